@@ -1,0 +1,33 @@
+# Every target creates and uses .venv itself, so each works alone from a clean clone.
+PY ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.zooctl-installed
+# torch first: 2.13.0 (CPU) is on this machine's disk; any other spec may pull a CUDA build.
+TORCH_SPEC ?= torch==2.13.0
+
+.PHONY: install demo test bench lint clean
+
+$(STAMP): pyproject.toml Makefile
+	test -x $(BIN)/python || $(PY) -m venv $(VENV)
+	$(BIN)/pip install -q --disable-pip-version-check $(TORCH_SPEC) || $(BIN)/pip install -q "torch>=2.2,<2.15"
+	$(BIN)/pip install -q --disable-pip-version-check -e '.[test]'
+	touch $(STAMP)
+
+install: $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/python -m zooctl.demo
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q -p no:cacheprovider
+
+bench: $(STAMP)
+	$(BIN)/python bench/bank.py
+
+lint: $(STAMP)
+	$(BIN)/ruff check zooctl tests bench plugins
+	$(BIN)/ruff format --check zooctl tests bench plugins
+
+clean:
+	rm -rf $(VENV) build *.egg-info

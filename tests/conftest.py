@@ -1,0 +1,38 @@
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared" / "data"
+ASSETS_DIR = SHARED / "assets" / "quaternius"
+VIDEOS_DIR = SHARED / "videos"
+
+
+def shared_assets() -> list[Path]:
+    return sorted(ASSETS_DIR.glob("*/*.glb")) if ASSETS_DIR.is_dir() else []
+
+
+needs_shared_assets = pytest.mark.skipif(
+    not shared_assets(), reason=f"shared test assets not found at {ASSETS_DIR} (a fresh clone has no ../shared/data)"
+)
+needs_shared_videos = pytest.mark.skipif(
+    not VIDEOS_DIR.is_dir(), reason=f"shared test videos not found at {VIDEOS_DIR} (a fresh clone has no ../shared/data)"
+)
+
+
+@pytest.fixture
+def store(tmp_path, monkeypatch) -> Path:
+    """An empty store root; ZOOCTL_STORE points at it for the CLI."""
+    root = tmp_path / "store"
+    monkeypatch.setenv("ZOOCTL_STORE", str(root))
+    return root
+
+
+@pytest.fixture(autouse=True)
+def _quiet_env(monkeypatch):
+    monkeypatch.delenv("ZOOCTL_DEBUG", raising=False)
+    monkeypatch.setenv("COLUMNS", "200")
+    os.environ.setdefault("OMP_NUM_THREADS", "1")

@@ -1,0 +1,3 @@
+from zooctl.cli.main import entry
+
+entry()

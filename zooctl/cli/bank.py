@@ -1,0 +1,137 @@
+"""`zooctl bank ...`: the rigged-asset bank."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from ._common import JsonOpt, console, err_console, print_json, store_root
+
+app = typer.Typer(help="Manage the bank of rigged, animated assets (templates for fitting).", no_args_is_help=True)
+
+
+def _bank():
+    from ..store.bank import Bank
+
+    return Bank.open(store_root())
+
+
+@app.command("add")
+def add(
+    paths: list[Path] = typer.Argument(..., help="Model files to import (.glb, .gltf, and whatever plugins add)."),
+    name: str = typer.Option(None, "--name", help="Asset name (default: the file name without suffix). One PATH only."),
+    tag: list[str] = typer.Option(None, "--tag", help="Tag to attach (repeatable), e.g. --tag quadruped."),
+    license: str = typer.Option(None, "--license", help="License of the asset, e.g. CC0-1.0."),
+    replace: bool = typer.Option(False, "--replace", help="Overwrite an asset of the same name."),
+    json_out: bool = JsonOpt,
+) -> None:
+    """Import rigged assets into the bank (atomic: a failed import changes nothing)."""
+    from rich.markup import escape
+
+    from ..errors import UsageError
+    from ..pipelines.ingest import add_files
+
+    results = add_files(_bank(), paths, name=name, tags=tag, license=license, replace=replace)
+    failed = [r for r in results if r.error is not None]
+    if json_out:
+        print_json(
+            [
+                {"path": str(r.path), "name": r.name, "ok": r.error is None, "error": None if r.error is None else r.error.message, "summary": r.summary}
+                for r in results
+            ]
+        )
+    else:
+        for r in results:
+            if r.summary is not None:
+                s = r.summary
+                console.print(f"added [bold]{escape(r.name)}[/]: {s['vertices']} vertices, {s['joints']} joints, {len(s['clips'])} clips", highlight=False)
+    if len(results) == 1 and failed:
+        raise failed[0].error  # one line, with its hint
+    for r in failed:
+        err_console.print(f"[bold red]error:[/] {escape(str(r.path))}: {escape(r.error.message)}", highlight=False, soft_wrap=True)
+    if failed:
+        raise UsageError(f"{len(failed)} of {len(results)} files were not added", hint="the others were added; fix the files named above and add them again")
+
+
+@app.command("list")
+def list_(json_out: bool = JsonOpt, tag: str = typer.Option(None, "--tag", help="Only assets with this tag.")) -> None:
+    """List the assets in the bank."""
+    rows = _bank().list()
+    if tag:
+        rows = [r for r in rows if tag in r.get("tags", [])]
+    if json_out:
+        print_json(rows)
+        return
+    from rich.table import Table
+
+    table = Table(title=f"{len(rows)} assets", title_justify="left")
+    for col, just in (("name", "left"), ("vertices", "right"), ("faces", "right"), ("joints", "right"), ("clips", "right"), ("size", "right"), ("tags", "left")):
+        table.add_column(col, justify=just)
+    for r in rows:
+        lo, hi = r["bbox"]
+        size = max(h - lo_ for lo_, h in zip(lo, hi))
+        table.add_row(r["name"], str(r["vertices"]), str(r["faces"]), str(r["joints"]), str(len(r["clips"])), f"{size:.3g}", ", ".join(r.get("tags", [])))
+    console.print(table)
+
+
+@app.command("show")
+def show(name: str = typer.Argument(..., help="Asset name."), json_out: bool = JsonOpt) -> None:
+    """Show one asset: counts, bounding box, clips and the joint tree."""
+    card = _bank().card(name)
+    if json_out:
+        print_json(card)
+        return
+    from rich.tree import Tree
+
+    lo, hi = card["bbox"]
+    console.print(f"[bold]{card['name']}[/]  {card['vertices']} vertices, {card['faces']} faces, {card['joints']} joints, {card['skin_influences']} influences per vertex", highlight=False)
+    console.print(f"bbox min {[round(x, 4) for x in lo]}  max {[round(x, 4) for x in hi]}", highlight=False)
+    if card.get("license"):
+        console.print(f"license: {card['license']}", highlight=False)
+    if card.get("source"):
+        console.print(f"source: {card['source']}", highlight=False)
+    if card.get("tags"):
+        console.print(f"tags: {', '.join(card['tags'])}", highlight=False)
+    for w in card.get("meta", {}).get("import_warnings", []):
+        console.print(f"[yellow]import warning:[/] {w}", highlight=False)
+    console.print(f"clips ({len(card['clips'])}):", highlight=False)
+    for cname, c in card["clips"].items():
+        console.print(f"  {cname}: {c['frames']} frames at {c['fps']:g} fps", highlight=False, markup=False)
+    names, parents = card["joint_names"], card["parents"]
+    nodes = {}
+    tree = Tree("joints")
+    for j, (jn, p) in enumerate(zip(names, parents)):
+        nodes[j] = (tree if p < 0 else nodes[p]).add(jn, highlight=False)
+    console.print(tree)
+
+
+@app.command("rm")
+def rm(names: list[str] = typer.Argument(..., help="Asset names to remove.")) -> None:
+    """Remove assets from the bank."""
+    bank = _bank()
+    for n in names:
+        bank.remove(n)
+        console.print(f"removed {n}", highlight=False, markup=False)
+
+
+@app.command("migrate")
+def migrate(json_out: bool = JsonOpt) -> None:
+    """Upgrade every asset file to this zooctl's layout (named migrations, atomic per asset)."""
+    from ..store.migrate import migrate_bank
+
+    report = migrate_bank(_bank())
+    if json_out:
+        print_json(report)
+    else:
+        console.print(f"{report['migrated']} assets migrated, {report['current']} already current", highlight=False)
+
+
+@app.command("clean")
+def clean(json_out: bool = JsonOpt) -> None:
+    """Remove leftovers of killed writers (temporary files, files no index entry names)."""
+    report = _bank().cleanup()
+    if json_out:
+        print_json(report)
+    else:
+        console.print(f"removed {report['temporaries']} temporaries and {report['orphans']} unindexed files", highlight=False)

@@ -1,0 +1,125 @@
+"""`zooctl` entry point: the root app, global options, command-group registration, error formatting."""
+
+from __future__ import annotations
+
+import os
+import sys
+import traceback
+from pathlib import Path
+
+import typer
+from rich.markup import escape
+
+from .. import __version__
+from ..errors import ZooctlError
+from ._common import err_console, state
+
+app = typer.Typer(
+    name="zooctl",
+    help="Rigged 3D characters from casual animal videos, and new motions for them.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    rich_markup_mode="rich",
+)
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"zooctl {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def main(
+    store: Path = typer.Option(
+        None,
+        "--store",
+        envvar="ZOOCTL_STORE",
+        help="Data root (asset bank, videos, fits). Default: ./store in a checkout, else the user data dir.",
+        show_default=False,
+    ),
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Print the version and exit."),
+) -> None:
+    state.store = store
+
+
+def _register_groups() -> None:
+    """Every command group is registered here, in one place."""
+    from . import bank, plugins_cmd
+
+    app.add_typer(bank.app, name="bank")
+    app.command("plugins")(plugins_cmd.plugins)
+
+
+def _builtin_names() -> set[str]:
+    names = {g.name for g in app.registered_groups}
+    names |= {c.name or c.callback.__name__ for c in app.registered_commands}
+    return names
+
+
+def _first_command(argv: list[str]) -> str | None:
+    it = iter(argv)
+    for a in it:
+        if a == "--store":
+            next(it, None)
+        elif not a.startswith("-"):
+            return a
+    return None
+
+
+def _register_plugin_commands(argv: list[str]) -> None:
+    """Load plugins for their extra commands, unless the command is a built-in one: plugin
+    loading costs an entry-point scan and module imports that `bank show` should not pay."""
+    if _first_command(argv) in _builtin_names() and "--help" not in argv:
+        return
+    from ..plugins import get_plugin_manager
+
+    try:
+        pm = get_plugin_manager()
+    except ZooctlError as exc:
+        err_console.print(f"[yellow]warning:[/] {escape(exc.message)}", highlight=False)
+        return
+    pm.add_commands(app)
+    for info in pm.failures():
+        err_console.print(f"[yellow]warning:[/] plugin {info.name!r} ({info.distribution}) skipped: {escape(info.error)}", highlight=False)
+
+
+def run(argv: list[str] | None = None) -> int:
+    """Console-script entry point. Returns the exit code (also used by tests in-process)."""
+    debug = os.environ.get("ZOOCTL_DEBUG", "") not in ("", "0")
+    try:
+        args = list(sys.argv[1:] if argv is None else argv)
+        _register_groups()
+        _register_plugin_commands(args)
+        # Typer's standalone mode prints usage errors (exit 2) and help; our errors come out here.
+        app(args=args, prog_name="zooctl")
+        return 0
+    except SystemExit as exc:
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    except ZooctlError as exc:
+        if debug:
+            traceback.print_exc()
+        err_console.print(f"[bold red]error:[/] {escape(exc.message)}", highlight=False, soft_wrap=True)
+        if exc.hint:
+            err_console.print(f"  [dim]hint:[/] {escape(exc.hint)}", highlight=False, soft_wrap=True)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        err_console.print("interrupted")
+        return 130
+    except Exception as exc:
+        if debug:
+            traceback.print_exc()
+        err_console.print(
+            f"[bold red]error:[/] internal failure: {type(exc).__name__}: {escape(str(exc))}", highlight=False, soft_wrap=True
+        )
+        err_console.print("  [dim]hint:[/] run again with ZOOCTL_DEBUG=1 for the traceback, and report it", highlight=False)
+        return 1
+
+
+def entry() -> None:
+    sys.exit(run())
+
+
+if __name__ == "__main__":  # pragma: no cover
+    entry()

@@ -1,0 +1,137 @@
+"""Hook specifications: the whole contract between zooctl and its plugins.
+
+A plugin is a module (or object) that implements some of these hooks, decorated with
+``zooctl.hookimpl``, and is advertised by a distribution through the ``zooctl`` entry-point group:
+
+.. code-block:: toml
+
+    [project.entry-points.zooctl]
+    toy = "zooctl_example.plugin"
+
+Every hook except `register_commands` is a *register-callback* hook: zooctl calls it once with a
+``register`` callable, and the plugin calls ``register(spec)`` for each component it provides
+(specs are in `zooctl.components`). Plugins should import heavy dependencies inside their
+factories, not at module import time, so that ``zooctl --help`` stays fast.
+
+zooctl's own built-in components are registered through exactly the same entry points.
+"""
+
+from __future__ import annotations
+
+import pluggy
+
+hookspec = pluggy.HookspecMarker("zooctl")
+
+
+@hookspec
+def register_importers(register):
+    """Register asset importers, chosen by file suffix.
+
+    :param register: call ``register(ImporterSpec(name, suffixes, load))`` once per importer.
+
+    ``load(path, name)`` must return a validated `zooctl.asset.RiggedAsset` named ``name`` and raise
+    `zooctl.errors.InputError` (one line saying what is wrong with the file) for bad input. When two
+    importers claim the same suffix, the first registered wins and the conflict is reported by
+    ``zooctl plugins``.
+    """
+
+
+@hookspec
+def register_exporters(register):
+    """Register asset exporters, chosen by ``--format``.
+
+    :param register: call ``register(ExporterSpec(name, formats, save))`` once per exporter.
+
+    ``save(asset, path, clips=None, **options)`` writes the asset (and the named clips, or all) to
+    ``path``. It must write atomically: a temporary beside ``path``, then ``os.replace``.
+    """
+
+
+@hookspec
+def register_embedders(register):
+    """Register image embedders used for video-to-template retrieval.
+
+    :param register: call ``register(ComponentSpec("embedder", name, factory))``.
+
+    ``factory(device="cpu", **options)`` returns an object with ``dim: int`` and
+    ``embed_batch(images) -> (N, dim) float32`` where ``images`` is an (N, H, W, 3) uint8 RGB array;
+    embeddings are compared by cosine distance.
+    """
+
+
+@hookspec
+def register_renderers(register):
+    """Register renderers (differentiable silhouettes, flow, shaded previews).
+
+    :param register: call ``register(ComponentSpec("renderer", name, factory))``.
+
+    ``factory(image_size, device="cpu", **options)`` returns a ``torch.nn.Module``-like object whose
+    call maps batched posed vertices (B, V, 3), faces (F, 3) and a `zooctl.render.camera` camera
+    batch to the images it renders; its docstring states the outputs.
+    """
+
+
+@hookspec
+def register_articulation_models(register):
+    """Register articulation models (how bones move the mesh).
+
+    :param register: call ``register(ComponentSpec("articulation_model", name, factory))``.
+
+    ``factory(asset, device="cpu", **options)`` returns a ``torch.nn.Module`` that maps per-frame
+    joint rotations and a root transform to posed vertices (T, V, 3) and joint positions (T, J, 3),
+    and owns its learnable shape parameters (bone scales, skinning, offsets).
+    """
+
+
+@hookspec
+def register_motion_priors(register):
+    """Register generative motion priors.
+
+    :param register: call ``register(ComponentSpec("motion_prior", name, factory))``.
+
+    ``factory(path=None, device="cpu", **options)`` returns an object that can ``fit`` a motion
+    dataset, ``save(path)``, and ``sample(asset, n, frames, seed) -> (n, frames, J, 4)`` local
+    rotations for any skeleton.
+    """
+
+
+@hookspec
+def register_segmenters(register):
+    """Register video segmenters that produce the animal's masks.
+
+    :param register: call ``register(ComponentSpec("segmenter", name, factory))``.
+
+    ``factory(**options)`` returns an object with
+    ``segment(frames, box=None, progress=None) -> (T, H, W) bool``; ``frames`` is (T, H, W, 3) uint8.
+    """
+
+
+@hookspec
+def register_flow_estimators(register):
+    """Register optical-flow estimators.
+
+    :param register: call ``register(ComponentSpec("flow_estimator", name, factory))``.
+
+    ``factory(**options)`` returns an object with ``flow(frame_a, frame_b) -> (H, W, 2) float32``,
+    the pixel displacement from a to b.
+    """
+
+
+@hookspec
+def register_executors(register):
+    """Register executors that run pipeline jobs (locally, in a pool, on a cluster).
+
+    :param register: call ``register(ComponentSpec("executor", name, factory))``.
+
+    ``factory(**options)`` returns an object with ``map(fn, items) -> iterator of results``.
+    """
+
+
+@hookspec
+def register_commands(cli):
+    """Add commands or command groups to the ``zooctl`` CLI.
+
+    :param cli: the root ``typer.Typer`` application. Use ``@cli.command()`` or
+        ``cli.add_typer(group, name=...)``. Commands should stay thin and raise
+        `zooctl.errors.ZooctlError` subclasses for anything the user got wrong.
+    """

@@ -1,0 +1,1 @@
+"""File formats: glTF import, USD and glTF export, video files."""

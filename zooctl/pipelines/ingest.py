@@ -1,0 +1,69 @@
+"""`bank add`: import files through the registered importers and store them in the bank."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ..names import check_name, sanitize_name
+from ..errors import InputError, UsageError, ZooctlError
+from ..plugins import get_registry
+from ..store.bank import Bank
+
+
+@dataclass
+class AddResult:
+    path: Path
+    name: str
+    summary: dict[str, Any] | None = None
+    error: ZooctlError | None = None
+
+
+def import_file(path: Path, name: str) -> Any:
+    """Read one file into a validated `RiggedAsset` with the importer its suffix selects."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path} does not exist")
+    registry = get_registry()
+    spec = registry.importer_for(path.suffix)
+    if spec is None:
+        if path.is_dir():
+            raise InputError(f"{path} is a directory", hint="give the model file(s) inside it")
+        known = sorted({s for sp in registry.components["importer"].values() for s in sp.suffixes})
+        raise InputError(f"cannot import {path.name}: unknown file type {path.suffix or '(none)'!r}", hint=f"supported: {' '.join(known)}")
+    if path.is_dir():
+        raise InputError(f"{path} is a directory", hint="give the model file(s) inside it")
+    return spec.load(path, name)
+
+
+def add_files(
+    bank: Bank,
+    paths: list[Path],
+    name: str | None = None,
+    tags: list[str] | None = None,
+    license: str | None = None,
+    replace: bool = False,
+) -> list[AddResult]:
+    """Import and store each path; one bad file does not stop the others (its result holds the error)."""
+    if name is not None and len(paths) > 1:
+        raise UsageError("--name needs exactly one PATH", hint="add the files one at a time, or drop --name")
+    if name is not None:
+        check_name(name, "asset name")
+    results = []
+    for p in paths:
+        asset_name = name or sanitize_name(Path(p).stem)
+        r = AddResult(Path(p), asset_name)
+        try:
+            if not replace and bank.exists(asset_name):
+                raise bank.exists_error(asset_name)
+            asset = import_file(Path(p), asset_name)
+            if tags:
+                asset.meta["tags"] = sorted(set(asset.meta.get("tags", [])) | set(tags))
+            if license is not None:
+                asset.meta["license"] = license
+            r.summary = bank.add(asset, replace=replace)
+        except ZooctlError as exc:
+            r.error = exc
+        results.append(r)
+    return results

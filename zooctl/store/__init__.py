@@ -1,0 +1,1 @@
+"""The on-disk store: asset bank, video store, fits and motion priors under one root."""
