@@ -173,7 +173,7 @@ class PluginManager:
             caller = getattr(self.pm.hook, hook_name)
             # Call each implementation on its own, so a component is attributed to its plugin
             # and a plugin whose hook raises is reported and skipped, not fatal for all.
-            for impl in reversed(caller.get_hookimpls()):  # pluggy calls LIFO; we keep load order
+            for impl in caller.get_hookimpls():  # registration order: built-ins first, so they keep their names
                 owner = impl.plugin_name
 
                 def register(spec: Any, _owner: str = owner, _kind: str = kind) -> None:
@@ -191,7 +191,7 @@ class PluginManager:
         return reg
 
     def add_commands(self, cli: Any) -> None:
-        for impl in reversed(self.pm.hook.register_commands.get_hookimpls()):
+        for impl in self.pm.hook.register_commands.get_hookimpls():
             try:
                 impl.function(cli=cli)
             except Exception as exc:

@@ -44,3 +44,27 @@ def _default(o: Any) -> Any:
 
 
 JsonOpt = typer.Option(False, "--json", help="Print JSON instead of a table (for scripts).")
+
+
+def print_table(columns: list[tuple[str, str]], rows: list[list[str]], title: str | None = None) -> None:
+    """Print an aligned table: a bold header and plain rows.
+
+    ``columns`` are (header, "left"|"right"). Rich's Table costs about 1 ms a row, too slow for
+    `bank list` on a 1,000-asset bank; this is a few microseconds a row and reads the same.
+    """
+    widths = [len(h) for h, _ in columns]
+    for r in rows:
+        for i, cell in enumerate(r):
+            widths[i] = max(widths[i], len(cell))
+
+    def fmt(cells: list[str]) -> str:
+        out = [c.ljust(w) if just == "left" else c.rjust(w) for c, w, (_, just) in zip(cells, widths, columns)]
+        return "  ".join(out).rstrip()
+
+    if title:
+        console.print(title, style="bold", highlight=False, markup=False)
+    header = fmt([h for h, _ in columns])
+    console.print(header, style="bold", highlight=False, markup=False)
+    console.print("  ".join("-" * w for w in widths), style="dim", highlight=False, markup=False)
+    console.file.write("\n".join(fmt(r) for r in rows) + ("\n" if rows else ""))
+    console.file.flush()

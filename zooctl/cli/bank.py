@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from ._common import JsonOpt, console, err_console, print_json, store_root
+from ._common import JsonOpt, console, err_console, print_json, print_table, store_root
 
 app = typer.Typer(help="Manage the bank of rigged, animated assets (templates for fitting).", no_args_is_help=True)
 
@@ -63,16 +63,13 @@ def list_(json_out: bool = JsonOpt, tag: str = typer.Option(None, "--tag", help=
     if json_out:
         print_json(rows)
         return
-    from rich.table import Table
-
-    table = Table(title=f"{len(rows)} assets", title_justify="left")
-    for col, just in (("name", "left"), ("vertices", "right"), ("faces", "right"), ("joints", "right"), ("clips", "right"), ("size", "right"), ("tags", "left")):
-        table.add_column(col, justify=just)
+    table = []
     for r in rows:
         lo, hi = r["bbox"]
         size = max(h - lo_ for lo_, h in zip(lo, hi))
-        table.add_row(r["name"], str(r["vertices"]), str(r["faces"]), str(r["joints"]), str(len(r["clips"])), f"{size:.3g}", ", ".join(r.get("tags", [])))
-    console.print(table)
+        table.append([r["name"], str(r["vertices"]), str(r["faces"]), str(r["joints"]), str(len(r["clips"])), f"{size:.3g}", ", ".join(r.get("tags", []))])
+    cols = [("name", "left"), ("vertices", "right"), ("faces", "right"), ("joints", "right"), ("clips", "right"), ("size", "right"), ("tags", "left")]
+    print_table(cols, table, title=f"{len(rows)} assets")
 
 
 @app.command("show")

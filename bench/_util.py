@@ -1,0 +1,48 @@
+"""Shared benchmark helpers: timing whole commands and describing the machine."""
+
+from __future__ import annotations
+
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared" / "data"
+
+
+def machine() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}"
+
+
+def median_time(fn: Callable[[], object], repeat: int = 7) -> float:
+    times = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return statistics.median(times)
+
+
+def time_command(args: list[str], env: dict | None = None, repeat: int = 7) -> float:
+    """Median wall time of a whole `zooctl ...` command (new process each time)."""
+    exe = Path(sys.executable).with_name("zooctl")
+    e = dict(os.environ, **(env or {}))
+
+    def run():
+        subprocess.run([str(exe), *args], check=True, capture_output=True, env=e)
+
+    run()  # warm the page cache
+    return median_time(run, repeat)

@@ -1,0 +1,1 @@
+"""Example zooctl plugin package."""

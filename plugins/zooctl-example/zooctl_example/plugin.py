@@ -1,0 +1,99 @@
+"""The `.toyrig` format: ``{"bones": N, "length": L, "radius": R, "fps": F}`` in JSON.
+
+The importer builds a tube of ``N`` bones along +Y with smooth two-bone skinning weights and a
+``wiggle`` clip (each joint swings about Z, phase-shifted along the chain).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import typer
+
+from zooctl.components import ImporterSpec
+from zooctl.errors import InputError
+from zooctl.plugins import hookimpl
+
+
+def load_toyrig(path: Path, name: str):
+    import numpy as np
+
+    from zooctl.asset import Clip, RiggedAsset
+
+    try:
+        spec = json.loads(Path(path).read_text())
+        n = int(spec["bones"])
+        length = float(spec.get("length", 1.0))
+        radius = float(spec.get("radius", 0.1))
+        fps = float(spec.get("fps", 30))
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise InputError(f"{path}: not a valid .toyrig file ({exc})", hint='expected JSON like {"bones": 4}') from None
+    if not (1 <= n <= 64) or length <= 0 or radius <= 0:
+        raise InputError(f"{path}: bones must be 1..64 and length, radius positive")
+    seg = length / n
+    rings, around = 4 * n + 1, 12
+    ys = np.linspace(0, length, rings)
+    ang = np.linspace(0, 2 * math.pi, around, endpoint=False)
+    verts = np.array([[radius * math.cos(a), y, radius * math.sin(a)] for y in ys for a in ang], np.float32)
+    faces = []
+    for r in range(rings - 1):
+        for k in range(around):
+            a, b = r * around + k, r * around + (k + 1) % around
+            c, d = a + around, b + around
+            faces += [[a, c, b], [b, c, d]]
+    # each vertex blends the bone it lies on with the nearest neighbouring bone
+    t = np.clip(verts[:, 1] / seg - 0.5, 0, n - 1)
+    j0 = np.floor(t).astype(np.int32)
+    j1 = np.minimum(j0 + 1, n - 1)
+    w1 = (t - j0).astype(np.float32)
+    joints = np.stack([j0, j1], 1)
+    weights = np.stack([1 - w1, w1], 1)
+    same = j0 == j1
+    weights[same] = [1, 0]
+    order = np.argsort(-weights, 1)
+    joints = np.take_along_axis(joints, order, 1)
+    weights = np.take_along_axis(weights, order, 1)
+    parents = np.arange(-1, n - 1, dtype=np.int32)
+    rest = np.tile(np.eye(4), (n, 1, 1))
+    rest[1:, 1, 3] = seg
+    ibm = np.tile(np.eye(4), (n, 1, 1))
+    ibm[:, 1, 3] = -seg * np.arange(n)
+    T = int(fps)
+    ph = np.linspace(0, 2 * math.pi, T, endpoint=False)[:, None] - 0.6 * np.arange(n)[None]
+    half = 0.25 * np.sin(ph) / 2
+    rot = np.zeros((T, n, 4), np.float32)
+    rot[..., 0], rot[..., 3] = np.cos(half), np.sin(half)
+    clip = Clip("wiggle", fps, rot, np.repeat(rest[None, :, :3, 3], T, 0).astype(np.float32), np.ones((T, n, 3), np.float32))
+    return RiggedAsset(
+        name=name,
+        vertices=verts,
+        faces=np.array(faces, np.int32),
+        joint_names=[f"bone{i}" for i in range(n)],
+        parents=parents,
+        rest_local=rest,
+        inverse_bind=ibm,
+        skin_joints=joints.astype(np.int32),
+        skin_weights=weights.astype(np.float32),
+        clips={"wiggle": clip},
+        meta={"source": str(path), "source_format": "toyrig", "units": "m", "meters_per_unit": 1.0, "up_axis": "Y"},
+    ).validate()
+
+
+@hookimpl
+def register_importers(register):
+    register(ImporterSpec("toyrig", (".toyrig",), load_toyrig, "toy JSON bone chains (example plugin)"))
+
+
+@hookimpl
+def register_commands(cli):
+    @cli.command("toyrig")
+    def toyrig(
+        name: str = typer.Argument(..., help="A label stored in the file."),
+        out: Path = typer.Option(..., "-o", "--out", help="Where to write the .toyrig file."),
+        bones: int = typer.Option(4, help="Number of bones."),
+    ) -> None:
+        """Write an example .toyrig file (from the zooctl-example plugin)."""
+        out.write_text(json.dumps({"label": name, "bones": bones, "length": 1.0, "radius": 0.1, "fps": 30}))
+        typer.echo(f"wrote {out}")

@@ -1,0 +1,44 @@
+"""Run the real `zooctl` CLI in-process or as a subprocess and capture what a user would see."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@dataclass
+class Result:
+    code: int
+    out: str
+    err: str
+
+    def json(self):
+        return json.loads(self.out)
+
+
+def zooctl(*args: str, store: Path | None = None, env: dict | None = None, timeout: float = 300) -> Result:
+    """Run ``python -m zooctl ARGS`` in a subprocess (the console script's exact code path)."""
+    e = dict(os.environ)
+    e.update({"COLUMNS": "200", "NO_COLOR": "1"})
+    if store is not None:
+        e["ZOOCTL_STORE"] = str(store)
+    if env:
+        e.update(env)
+    p = subprocess.run([sys.executable, "-m", "zooctl", *args], capture_output=True, text=True, env=e, cwd=REPO, timeout=timeout)
+    return Result(p.returncode, p.stdout, p.stderr)
+
+
+def run_inprocess(capsys: pytest.CaptureFixture, *args: str) -> Result:
+    from zooctl.cli.main import run
+
+    code = run(list(args))
+    cap = capsys.readouterr()
+    return Result(code, cap.out, cap.err)
