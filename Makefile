@@ -3,6 +3,7 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.zooctl-installed
+TEST_STAMP := $(VENV)/.zooctl-test-extras
 # torch first: 2.13.0 (CPU) is on this machine's disk; any other spec may pull a CUDA build.
 TORCH_SPEC ?= torch==2.13.0
 
@@ -14,13 +15,18 @@ $(STAMP): pyproject.toml Makefile
 	$(BIN)/pip install -q --disable-pip-version-check -e '.[test]'
 	touch $(STAMP)
 
+# Blender as a Python module, only for the tests that open our exports in Blender (~350 MB).
+$(TEST_STAMP): $(STAMP)
+	$(BIN)/pip install -q --disable-pip-version-check bpy==4.2.0 || echo "bpy unavailable: Blender tests will skip"
+	touch $(TEST_STAMP)
+
 install: $(STAMP)
 
 demo: $(STAMP)
 	$(BIN)/python -m zooctl.demo
 
-test: $(STAMP)
-	$(BIN)/python -m pytest -q -p no:cacheprovider
+test: $(TEST_STAMP)
+	$(BIN)/python -m pytest -q -p no:cacheprovider -n 2 --dist loadfile --durations=15
 
 bench: $(STAMP)
 	$(BIN)/python bench/bank.py

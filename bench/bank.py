@@ -35,7 +35,12 @@ def main() -> None:
         t = time.perf_counter()
         import subprocess
 
-        subprocess.run([str(Path(sys.executable).with_name("zooctl")), "bank", "add", *map(str, files)], check=True, capture_output=True, env=dict(__import__("os").environ, **env))
+        subprocess.run(
+            [str(Path(sys.executable).with_name("zooctl")), "bank", "add", *map(str, files)],
+            check=True,
+            capture_output=True,
+            env=dict(__import__("os").environ, **env),
+        )
         cli_rate = len(files) / (time.perf_counter() - t)
         # 2. library adds until the bank holds --assets assets (import once, store many)
         assets = [load_gltf(f, f.stem) for f in files]

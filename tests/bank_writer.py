@@ -47,7 +47,9 @@ def main() -> None:
     root, prefix, count = Path(sys.argv[1]), sys.argv[2], int(sys.argv[3])
     bank = Bank(root)
     for i in range(count):
-        a = synthetic(f"{prefix}{i:03d}", seed=zlib.crc32(prefix.encode()) % 1000 + i)  # same name, same content
+        a = synthetic(
+            f"{prefix}{i:03d}", seed=zlib.crc32(prefix.encode()) % 1000 + i
+        )  # same name, same content
         bank.add(a, replace=True)
         print(f"ADDED {a.name} {checksum(a)}", flush=True)
 

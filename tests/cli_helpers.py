@@ -32,7 +32,14 @@ def zooctl(*args: str, store: Path | None = None, env: dict | None = None, timeo
         e["ZOOCTL_STORE"] = str(store)
     if env:
         e.update(env)
-    p = subprocess.run([sys.executable, "-m", "zooctl", *args], capture_output=True, text=True, env=e, cwd=REPO, timeout=timeout)
+    p = subprocess.run(
+        [sys.executable, "-m", "zooctl", *args],
+        capture_output=True,
+        text=True,
+        env=e,
+        cwd=REPO,
+        timeout=timeout,
+    )
     return Result(p.returncode, p.stdout, p.stderr)
 
 

@@ -5,6 +5,17 @@ from pathlib import Path
 
 import pytest
 
+# One thread per test process: CI has 2 cores and runs two pytest workers; on this machine one
+# torch thread was also faster than two for our small kernels.
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+try:
+    import torch
+
+    torch.set_num_threads(1)
+except ImportError:  # pragma: no cover - torch is a hard dependency; keep conftest importable
+    pass
+
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared" / "data"
 ASSETS_DIR = SHARED / "assets" / "quaternius"
@@ -16,10 +27,12 @@ def shared_assets() -> list[Path]:
 
 
 needs_shared_assets = pytest.mark.skipif(
-    not shared_assets(), reason=f"shared test assets not found at {ASSETS_DIR} (a fresh clone has no ../shared/data)"
+    not shared_assets(),
+    reason=f"shared test assets not found at {ASSETS_DIR} (a fresh clone has no ../shared/data)",
 )
 needs_shared_videos = pytest.mark.skipif(
-    not VIDEOS_DIR.is_dir(), reason=f"shared test videos not found at {VIDEOS_DIR} (a fresh clone has no ../shared/data)"
+    not VIDEOS_DIR.is_dir(),
+    reason=f"shared test videos not found at {VIDEOS_DIR} (a fresh clone has no ../shared/data)",
 )
 
 
@@ -35,4 +48,6 @@ def store(tmp_path, monkeypatch) -> Path:
 def _quiet_env(monkeypatch):
     monkeypatch.delenv("ZOOCTL_DEBUG", raising=False)
     monkeypatch.setenv("COLUMNS", "200")
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    # `bank add` renders and embeds retrieval views (~2 s of CPU per asset); tests that need
+    # views turn them on themselves.
+    monkeypatch.setenv("ZOOCTL_VIEWS", "0")

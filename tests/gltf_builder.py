@@ -21,19 +21,41 @@ def tiny_gltf(weights=None, joints=None, skin=True):
     """A two-bone, one-triangle-strip skinned glTF document built by hand."""
     pos = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], np.float32)
     idx = np.array([0, 1, 2, 1, 3, 2], np.uint16)
-    j = np.array(joints if joints is not None else [[0, 0, 0, 0], [0, 1, 0, 0], [1, 0, 0, 0], [1, 0, 0, 0]], np.uint16)
-    w = np.array(weights if weights is not None else [[1, 0, 0, 0], [0.5, 0.5, 0, 0], [1, 0, 0, 0], [1, 0, 0, 0]], np.float32)
-    ibm = np.stack([np.eye(4), np.linalg.inv(np.array([[1, 0, 0, 0], [0, 1, 0, 1], [0, 0, 1, 0], [0, 0, 0, 1.0]]))]).astype(np.float32)
+    j = np.array(
+        joints if joints is not None else [[0, 0, 0, 0], [0, 1, 0, 0], [1, 0, 0, 0], [1, 0, 0, 0]], np.uint16
+    )
+    w = np.array(
+        weights if weights is not None else [[1, 0, 0, 0], [0.5, 0.5, 0, 0], [1, 0, 0, 0], [1, 0, 0, 0]],
+        np.float32,
+    )
+    ibm = np.stack(
+        [np.eye(4), np.linalg.inv(np.array([[1, 0, 0, 0], [0, 1, 0, 1], [0, 0, 1, 0], [0, 0, 0, 1.0]]))]
+    ).astype(np.float32)
     times = np.array([0, 1], np.float32)
     rots = np.array([[0, 0, 0, 1], [0, 0, 0.7071068, 0.7071068]], np.float32)
-    blobs = [pos.tobytes(), idx.tobytes() + b"\0\0", j.tobytes(), w.tobytes(), ibm.transpose(0, 2, 1).tobytes(), times.tobytes(), rots.tobytes()]
+    blobs = [
+        pos.tobytes(),
+        idx.tobytes() + b"\0\0",
+        j.tobytes(),
+        w.tobytes(),
+        ibm.transpose(0, 2, 1).tobytes(),
+        times.tobytes(),
+        rots.tobytes(),
+    ]
     views, off = [], 0
     for b in blobs:
         views.append({"buffer": 0, "byteOffset": off, "byteLength": len(b)})
         off += len(b)
     binary = b"".join(blobs)
     accessors = [
-        {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]},
+        {
+            "bufferView": 0,
+            "componentType": 5126,
+            "count": 4,
+            "type": "VEC3",
+            "min": [0, 0, 0],
+            "max": [1, 1, 0],
+        },
         {"bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR"},
         {"bufferView": 2, "componentType": 5123, "count": 4, "type": "VEC4"},
         {"bufferView": 3, "componentType": 5126, "count": 4, "type": "VEC4"},
@@ -54,7 +76,13 @@ def tiny_gltf(weights=None, joints=None, skin=True):
         "nodes": nodes,
         "meshes": [{"primitives": [prim]}],
         "skins": [{"joints": [1, 2], "inverseBindMatrices": 4}] if skin else [],
-        "animations": [{"name": "bend", "channels": [{"sampler": 0, "target": {"node": 2, "path": "rotation"}}], "samplers": [{"input": 5, "output": 6}]}],
+        "animations": [
+            {
+                "name": "bend",
+                "channels": [{"sampler": 0, "target": {"node": 2, "path": "rotation"}}],
+                "samplers": [{"input": 5, "output": 6}],
+            }
+        ],
         "accessors": accessors,
         "bufferViews": views,
         "buffers": [{"byteLength": len(binary)}],

@@ -24,7 +24,11 @@ def schema(name):
 
 def snapshot(root):
     """Every file under the store with its bytes: 'unchanged' means byte-identical."""
-    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file() and p.name != ".lock"}
+    return {
+        str(p.relative_to(root)): p.read_bytes()
+        for p in sorted(root.rglob("*"))
+        if p.is_file() and p.name != ".lock"
+    }
 
 
 @needs_shared_assets
@@ -48,9 +52,13 @@ def test_all_shared_assets_enter_the_bank_and_list_json_reports_counts(tmp_path)
     # stored assets read back identical to a fresh import
     back = bank.get("Fox")
     np.testing.assert_array_equal(back.vertices, fox.vertices.astype(np.float32))
-    np.testing.assert_allclose(back.pose("AnimalArmature|Walk", 7), fox.pose("AnimalArmature|Walk", 7), atol=1e-6)
+    np.testing.assert_allclose(
+        back.pose("AnimalArmature|Walk", 7), fox.pose("AnimalArmature|Walk", 7), atol=1e-6
+    )
     show = zooctl("bank", "show", "Fox", "--json", store=store).json()
-    assert show["joint_names"][: len(fox.joint_names)] == fox.joint_names and len(show["clips"]) == len(fox.clips)
+    assert show["joint_names"][: len(fox.joint_names)] == fox.joint_names and len(show["clips"]) == len(
+        fox.clips
+    )
     table = zooctl("bank", "show", "Fox", store=store)
     assert table.code == 0 and "Tail4" in table.out and "AnimalArmature|Walk" in table.out
 

@@ -53,7 +53,7 @@ def test_sigkill_at_random_moments_never_loses_or_half_writes(tmp_path):
         confirmed.update(_added(out))
         bank = Bank(tmp_path)  # the bank always opens
         listed = bank.names()
-        for name, summ in confirmed.items():
+        for name in confirmed:
             assert name in listed, f"{name} was added before the kill but is missing"
         for name in listed:  # nothing half-written is listed: every listed asset reads intact
             asset = bank.get(name)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import pytest
 from cli_helpers import REPO, zooctl
@@ -18,7 +19,12 @@ EXAMPLE = REPO / "plugins" / "zooctl-example"
 
 
 def _pip(*args: str) -> None:
-    subprocess.run([sys.executable, "-m", "pip", "-q", "--disable-pip-version-check", *args], check=True, capture_output=True, timeout=300)
+    subprocess.run(
+        [sys.executable, "-m", "pip", "-q", "--disable-pip-version-check", *args],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -63,7 +69,9 @@ def test_third_party_plugin_is_discovered_and_used(example_installed, tmp_path):
     assert {p["name"]: p for p in r.json()["plugins"]}["toyrig"]["status"] == "loaded"
 
 
-def _install_broken(tmp_path, module_src: str, dist: str) -> None:
+def _install_broken(tmp_path, module_src: str, dist: str) -> Path:
+    """pip-install a broken plugin into a private target folder (not the venv), so that tests
+    running at the same time in other workers never see it; returns the folder."""
     pkg = tmp_path / dist
     (pkg / dist.replace("-", "_")).mkdir(parents=True)
     (pkg / dist.replace("-", "_") / "__init__.py").write_text(textwrap.dedent(module_src))
@@ -81,12 +89,14 @@ def _install_broken(tmp_path, module_src: str, dist: str) -> None:
             """
         )
     )
-    _pip("install", "--no-deps", "--no-build-isolation", str(pkg))
+    target = tmp_path / "site"
+    _pip("install", "--no-deps", "--no-build-isolation", "--target", str(target), str(pkg))
+    return target
 
 
 def test_broken_and_misspelt_plugins_are_reported_and_skipped(tmp_path):
     _install_broken(tmp_path, "import this_module_does_not_exist_anywhere\n", "zooctl-broken-import")
-    _install_broken(
+    site = _install_broken(
         tmp_path,
         """
         from zooctl.plugins import hookimpl
@@ -96,22 +106,20 @@ def test_broken_and_misspelt_plugins_are_reported_and_skipped(tmp_path):
         """,
         "zooctl-misspelt",
     )
-    try:
-        r = zooctl("plugins", "--json")
-        assert r.code == 0
-        plugins = {p["name"]: p for p in r.json()["plugins"]}
-        assert plugins["zooctl_broken_import"]["status"] == "failed"
-        assert "ModuleNotFoundError" in plugins["zooctl_broken_import"]["error"]
-        assert plugins["zooctl_misspelt"]["status"] == "failed"
-        assert "register_importerz" in plugins["zooctl_misspelt"]["error"]
-        # the CLI keeps working, and says loudly which plugins were skipped
-        help_ = zooctl("--help")
-        assert help_.code == 0
-        assert "plugin 'zooctl_broken_import' (zooctl-broken-import) skipped" in help_.err
-        assert "register_importerz" in help_.err
-        assert zooctl("bank", "list", "--json", store=tmp_path / "s").code == 0
-    finally:
-        _pip("uninstall", "-y", "zooctl-broken-import", "zooctl-misspelt")
+    env = {"PYTHONPATH": str(site)}
+    r = zooctl("plugins", "--json", env=env)
+    assert r.code == 0
+    plugins = {p["name"]: p for p in r.json()["plugins"]}
+    assert plugins["zooctl_broken_import"]["status"] == "failed"
+    assert "ModuleNotFoundError" in plugins["zooctl_broken_import"]["error"]
+    assert plugins["zooctl_misspelt"]["status"] == "failed"
+    assert "register_importerz" in plugins["zooctl_misspelt"]["error"]
+    # the CLI keeps working, and says loudly which plugins were skipped
+    help_ = zooctl("--help", env=env)
+    assert help_.code == 0
+    assert "plugin 'zooctl_broken_import' (zooctl-broken-import) skipped" in help_.err
+    assert "register_importerz" in help_.err
+    assert zooctl("bank", "list", "--json", store=tmp_path / "s", env=env).code == 0
 
 
 def test_in_process_registration_and_conflicts():

@@ -21,8 +21,9 @@ from typing import Any
 import numpy as np
 
 from .errors import InputError
-from .names import check_name, sanitize_name  # noqa: F401  (re-exported)
 from .geometry import compose_trs, decompose_trs, global_transforms
+from .names import check_name, sanitize_name  # noqa: F401  (re-exported)
+
 
 @dataclass
 class Clip:
@@ -129,7 +130,10 @@ class RiggedAsset:
         else:
             c = self.clips.get(clip)
             if c is None:
-                raise InputError(f"asset {self.name!r} has no clip {clip!r}", hint=f"clips: {', '.join(self.clips) or 'none'}")
+                raise InputError(
+                    f"asset {self.name!r} has no clip {clip!r}",
+                    hint=f"clips: {', '.join(self.clips) or 'none'}",
+                )
             local = c.local_matrices(frame)
         return lbs(self.vertices, self.skin_joints, self.skin_weights, self.skinning_matrices(local))
 
@@ -176,7 +180,11 @@ class RiggedAsset:
             raise bad(f"skin weights of {(np.abs(sums - 1) > 1e-3).sum()} vertices do not sum to 1")
         for c in self.clips.values():
             T = c.num_frames
-            if c.rotations.shape != (T, J, 4) or c.translations.shape != (T, J, 3) or c.scales.shape != (T, J, 3):
+            if (
+                c.rotations.shape != (T, J, 4)
+                or c.translations.shape != (T, J, 3)
+                or c.scales.shape != (T, J, 3)
+            ):
                 raise bad(f"clip {c.name!r} arrays do not match {J} joints")
             if T == 0 or not (c.fps > 0):
                 raise bad(f"clip {c.name!r} is empty or has a bad fps")
@@ -205,7 +213,9 @@ class RiggedAsset:
         }
 
 
-def lbs(vertices: np.ndarray, skin_joints: np.ndarray, skin_weights: np.ndarray, mats: np.ndarray) -> np.ndarray:
+def lbs(
+    vertices: np.ndarray, skin_joints: np.ndarray, skin_weights: np.ndarray, mats: np.ndarray
+) -> np.ndarray:
     """Linear blend skinning in numpy.
 
     vertices (V, 3); skin_joints, skin_weights (V, K); mats (..., J, 4, 4) skinning matrices.

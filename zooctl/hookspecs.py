@@ -103,6 +103,8 @@ def register_segmenters(register):
 
     ``factory(**options)`` returns an object with
     ``segment(frames, box=None, progress=None) -> (T, H, W) bool``; ``frames`` is (T, H, W, 3) uint8.
+    A segmenter that sets the attribute ``uses_flow = True`` is also passed ``flow=`` (the forward
+    flow the video store computes anyway: a `zooctl.video.flow.VideoFlow`), so it is not computed twice.
     """
 
 

@@ -152,9 +152,7 @@ class PluginManager:
         try:
             self.pm.check_pending()
         except pluggy.PluginValidationError as exc:
-            raise PluginError(
-                str(exc), hint="check the hook's spelling against zooctl.hookspecs"
-            ) from exc
+            raise PluginError(str(exc), hint="check the hook's spelling against zooctl.hookspecs") from exc
         for name, info in self.infos.items():
             plugin = self.pm.get_plugin(name)
             if plugin is not None:
@@ -173,7 +171,9 @@ class PluginManager:
             caller = getattr(self.pm.hook, hook_name)
             # Call each implementation on its own, so a component is attributed to its plugin
             # and a plugin whose hook raises is reported and skipped, not fatal for all.
-            for impl in caller.get_hookimpls():  # registration order: built-ins first, so they keep their names
+            for (
+                impl
+            ) in caller.get_hookimpls():  # registration order: built-ins first, so they keep their names
                 owner = impl.plugin_name
 
                 def register(spec: Any, _owner: str = owner, _kind: str = kind) -> None:
@@ -207,7 +207,9 @@ class PluginManager:
 def _add(reg: Registry, infos: dict[str, PluginInfo], kind: str, spec: Any, owner: str) -> None:
     expected = {"importer": ImporterSpec, "exporter": ExporterSpec}.get(kind, ComponentSpec)
     if not isinstance(spec, expected) or spec.kind != kind:
-        raise PluginError(f"register() in the {kind} hook needs a {expected.__name__} of kind {kind!r}, got {spec!r}")
+        raise PluginError(
+            f"register() in the {kind} hook needs a {expected.__name__} of kind {kind!r}, got {spec!r}"
+        )
     if spec.name in reg.components[kind]:
         reg.problems.append(
             f"{kind} {spec.name!r} from plugin {owner!r} ignored: already registered by {reg.owner[(kind, spec.name)]!r}"

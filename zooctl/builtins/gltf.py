@@ -16,4 +16,6 @@ def _load(path: Path, name: str):
 
 @hookimpl
 def register_importers(register):
-    register(ImporterSpec("gltf", (".glb", ".gltf"), _load, "glTF 2.0 skinned meshes with skins and animations"))
+    register(
+        ImporterSpec("gltf", (".glb", ".gltf"), _load, "glTF 2.0 skinned meshes with skins and animations")
+    )

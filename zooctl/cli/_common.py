@@ -58,7 +58,9 @@ def print_table(columns: list[tuple[str, str]], rows: list[list[str]], title: st
             widths[i] = max(widths[i], len(cell))
 
     def fmt(cells: list[str]) -> str:
-        out = [c.ljust(w) if just == "left" else c.rjust(w) for c, w, (_, just) in zip(cells, widths, columns)]
+        out = [
+            c.ljust(w) if just == "left" else c.rjust(w) for c, w, (_, just) in zip(cells, widths, columns)
+        ]
         return "  ".join(out).rstrip()
 
     if title:

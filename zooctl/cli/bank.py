@@ -8,7 +8,9 @@ import typer
 
 from ._common import JsonOpt, console, err_console, print_json, print_table, store_root
 
-app = typer.Typer(help="Manage the bank of rigged, animated assets (templates for fitting).", no_args_is_help=True)
+app = typer.Typer(
+    help="Manage the bank of rigged, animated assets (templates for fitting).", no_args_is_help=True
+)
 
 
 def _bank():
@@ -19,11 +21,22 @@ def _bank():
 
 @app.command("add")
 def add(
-    paths: list[Path] = typer.Argument(..., help="Model files to import (.glb, .gltf, and whatever plugins add)."),
-    name: str = typer.Option(None, "--name", help="Asset name (default: the file name without suffix). One PATH only."),
+    paths: list[Path] = typer.Argument(
+        ..., help="Model files to import (.glb, .gltf, and whatever plugins add)."
+    ),
+    name: str = typer.Option(
+        None, "--name", help="Asset name (default: the file name without suffix). One PATH only."
+    ),
     tag: list[str] = typer.Option(None, "--tag", help="Tag to attach (repeatable), e.g. --tag quadruped."),
     license: str = typer.Option(None, "--license", help="License of the asset, e.g. CC0-1.0."),
     replace: bool = typer.Option(False, "--replace", help="Overwrite an asset of the same name."),
+    views: bool = typer.Option(
+        None,
+        "--views/--no-views",
+        help="Render and embed retrieval views (default: on; ZOOCTL_VIEWS=0 turns the default off). "
+        "`bank reindex --missing` adds them later.",
+        show_default=False,
+    ),
     json_out: bool = JsonOpt,
 ) -> None:
     """Import rigged assets into the bank (atomic: a failed import changes nothing)."""
@@ -32,12 +45,18 @@ def add(
     from ..errors import UsageError
     from ..pipelines.ingest import add_files
 
-    results = add_files(_bank(), paths, name=name, tags=tag, license=license, replace=replace)
+    results = add_files(_bank(), paths, name=name, tags=tag, license=license, replace=replace, views=views)
     failed = [r for r in results if r.error is not None]
     if json_out:
         print_json(
             [
-                {"path": str(r.path), "name": r.name, "ok": r.error is None, "error": None if r.error is None else r.error.message, "summary": r.summary}
+                {
+                    "path": str(r.path),
+                    "name": r.name,
+                    "ok": r.error is None,
+                    "error": None if r.error is None else r.error.message,
+                    "summary": r.summary,
+                }
                 for r in results
             ]
         )
@@ -45,17 +64,29 @@ def add(
         for r in results:
             if r.summary is not None:
                 s = r.summary
-                console.print(f"added [bold]{escape(r.name)}[/]: {s['vertices']} vertices, {s['joints']} joints, {len(s['clips'])} clips", highlight=False)
+                console.print(
+                    f"added [bold]{escape(r.name)}[/]: {s['vertices']} vertices, {s['joints']} joints, {len(s['clips'])} clips",
+                    highlight=False,
+                )
     if len(results) == 1 and failed:
         raise failed[0].error  # one line, with its hint
     for r in failed:
-        err_console.print(f"[bold red]error:[/] {escape(str(r.path))}: {escape(r.error.message)}", highlight=False, soft_wrap=True)
+        err_console.print(
+            f"[bold red]error:[/] {escape(str(r.path))}: {escape(r.error.message)}",
+            highlight=False,
+            soft_wrap=True,
+        )
     if failed:
-        raise UsageError(f"{len(failed)} of {len(results)} files were not added", hint="the others were added; fix the files named above and add them again")
+        raise UsageError(
+            f"{len(failed)} of {len(results)} files were not added",
+            hint="the others were added; fix the files named above and add them again",
+        )
 
 
 @app.command("list")
-def list_(json_out: bool = JsonOpt, tag: str = typer.Option(None, "--tag", help="Only assets with this tag.")) -> None:
+def list_(
+    json_out: bool = JsonOpt, tag: str = typer.Option(None, "--tag", help="Only assets with this tag.")
+) -> None:
     """List the assets in the bank."""
     rows = _bank().list()
     if tag:
@@ -67,8 +98,26 @@ def list_(json_out: bool = JsonOpt, tag: str = typer.Option(None, "--tag", help=
     for r in rows:
         lo, hi = r["bbox"]
         size = max(h - lo_ for lo_, h in zip(lo, hi))
-        table.append([r["name"], str(r["vertices"]), str(r["faces"]), str(r["joints"]), str(len(r["clips"])), f"{size:.3g}", ", ".join(r.get("tags", []))])
-    cols = [("name", "left"), ("vertices", "right"), ("faces", "right"), ("joints", "right"), ("clips", "right"), ("size", "right"), ("tags", "left")]
+        table.append(
+            [
+                r["name"],
+                str(r["vertices"]),
+                str(r["faces"]),
+                str(r["joints"]),
+                str(len(r["clips"])),
+                f"{size:.3g}",
+                ", ".join(r.get("tags", [])),
+            ]
+        )
+    cols = [
+        ("name", "left"),
+        ("vertices", "right"),
+        ("faces", "right"),
+        ("joints", "right"),
+        ("clips", "right"),
+        ("size", "right"),
+        ("tags", "left"),
+    ]
     print_table(cols, table, title=f"{len(rows)} assets")
 
 
@@ -82,7 +131,10 @@ def show(name: str = typer.Argument(..., help="Asset name."), json_out: bool = J
     from rich.tree import Tree
 
     lo, hi = card["bbox"]
-    console.print(f"[bold]{card['name']}[/]  {card['vertices']} vertices, {card['faces']} faces, {card['joints']} joints, {card['skin_influences']} influences per vertex", highlight=False)
+    console.print(
+        f"[bold]{card['name']}[/]  {card['vertices']} vertices, {card['faces']} faces, {card['joints']} joints, {card['skin_influences']} influences per vertex",
+        highlight=False,
+    )
     console.print(f"bbox min {[round(x, 4) for x in lo]}  max {[round(x, 4) for x in hi]}", highlight=False)
     if card.get("license"):
         console.print(f"license: {card['license']}", highlight=False)
@@ -121,7 +173,9 @@ def migrate(json_out: bool = JsonOpt) -> None:
     if json_out:
         print_json(report)
     else:
-        console.print(f"{report['migrated']} assets migrated, {report['current']} already current", highlight=False)
+        console.print(
+            f"{report['migrated']} assets migrated, {report['current']} already current", highlight=False
+        )
 
 
 @app.command("clean")
@@ -131,4 +185,16 @@ def clean(json_out: bool = JsonOpt) -> None:
     if json_out:
         print_json(report)
     else:
-        console.print(f"removed {report['temporaries']} temporaries and {report['orphans']} unindexed files", highlight=False)
+        console.print(
+            f"removed {report['temporaries']} temporaries and {report['orphans']} unindexed files",
+            highlight=False,
+        )
+
+
+from . import bank_rig  # noqa: E402  (export, seed, render live in their own module)
+
+bank_rig.register(app)
+
+from . import bank_search  # noqa: E402  (search, reindex: retrieval lives in its own module)
+
+bank_search.register(app)

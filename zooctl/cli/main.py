@@ -14,6 +14,10 @@ from .. import __version__
 from ..errors import ZooctlError
 from ._common import err_console, state
 
+# Before torch is imported anywhere: a spinning OpenMP pool made every render ~4x slower on a
+# busy 2-core machine (measured with bench/render.py); passive waiting costs nothing when idle.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
 app = typer.Typer(
     name="zooctl",
     help="Rigged 3D characters from casual animal videos, and new motions for them.",
@@ -39,17 +43,27 @@ def main(
         help="Data root (asset bank, videos, fits). Default: ./store in a checkout, else the user data dir.",
         show_default=False,
     ),
-    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Print the version and exit."),
+    version: bool = typer.Option(
+        False, "--version", callback=_version, is_eager=True, help="Print the version and exit."
+    ),
 ) -> None:
     state.store = store
 
 
 def _register_groups() -> None:
     """Every command group is registered here, in one place."""
-    from . import bank, plugins_cmd
+    from . import animate, bank, bench, motion, plugins_cmd, video
 
     app.add_typer(bank.app, name="bank")
+    app.add_typer(bench.app, name="bench")
+    app.add_typer(video.app, name="video")
+    app.add_typer(motion.app, name="motion")
+    app.command("animate")(animate.animate)
     app.command("plugins")(plugins_cmd.plugins)
+    from . import fit, fits
+
+    app.command("fit")(fit.fit)
+    app.add_typer(fits.app, name="fits")
 
 
 def _builtin_names() -> set[str]:
@@ -82,7 +96,10 @@ def _register_plugin_commands(argv: list[str]) -> None:
         return
     pm.add_commands(app)
     for info in pm.failures():
-        err_console.print(f"[yellow]warning:[/] plugin {info.name!r} ({info.distribution}) skipped: {escape(info.error)}", highlight=False)
+        err_console.print(
+            f"[yellow]warning:[/] plugin {info.name!r} ({info.distribution}) skipped: {escape(info.error)}",
+            highlight=False,
+        )
 
 
 def run(argv: list[str] | None = None) -> int:
@@ -111,9 +128,13 @@ def run(argv: list[str] | None = None) -> int:
         if debug:
             traceback.print_exc()
         err_console.print(
-            f"[bold red]error:[/] internal failure: {type(exc).__name__}: {escape(str(exc))}", highlight=False, soft_wrap=True
+            f"[bold red]error:[/] internal failure: {type(exc).__name__}: {escape(str(exc))}",
+            highlight=False,
+            soft_wrap=True,
         )
-        err_console.print("  [dim]hint:[/] run again with ZOOCTL_DEBUG=1 for the traceback, and report it", highlight=False)
+        err_console.print(
+            "  [dim]hint:[/] run again with ZOOCTL_DEBUG=1 for the traceback, and report it", highlight=False
+        )
         return 1
 
 

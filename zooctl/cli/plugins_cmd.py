@@ -25,7 +25,9 @@ def plugins(json_out: bool = JsonOpt) -> None:
         regs = "; ".join(f"{k.replace('_', ' ')}: {', '.join(v)}" for k, v in sorted(i.registers.items()))
         if "register_commands" in i.hooks:
             regs = (regs + "; " if regs else "") + "commands"
-        status = {"loaded": "[green]loaded[/]", "failed": "[red]failed[/]", "skipped": "[dim]skipped[/]"}[i.status]
+        status = {"loaded": "[green]loaded[/]", "failed": "[red]failed[/]", "skipped": "[dim]skipped[/]"}[
+            i.status
+        ]
         if i.error:
             status += f"\n[dim]{escape(i.error)}[/]"
         table.add_row(i.name, i.distribution, i.version, status, escape(regs))

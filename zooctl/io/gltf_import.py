@@ -33,7 +33,14 @@ from ..errors import InputError
 from ..geometry import compose_trs, decompose_trs, quat_normalize, quat_slerp
 
 GLB_MAGIC = 0x46546C67
-_COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
+_COMPONENT = {
+    5120: np.int8,
+    5121: np.uint8,
+    5122: np.int16,
+    5123: np.uint16,
+    5125: np.uint32,
+    5126: np.float32,
+}
 _NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 MAX_INFLUENCES = 8
 
@@ -57,7 +64,9 @@ class _Doc:
             raise InputError(f"{path}: not a glTF 2.0 document (no 'asset' object)")
         version = str(self.json["asset"].get("version", ""))
         if not version.startswith("2"):
-            raise InputError(f"{path}: glTF version {version!r} is not supported", hint="convert it to glTF 2.0")
+            raise InputError(
+                f"{path}: glTF version {version!r} is not supported", hint="convert it to glTF 2.0"
+            )
         self._buffers: dict[int, bytes] = {}
 
     def get(self, key: str) -> list[dict[str, Any]]:
@@ -110,7 +119,9 @@ class _Doc:
         off = int(v.get("byteOffset", 0))
         length = int(v["byteLength"])
         if off + length > len(buf):
-            raise InputError(f"{self.path}: bufferView {vi} runs past the end of its buffer (truncated file?)")
+            raise InputError(
+                f"{self.path}: bufferView {vi} runs past the end of its buffer (truncated file?)"
+            )
         return buf, off, v.get("byteStride")
 
     def accessor(self, ai: int) -> np.ndarray:
@@ -118,7 +129,9 @@ class _Doc:
         if not isinstance(ai, int) or ai >= len(accs):
             raise InputError(f"{self.path}: accessor {ai} does not exist")
         a = accs[ai]
-        dtype = np.dtype(_COMPONENT.get(a.get("componentType"), None) or _bad(self.path, f"accessor {ai} component type"))
+        dtype = np.dtype(
+            _COMPONENT.get(a.get("componentType"), None) or _bad(self.path, f"accessor {ai} component type")
+        )
         nc = _NCOMP.get(a.get("type"), 0) or _bad(self.path, f"accessor {ai} type")
         count = int(a["count"])
         if "bufferView" in a:
@@ -128,7 +141,9 @@ class _Doc:
             stride = int(stride or elem)
             need = off + stride * (count - 1) + elem if count else off
             if need > len(buf):
-                raise InputError(f"{self.path}: accessor {ai} runs past the end of its buffer (truncated file?)")
+                raise InputError(
+                    f"{self.path}: accessor {ai} runs past the end of its buffer (truncated file?)"
+                )
             if stride == elem:
                 out = np.frombuffer(buf, dtype=dtype, count=count * nc, offset=off).reshape(count, nc).copy()
             else:
@@ -142,9 +157,16 @@ class _Doc:
             n = int(sparse["count"])
             idx_info, val_info = sparse["indices"], sparse["values"]
             ib, io_, _ = self.view_bytes(int(idx_info["bufferView"]))
-            idx = np.frombuffer(ib, dtype=_COMPONENT[idx_info["componentType"]], count=n, offset=io_ + int(idx_info.get("byteOffset", 0)))
+            idx = np.frombuffer(
+                ib,
+                dtype=_COMPONENT[idx_info["componentType"]],
+                count=n,
+                offset=io_ + int(idx_info.get("byteOffset", 0)),
+            )
             vb, vo, _ = self.view_bytes(int(val_info["bufferView"]))
-            vals = np.frombuffer(vb, dtype=dtype, count=n * nc, offset=vo + int(val_info.get("byteOffset", 0))).reshape(n, nc)
+            vals = np.frombuffer(
+                vb, dtype=dtype, count=n * nc, offset=vo + int(val_info.get("byteOffset", 0))
+            ).reshape(n, nc)
             out = out.copy()
             if idx.size and idx.max() >= count:
                 raise InputError(f"{self.path}: sparse accessor {ai} has indices out of range")
@@ -193,7 +215,8 @@ def _parse_glb(path: Path, data: bytes) -> tuple[dict[str, Any], bytes | None]:
         raise InputError(f"{path}: GLB container version {version} is not supported")
     if length > len(data):
         raise InputError(
-            f"{path}: truncated GLB ({len(data)} of {length} bytes)", hint="the file was cut short; re-export or re-download it"
+            f"{path}: truncated GLB ({len(data)} of {length} bytes)",
+            hint="the file was cut short; re-export or re-download it",
         )
     off = 12
     js: dict[str, Any] | None = None
@@ -237,7 +260,12 @@ def _triangles(doc: _Doc, prim: dict[str, Any], nverts: int) -> np.ndarray:
     if mode == 4:
         tris = idx[: len(idx) // 3 * 3].reshape(-1, 3)
     elif mode == 5:  # strip: alternate winding
-        tris = np.array([(idx[i], idx[i + 1], idx[i + 2]) if i % 2 == 0 else (idx[i + 1], idx[i], idx[i + 2]) for i in range(len(idx) - 2)])
+        tris = np.array(
+            [
+                (idx[i], idx[i + 1], idx[i + 2]) if i % 2 == 0 else (idx[i + 1], idx[i], idx[i + 2])
+                for i in range(len(idx) - 2)
+            ]
+        )
     elif mode == 6:  # fan
         tris = np.array([(idx[0], idx[i], idx[i + 1]) for i in range(1, len(idx) - 1)])
     else:
@@ -255,7 +283,9 @@ def load_gltf(path: str | Path, name: str, fps: float = 30.0) -> RiggedAsset:
     nodes = doc.get("nodes")
     skins = doc.get("skins")
     if not skins:
-        raise InputError(f"{path}: the file has no skin (no rigged mesh)", hint="zooctl needs a skinned, rigged mesh")
+        raise InputError(
+            f"{path}: the file has no skin (no rigged mesh)", hint="zooctl needs a skinned, rigged mesh"
+        )
     parent = np.full(len(nodes), -1, dtype=np.int64)
     for i, n in enumerate(nodes):
         for c in n.get("children", []):
@@ -263,12 +293,20 @@ def load_gltf(path: str | Path, name: str, fps: float = 30.0) -> RiggedAsset:
                 raise InputError(f"{path}: node hierarchy is not a tree (node {c})")
             parent[c] = i
     rest = [_node_local(n) for n in nodes]
-    rest_m = compose_trs(np.array([r[0] for r in rest]), np.array([r[1] for r in rest]), np.array([r[2] for r in rest])) if nodes else np.zeros((0, 4, 4))
+    rest_m = (
+        compose_trs(
+            np.array([r[0] for r in rest]), np.array([r[1] for r in rest]), np.array([r[2] for r in rest])
+        )
+        if nodes
+        else np.zeros((0, 4, 4))
+    )
     world = _world(rest_m, parent)
 
     skinned = [(i, n) for i, n in enumerate(nodes) if "mesh" in n and "skin" in n]
     if not skinned:
-        raise InputError(f"{path}: no mesh node is bound to a skin", hint="zooctl needs a skinned, rigged mesh")
+        raise InputError(
+            f"{path}: no mesh node is bound to a skin", hint="zooctl needs a skinned, rigged mesh"
+        )
     used_skins = sorted({int(n["skin"]) for _, n in skinned})
     for s in used_skins:
         if s >= len(skins):
@@ -308,7 +346,9 @@ def load_gltf(path: str | Path, name: str, fps: float = 30.0) -> RiggedAsset:
             else np.tile(np.eye(4), (len(sk["joints"]), 1, 1))
         )
         if m.shape[0] != len(sk["joints"]):
-            raise InputError(f"{path}: skin {s} has {m.shape[0]} inverse bind matrices for {len(sk['joints'])} joints")
+            raise InputError(
+                f"{path}: skin {s} has {m.shape[0]} inverse bind matrices for {len(sk['joints'])} joints"
+            )
         ibm_skin[s] = m
     first = used_skins[0]
     assigned = np.zeros(J, dtype=bool)
@@ -339,7 +379,9 @@ def load_gltf(path: str | Path, name: str, fps: float = 30.0) -> RiggedAsset:
             v, f, col, uv, tex = got
             attrs = prim["attributes"]
             if "JOINTS_0" not in attrs or "WEIGHTS_0" not in attrs:
-                raise InputError(f"{path}: a primitive of skinned mesh {node.get('name', node_i)!r} has no JOINTS_0/WEIGHTS_0")
+                raise InputError(
+                    f"{path}: a primitive of skinned mesh {node.get('name', node_i)!r} has no JOINTS_0/WEIGHTS_0"
+                )
             js = [doc.accessor(attrs["JOINTS_0"])]
             ws = [doc.accessor(attrs["WEIGHTS_0"]).astype(np.float64)]
             if "JOINTS_1" in attrs and "WEIGHTS_1" in attrs:
@@ -353,7 +395,9 @@ def load_gltf(path: str | Path, name: str, fps: float = 30.0) -> RiggedAsset:
             if np.any(ww < 0):
                 raise InputError(f"{path}: skin weights are negative")
             if np.any(jj[ww > 0] >= len(skin_joints)) or np.any(jj < 0):
-                raise InputError(f"{path}: joint indices out of range of skin {s}'s {len(skin_joints)} joints")
+                raise InputError(
+                    f"{path}: joint indices out of range of skin {s}'s {len(skin_joints)} joints"
+                )
             jj = skin_joints[np.clip(jj, 0, len(skin_joints) - 1)]
             if not np.allclose(M, np.eye(4), atol=1e-6):
                 v = v @ M[:3, :3].T + M[:3, 3]
@@ -452,20 +496,27 @@ def load_gltf(path: str | Path, name: str, fps: float = 30.0) -> RiggedAsset:
 MAX_REPAIRED_FRACTION = 0.05
 
 
-def _repair_unweighted(path: Path, v: np.ndarray, jj: np.ndarray, ww: np.ndarray, warnings: list[str]) -> np.ndarray:
+def _repair_unweighted(
+    path: Path, v: np.ndarray, jj: np.ndarray, ww: np.ndarray, warnings: list[str]
+) -> np.ndarray:
     """Vertices whose weights are all NaN or all zero get the weights of their nearest weighted
     vertex: real exporters leave a handful of these (Quaternius' Wasp has 6). More than 5% of a
     primitive, or NaN mixed into otherwise valid rows, is an error."""
     finite = np.isfinite(ww)
     row_bad = ~finite.all(1)
     if np.any(row_bad & finite.any(1)):
-        raise InputError(f"{path}: skin weights contain NaN or infinity", hint="fix the weights in the source file")
+        raise InputError(
+            f"{path}: skin weights contain NaN or infinity", hint="fix the weights in the source file"
+        )
     dead = row_bad | (np.where(finite, ww, 0).sum(1) <= 0)
     if not dead.any():
         return ww
     if dead.mean() > MAX_REPAIRED_FRACTION or dead.all():
         what = "NaN or infinite" if row_bad.any() else "zero"
-        raise InputError(f"{path}: {int(dead.sum())} of {len(ww)} vertices have {what} skin weights", hint="fix the weights in the source file")
+        raise InputError(
+            f"{path}: {int(dead.sum())} of {len(ww)} vertices have {what} skin weights",
+            hint="fix the weights in the source file",
+        )
     from scipy.spatial import cKDTree
 
     good = np.flatnonzero(~dead)
@@ -473,7 +524,9 @@ def _repair_unweighted(path: Path, v: np.ndarray, jj: np.ndarray, ww: np.ndarray
     ww = ww.copy()
     ww[dead] = ww[good[nn]]
     jj[dead] = jj[good[nn]]
-    warnings.append(f"{int(dead.sum())} vertices had no valid skin weights; copied from their nearest neighbours")
+    warnings.append(
+        f"{int(dead.sum())} vertices had no valid skin weights; copied from their nearest neighbours"
+    )
     return ww
 
 
@@ -579,7 +632,12 @@ def _sample(times: np.ndarray, values: np.ndarray, interp: str, t: np.ndarray, i
         h10 = u3 - 2 * u2 + u
         h01 = -2 * u3 + 3 * u2
         h11 = u3 - u2
-        out = h00[:, None] * v[i] + (h10 * dt)[:, None] * b_out[i] + h01[:, None] * v[i + 1] + (h11 * dt)[:, None] * a_in[i + 1]
+        out = (
+            h00[:, None] * v[i]
+            + (h10 * dt)[:, None] * b_out[i]
+            + h01[:, None] * v[i + 1]
+            + (h11 * dt)[:, None] * a_in[i + 1]
+        )
     elif is_rot:
         out = quat_slerp(v[i], v[i + 1], u)
     else:
@@ -621,7 +679,7 @@ def _clips(doc: _Doc, nodes, node_to_joint, rest, order, fps: float) -> dict[str
         if not chans:
             continue
         # Uniform samples from the first key; a partial last step shorter than 1/fps is dropped.
-        n = max(1, int(np.floor((t_hi - t_lo) * fps + 1e-6)) + 1)
+        n = max(1, int(np.floor((t_hi - t_lo) * fps + 1e-3)) + 1)  # float32 key times: 1e-3 frame slack
         t = t_lo + np.arange(n) / fps
         tr = np.repeat(rest_t[None], n, 0)
         rq = np.repeat(rest_q[None], n, 0)
@@ -634,5 +692,11 @@ def _clips(doc: _Doc, nodes, node_to_joint, rest, order, fps: float) -> dict[str
         while name in clips:
             k += 1
             name = f"{base}.{k}"
-        clips[name] = Clip(name=name, fps=float(fps), rotations=rq.astype(np.float32), translations=tr.astype(np.float32), scales=sc.astype(np.float32))
+        clips[name] = Clip(
+            name=name,
+            fps=float(fps),
+            rotations=rq.astype(np.float32),
+            translations=tr.astype(np.float32),
+            scales=sc.astype(np.float32),
+        )
     return clips

@@ -19,7 +19,9 @@ def _even(n: int) -> int:
     return n + (n % 2)
 
 
-def write_mp4(path: str | Path, frames: Iterable[np.ndarray] | np.ndarray, fps: float = 30.0, quality: int = 23) -> Path:
+def write_mp4(
+    path: str | Path, frames: Iterable[np.ndarray] | np.ndarray, fps: float = 30.0, quality: int = 23
+) -> Path:
     """Write RGB uint8 frames (each (H, W, 3), all the same size) as an H.264 MP4, atomically.
 
     ``quality`` is x264's CRF (lower is better, 18-28 sensible). Odd sizes are padded by one pixel.

@@ -6,8 +6,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..names import check_name, sanitize_name
 from ..errors import InputError, UsageError, ZooctlError
+from ..names import check_name, sanitize_name
 from ..plugins import get_registry
 from ..store.bank import Bank
 
@@ -31,7 +31,10 @@ def import_file(path: Path, name: str) -> Any:
         if path.is_dir():
             raise InputError(f"{path} is a directory", hint="give the model file(s) inside it")
         known = sorted({s for sp in registry.components["importer"].values() for s in sp.suffixes})
-        raise InputError(f"cannot import {path.name}: unknown file type {path.suffix or '(none)'!r}", hint=f"supported: {' '.join(known)}")
+        raise InputError(
+            f"cannot import {path.name}: unknown file type {path.suffix or '(none)'!r}",
+            hint=f"supported: {' '.join(known)}",
+        )
     if path.is_dir():
         raise InputError(f"{path} is a directory", hint="give the model file(s) inside it")
     return spec.load(path, name)
@@ -44,8 +47,17 @@ def add_files(
     tags: list[str] | None = None,
     license: str | None = None,
     replace: bool = False,
+    views: bool | None = None,
 ) -> list[AddResult]:
-    """Import and store each path; one bad file does not stop the others (its result holds the error)."""
+    """Import and store each path; one bad file does not stop the others (its result holds the error).
+
+    ``views`` renders and embeds each added asset's retrieval views (`zooctl.retrieval.index`);
+    default: on, unless the environment sets ZOOCTL_VIEWS=0.
+    """
+    if views is None:
+        import os
+
+        views = os.environ.get("ZOOCTL_VIEWS", "1") != "0"
     if name is not None and len(paths) > 1:
         raise UsageError("--name needs exactly one PATH", hint="add the files one at a time, or drop --name")
     if name is not None:
@@ -63,6 +75,13 @@ def add_files(
             if license is not None:
                 asset.meta["license"] = license
             r.summary = bank.add(asset, replace=replace)
+            if views:
+                from ..retrieval.index import index_asset
+
+                try:
+                    r.summary = {**r.summary, "views": index_asset(bank, asset)}
+                except ZooctlError as exc:
+                    raise type(exc)(f"{asset_name} was added, but its retrieval views failed: {exc.message}", hint=f"fix that, then run `zooctl bank reindex {asset_name}`") from None
         except ZooctlError as exc:
             r.error = exc
         results.append(r)

@@ -82,14 +82,18 @@ def write_asset(path: Path, asset: RiggedAsset) -> None:
             g.attrs["name"] = clip.name
             g.attrs["fps"] = float(clip.fps)
             for key in ("rotations", "translations", "scales"):
-                g.create_dataset(key, data=getattr(clip, key).astype(np.float32), compression="lzf", shuffle=True)
+                g.create_dataset(
+                    key, data=getattr(clip, key).astype(np.float32), compression="lzf", shuffle=True
+                )
 
 
 def read_asset(path: Path) -> RiggedAsset:
     try:
         f = h5py.File(path, "r")
     except (OSError, FileNotFoundError) as exc:
-        raise StoreError(f"asset file {path} is unreadable: {exc}", hint="re-add the asset with --replace") from None
+        raise StoreError(
+            f"asset file {path} is unreadable: {exc}", hint="re-add the asset with --replace"
+        ) from None
     with f:
         _check_version(f, path)
         m, s, k = f["mesh"], f["skeleton"], f["skin"]
@@ -97,7 +101,9 @@ def read_asset(path: Path) -> RiggedAsset:
         for key in sorted(f["clips"], key=int):
             g = f["clips"][key]
             name = str(g.attrs["name"])
-            clips[name] = Clip(name, float(g.attrs["fps"]), g["rotations"][()], g["translations"][()], g["scales"][()])
+            clips[name] = Clip(
+                name, float(g.attrs["fps"]), g["rotations"][()], g["translations"][()], g["scales"][()]
+            )
         return RiggedAsset(
             name=str(f.attrs["name"]),
             vertices=m["vertices"][()],
@@ -119,9 +125,14 @@ def read_asset(path: Path) -> RiggedAsset:
 def _check_version(f: h5py.File, path: Path) -> None:
     v = int(f.attrs.get("schema_version", 0))
     if v > SCHEMA_VERSION:
-        raise StoreError(f"{path} was written by a newer zooctl (layout {v}; this one reads {SCHEMA_VERSION})", hint="upgrade zooctl")
+        raise StoreError(
+            f"{path} was written by a newer zooctl (layout {v}; this one reads {SCHEMA_VERSION})",
+            hint="upgrade zooctl",
+        )
     if v < SCHEMA_VERSION:
-        raise StoreError(f"{path} has the old layout {v}", hint="run `zooctl bank migrate` to upgrade the bank")
+        raise StoreError(
+            f"{path} has the old layout {v}", hint="run `zooctl bank migrate` to upgrade the bank"
+        )
 
 
 def pending_migrations(version: int, migrations: list[Migration] | None = None) -> list[Migration]:
@@ -134,7 +145,9 @@ def pending_migrations(version: int, migrations: list[Migration] | None = None) 
     return out
 
 
-def migrate_file(path: Path, migrations: list[Migration] | None = None, target: int = SCHEMA_VERSION) -> list[str]:
+def migrate_file(
+    path: Path, migrations: list[Migration] | None = None, target: int = SCHEMA_VERSION
+) -> list[str]:
     """Upgrade a (temporary copy of an) asset file to ``target``; returns the names applied."""
     applied = []
     with h5py.File(path, "r+") as f:
@@ -179,7 +192,11 @@ def describe_h5(path: Path) -> dict[str, Any]:
             if isinstance(obj, h5py.Group):
                 node["groups"][key] = walk(obj)
             else:
-                node["datasets"][key] = {"dtype": obj.dtype.str if obj.dtype.kind != "O" else "str", "shape": list(obj.shape), "attrs": attrs(obj)}
+                node["datasets"][key] = {
+                    "dtype": obj.dtype.str if obj.dtype.kind != "O" else "str",
+                    "shape": list(obj.shape),
+                    "attrs": attrs(obj),
+                }
         return node
 
     with h5py.File(path, "r") as f:

@@ -22,8 +22,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..names import check_name
 from ..errors import AlreadyExistsError, NotFoundError, StoreError
+from ..names import check_name
 from .fs import publish, remove_stale_temps, store_lock, temp_path, write_json_atomic
 
 if TYPE_CHECKING:  # numpy/h5py stay unimported for `bank list` and `bank show`
@@ -57,7 +57,9 @@ class Bank:
         if v != INDEX_VERSION:
             raise StoreError(
                 f"the bank index has schema version {v}, this zooctl reads {INDEX_VERSION}",
-                hint="upgrade zooctl" if isinstance(v, int) and v > INDEX_VERSION else "run `zooctl bank migrate`",
+                hint="upgrade zooctl"
+                if isinstance(v, int) and v > INDEX_VERSION
+                else "run `zooctl bank migrate`",
             )
         return data
 
@@ -84,7 +86,9 @@ class Bank:
         try:
             card = json.loads(self.card_path(name).read_text())
         except (OSError, json.JSONDecodeError) as exc:
-            raise StoreError(f"the card of asset {name!r} is unreadable: {exc}", hint="re-add the asset with --replace") from None
+            raise StoreError(
+                f"the card of asset {name!r} is unreadable: {exc}", hint="re-add the asset with --replace"
+            ) from None
         card.update(summary)
         return card
 
@@ -175,13 +179,17 @@ class Bank:
             orphans = 0
             if self.assets_dir.is_dir():
                 for p in self.assets_dir.iterdir():
-                    if p.suffix in (".h5", ".json") and not p.name.startswith(".") and p.stem not in index["assets"]:
+                    if (
+                        p.suffix in (".h5", ".json")
+                        and not p.name.startswith(".")
+                        and p.stem not in index["assets"]
+                    ):
                         p.unlink(missing_ok=True)
                         orphans += 1
         return {"temporaries": temps, "orphans": orphans}
 
     def exists_error(self, name: str) -> AlreadyExistsError:
         return AlreadyExistsError(
-            f"an asset named {name!r} is already in the bank", hint="pass --replace to overwrite it, or --name to choose another name"
+            f"an asset named {name!r} is already in the bank",
+            hint="pass --replace to overwrite it, or --name to choose another name",
         )
-

@@ -29,7 +29,9 @@ def load_toyrig(path: Path, name: str):
         radius = float(spec.get("radius", 0.1))
         fps = float(spec.get("fps", 30))
     except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise InputError(f"{path}: not a valid .toyrig file ({exc})", hint='expected JSON like {"bones": 4}') from None
+        raise InputError(
+            f"{path}: not a valid .toyrig file ({exc})", hint='expected JSON like {"bones": 4}'
+        ) from None
     if not (1 <= n <= 64) or length <= 0 or radius <= 0:
         raise InputError(f"{path}: bones must be 1..64 and length, radius positive")
     seg = length / n
@@ -65,7 +67,13 @@ def load_toyrig(path: Path, name: str):
     half = 0.25 * np.sin(ph) / 2
     rot = np.zeros((T, n, 4), np.float32)
     rot[..., 0], rot[..., 3] = np.cos(half), np.sin(half)
-    clip = Clip("wiggle", fps, rot, np.repeat(rest[None, :, :3, 3], T, 0).astype(np.float32), np.ones((T, n, 3), np.float32))
+    clip = Clip(
+        "wiggle",
+        fps,
+        rot,
+        np.repeat(rest[None, :, :3, 3], T, 0).astype(np.float32),
+        np.ones((T, n, 3), np.float32),
+    )
     return RiggedAsset(
         name=name,
         vertices=verts,
@@ -77,7 +85,13 @@ def load_toyrig(path: Path, name: str):
         skin_joints=joints.astype(np.int32),
         skin_weights=weights.astype(np.float32),
         clips={"wiggle": clip},
-        meta={"source": str(path), "source_format": "toyrig", "units": "m", "meters_per_unit": 1.0, "up_axis": "Y"},
+        meta={
+            "source": str(path),
+            "source_format": "toyrig",
+            "units": "m",
+            "meters_per_unit": 1.0,
+            "up_axis": "Y",
+        },
     ).validate()
 
 

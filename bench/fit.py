@@ -1,0 +1,202 @@
+"""CASA fit benchmark: speed (60 frames, 320 px, ~4,000-vertex template) and quality (bench run).
+
+    python bench/fit.py speed [--preset fast|quality] [--device cpu|cuda]
+    python bench/fit.py quality [--assets N] [--frames 60] [--size 320] [--ablation ...]
+    python bench/fit.py davis [--store DIR] [--videos dog cows blackswan] [--masks given auto]
+
+``speed`` renders one 60-frame 320x320 video of a shared Quaternius animal, fits it with another
+animal as the template (`zooctl fit --template`, a fresh process, retrieval excluded only when
+no index exists) and reports the wall time. ``quality`` renders videos from the shared assets,
+adds them all to a scratch bank and runs `zooctl bench run` (each video's own asset excluded).
+``davis`` fits the shared DAVIS videos (added to the video store the way `zooctl fit PATH`
+does) with their given masks and with automatic GrabCut masks seeded by the first annotation's
+box, and reports the reprojected mask IoU against the DAVIS annotations (the ground truth in
+both cases). The template comes from retrieval over a bank of the 28 shared assets unless
+``--template VIDEO=ASSET`` says otherwise.
+Results: print a markdown line for BENCHMARKS.md (machine, command, median).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _util import SHARED, machine  # noqa: E402
+
+ASSETS = SHARED / "assets" / "quaternius"
+
+
+def zooctl(*args: str, store: Path) -> subprocess.CompletedProcess:
+    exe = Path(sys.executable).with_name("zooctl")
+    env = {"ZOOCTL_STORE": str(store), "PATH": "/usr/bin:/bin"}
+    return subprocess.run([str(exe), *args], capture_output=True, text=True, env=env)
+
+
+def speed(args) -> None:
+    with tempfile.TemporaryDirectory() as d:
+        store, vids = Path(d) / "store", Path(d) / "videos"
+        fox, wolf = ASSETS / "animals_pack" / "Fox.glb", ASSETS / "animals_pack" / "Wolf.glb"
+        zooctl("bank", "add", str(fox), str(wolf), store=store)
+        zooctl(
+            "bench",
+            "make",
+            "--out",
+            str(vids),
+            "--asset",
+            "Fox",
+            "--frames",
+            str(args.frames),
+            "--size",
+            str(args.size),
+            store=store,
+        )
+        times = []
+        for i in range(args.repeat):
+            t = time.perf_counter()
+            p = zooctl(
+                "fit",
+                str(vids / "Fox"),
+                "--template",
+                "Wolf",
+                "--preset",
+                args.preset,
+                "--device",
+                args.device,
+                "--name",
+                f"s{i}",
+                "--json",
+                store=store,
+            )
+            times.append(time.perf_counter() - t)
+            if p.returncode != 0:
+                sys.exit(p.stderr)
+            rec = json.loads(p.stdout)
+        times.sort()
+        print(
+            f"| {machine()} | zooctl fit (Fox video {args.frames}x{args.size}px, template Wolf 3,994 vertices, --preset {args.preset}, {args.device}) | "
+            f"median {times[len(times) // 2]:.1f} s of {args.repeat} | mask IoU {rec['metrics']['mask_iou']:.3f}, mIoU {rec['metrics'].get('miou')} |"
+        )
+        print(json.dumps(rec["timings"]))
+
+
+def quality(args) -> None:
+    glbs = sorted(ASSETS.glob("*/*.glb"))[: args.assets]
+    with tempfile.TemporaryDirectory() as d:
+        store, vids = Path(d) / "store", Path(d) / "videos"
+        zooctl("bank", "add", *map(str, sorted(ASSETS.glob("*/*.glb"))), store=store)
+        names = [p.stem for p in glbs]
+        zooctl(
+            "bench",
+            "make",
+            "--out",
+            str(vids),
+            "--frames",
+            str(args.frames),
+            "--size",
+            str(args.size),
+            *sum((["--asset", n] for n in names), []),
+            store=store,
+        )
+        extra = sum((["--ablation", a] for a in args.ablation), [])
+        t = time.perf_counter()
+        p = zooctl("bench", "run", str(vids), "--preset", args.preset, *extra, store=store)
+        print(p.stdout or p.stderr)
+        print(f"machine: {machine()}; {len(glbs)} videos; total {time.perf_counter() - t:.0f} s")
+
+
+def davis(args) -> None:
+    import numpy as np
+
+    from zooctl.fit.config import preset
+    from zooctl.fit.job import load_source
+    from zooctl.fit.run import fit_video, input_mask_iou
+    from zooctl.fit.template import choose_template
+    from zooctl.store.bank import Bank
+
+    store = Path(args.store) if args.store else Path(tempfile.mkdtemp()) / "store"
+    bank = Bank(store)
+    if not bank.names():
+        zooctl("bank", "add", *map(str, sorted(ASSETS.glob("*/*.glb"))), store=store)
+        bank = Bank(store)
+    fixed = dict(t.split("=", 1) for t in args.template)
+    print(f"machine: {machine()}; preset {args.preset}; store {store}")
+    print("| video | masks | frames | template (top 3 retrieval) | IoU vs annotations | wall s |")
+    print("|---|---|---|---|---|---|")
+    for name in args.videos:
+        folder = SHARED / "videos" / name
+        first = _first_annotation(folder)  # original pixels, as `--box` takes them
+        ys, xs = np.nonzero(first)
+        box = (float(xs.min()), float(ys.min()), float(np.ptp(xs) + 1), float(np.ptp(ys) + 1))
+        for kind in args.masks:
+            t = time.perf_counter()
+            cfg = preset(args.preset)
+            cfg.max_frames = args.max_frames
+            video = load_source(
+                str(folder),
+                store,
+                "auto" if kind == "auto" else None,
+                args.max_frames,
+                box if kind == "auto" else None,
+            )
+            asset, cands = choose_template(bank, fixed.get(name), video.frames, video.masks)
+            res = fit_video(video, asset, cfg)
+            wall = time.perf_counter() - t
+            H, W = video.size
+            gt = _gt_masks(folder, store, video, (H, W))
+            iou = float(np.nanmean(input_mask_iou(res, gt)))
+            top = ", ".join(f"{c['name']} {c['score']:.2f}" for c in cands[:3]) or "fixed"
+            print(
+                f"| {name} | {kind} | {video.num_frames} | {asset.name} ({top}) | {iou:.3f} | {wall:.0f} |",
+                flush=True,
+            )
+
+
+def _first_annotation(folder: Path):
+    import numpy as np
+    from PIL import Image
+
+    from zooctl.video.decode import image_files
+
+    with Image.open(image_files(folder / "Annotations")[0]) as im:
+        return np.asarray(im.convert("L")) > 0
+
+
+def _gt_masks(folder: Path, store: Path, video, size: tuple[int, int]):
+    """The DAVIS annotations for the stored frames of ``video`` (their source indices)."""
+    from zooctl.fit.inputs import _read_mask_folder
+    from zooctl.store.videos import VideoStore
+
+    rec = VideoStore(store).get(video.source[len("video:") :], what=())
+    return _read_mask_folder(folder / "Annotations", rec.source_indices[: video.num_frames], size)
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser()
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    s = sub.add_parser("speed")
+    s.add_argument("--preset", default="fast")
+    s.add_argument("--device", default="cpu")
+    s.add_argument("--frames", type=int, default=60)
+    s.add_argument("--size", type=int, default=320)
+    s.add_argument("--repeat", type=int, default=1)
+    q = sub.add_parser("quality")
+    q.add_argument("--assets", type=int, default=28)
+    q.add_argument("--frames", type=int, default=60)
+    q.add_argument("--size", type=int, default=320)
+    q.add_argument("--preset", default="fast")
+    q.add_argument("--ablation", action="append", default=[])
+    dv = sub.add_parser("davis")
+    dv.add_argument("--store", default=None, help="store with the bank (default: a new one, 28 assets)")
+    dv.add_argument("--videos", nargs="+", default=["dog", "cows", "blackswan"])
+    dv.add_argument("--masks", nargs="+", default=["given", "auto"], choices=["given", "auto"])
+    dv.add_argument("--template", action="append", default=[], help="VIDEO=ASSET instead of retrieval")
+    dv.add_argument("--preset", default="fast")
+    dv.add_argument("--max-frames", type=int, default=60)
+    a = ap.parse_args()
+    {"speed": speed, "quality": quality, "davis": davis}[a.cmd](a)

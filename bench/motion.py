@@ -1,0 +1,112 @@
+"""Motion-prior benchmark (issue 8): train on the clips of the 28 shared assets with 20 % of each
+asset's clips held out, then report held-out metrics against the baselines, and the time to sample
+5 motions of 60 frames for the largest skeleton with USD + GLB export.
+
+    .venv/bin/python bench/motion.py [--width 256 --layers 4] [--minutes 20] [--epochs 50]
+                                     [--device cpu] [--threads 2] [--out bench/out/motion.json]
+
+Everything runs through the library (the same code as `zooctl motion train` / `zooctl bench
+motion` / `zooctl animate`), with the assets imported straight from the shared folder.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import torch
+from _util import SHARED, machine
+
+from zooctl.io.gltf_import import load_gltf
+from zooctl.motion.evaluate import TABLE_COLUMNS, evaluate, format_table, split_assets
+from zooctl.motion.model import MotionConfig
+from zooctl.motion.prior import PonymationPrior, motion_clip
+from zooctl.motion.train import TrainOptions, loss_curve_png
+from zooctl.names import sanitize_name
+from zooctl.plugins import get_registry
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--width", type=int, default=256)
+    ap.add_argument("--layers", type=int, default=4)
+    ap.add_argument("--epochs", type=int, default=50)
+    ap.add_argument("--minutes", type=float, default=20.0, help="training time budget")
+    ap.add_argument("--batch-size", type=int, default=64)
+    ap.add_argument("--device", default="cpu")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--samples", type=int, default=32)
+    ap.add_argument("--out", type=Path, default=Path("bench/out/motion.json"))
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    files = sorted((SHARED / "assets" / "quaternius").glob("*/*.glb"))
+    if not files:
+        sys.exit(f"bench/motion.py needs the shared assets at {SHARED / 'assets'}")
+    assets = [load_gltf(f, sanitize_name(f.stem)) for f in files]
+    train, test, held = split_assets(assets, 0.2, seed=0)
+    cfg = MotionConfig(width=args.width, layers=args.layers, latent=args.width)
+    prior = PonymationPrior(cfg, device=args.device)
+    data = prior.dataset(train)
+    print(f"{len(assets)} assets, {len(train)} training clips ({len(data)} windows), {len(test)} held out; "
+          f"model {args.width}x{args.layers}, {sum(p.numel() for p in prior.model.parameters()) / 1e6:.2f} M parameters", flush=True)
+    last = [time.perf_counter()]
+
+    def on_step(step: int, total: int, losses: dict[str, float]) -> None:
+        if time.perf_counter() - last[0] > 30:
+            last[0] = time.perf_counter()
+            print(f"  step {step}/{total} loss {losses['total']:.4f}", flush=True)
+
+    opts = TrainOptions(epochs=args.epochs, batch_size=args.batch_size, max_minutes=args.minutes, device=args.device)
+    hist = prior.fit(data, opts, on_step)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.with_name("motion_loss.png").write_bytes(loss_curve_png(hist))
+    print(f"trained {hist.steps} steps ({hist.epochs} epochs) in {hist.seconds:.0f} s", flush=True)
+    prior.device = torch.device("cpu")
+    prior.model.to("cpu")
+    result = evaluate(prior, train, test, samples=args.samples)
+    # Sampling + export timing on the largest skeleton, CPU.
+    big = max(assets, key=lambda a: a.num_joints)
+    reg = get_registry()
+    usd, glb = reg.exporter_for("usd"), reg.exporter_for("glb")
+    tmp = Path(tempfile.mkdtemp(prefix="zooctl-bench-motion-"))
+    times, sample_only = [], []
+    for r in range(5):
+        t = time.perf_counter()
+        rots = prior.sample(big, n=5, frames=60, seed=r)
+        sample_only.append(time.perf_counter() - t)
+        names = [f"s{i}" for i in range(5)]
+        animated = dataclasses.replace(big, clips={n: motion_clip(big, q, 30.0, n) for n, q in zip(names, rots, strict=True)})
+        for n in names:
+            usd.save(animated, tmp / f"{n}.usd", clips=[n])
+            glb.save(animated, tmp / f"{n}.glb", clips=[n])
+        times.append(time.perf_counter() - t)
+    out = {
+        "machine": machine(),
+        "torch_threads": torch.get_num_threads(),
+        "command": " ".join(["bench/motion.py", *sys.argv[1:]]),
+        "model": cfg.to_json(),
+        "training": {**prior.training, "sequences": len(prior.training["sequences"]), "held_out_clips": sum(len(v) for v in held.values())},
+        "evaluation": {k: v for k, v in result.items() if k != "per_skeleton"},
+        "per_skeleton": result["per_skeleton"],
+        "sampling": {"asset": big.name, "joints": big.num_joints, "samples": 5, "frames": 60,
+                     "median_sample_s": round(statistics.median(sample_only), 3),
+                     "median_sample_and_export_s": round(statistics.median(times), 3)},
+    }
+    args.out.write_text(json.dumps(out, indent=1) + "\n")
+    widths = [max(len(c[0]), 12) for c in TABLE_COLUMNS]
+    print(" | ".join(c[0].ljust(w) for c, w in zip(TABLE_COLUMNS, widths, strict=True)))
+    for row in format_table(result):
+        print(" | ".join(x.ljust(w) for x, w in zip(row, widths, strict=True)))
+    s = out["sampling"]
+    print(f"sampling 5x60 frames, {s['joints']} joints: {s['median_sample_s']} s; with USD+GLB export: "
+          f"{s['median_sample_and_export_s']} s (median of 5); results in {args.out}")
+
+
+if __name__ == "__main__":
+    main()

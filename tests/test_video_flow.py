@@ -1,0 +1,63 @@
+"""DIS flow, warping and the forward-backward occlusion check on frames with known motion."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from video_helpers import texture
+
+from zooctl.errors import UsageError
+from zooctl.plugins import get_registry
+from zooctl.video.flow import DISFlow, compute_video_flow, fb_inconsistent, flow_to_rgb, warp
+
+
+def shifted_pair(dx: int, dy: int, h: int = 96, w: int = 128):
+    big = texture(h + 20, w + 20, seed=3)
+    a = big[10 : 10 + h, 10 : 10 + w]
+    b = big[10 - dy : 10 - dy + h, 10 - dx : 10 - dx + w]  # content moves by (+dx, +dy) from a to b
+    return np.ascontiguousarray(a), np.ascontiguousarray(b)
+
+
+def test_dis_recovers_a_translation():
+    a, b = shifted_pair(3, -2)
+    flow = get_registry().get("flow_estimator", "dis").create(preset="medium").flow(a, b)
+    assert flow.shape == (96, 128, 2) and flow.dtype == np.float32
+    inner = flow[16:-16, 16:-16].reshape(-1, 2)
+    assert np.median(inner, 0) == pytest.approx([3, -2], abs=0.25)
+
+
+def test_warp_with_backward_flow_reconstructs_the_first_frame():
+    a, b = shifted_pair(4, 0)
+    back = DISFlow().flow(b, a)  # b -> a: sampling a at x + back(x) gives b
+    rec = warp(a.astype(np.float32), back)
+    err = np.abs(rec - b.astype(np.float32))[16:-16, 16:-16].mean()
+    assert err < 6
+
+
+def test_video_flow_and_occlusion_masks():
+    a, b = shifted_pair(5, 0)
+    frames = np.stack([a, b, a])
+    vf = compute_video_flow(DISFlow("fast"), frames)
+    assert vf.forward.shape == (2, 96, 128, 2) and vf.occlusion_forward.shape == (2, 96, 128)
+    assert np.median(vf.forward[0][:, 20:-20, 0]) == pytest.approx(5, abs=0.5)
+    assert np.median(vf.backward[0][:, 20:-20, 0]) == pytest.approx(-5, abs=0.5)
+    # pixels that leave the frame (right edge moving right) fail the check; the middle passes
+    assert vf.occlusion_forward[0][:, -3:].mean() > 0.9
+    assert vf.occlusion_forward[0][:, 20:-20].mean() < 0.1
+
+
+def test_fb_check_flags_inconsistent_flow():
+    f = np.zeros((32, 32, 2), np.float32)
+    f[..., 0] = 2
+    assert not fb_inconsistent(f, -f)[:, :-4].any()
+    assert fb_inconsistent(f, f)[:, :-4].all()  # going there and "back" by the same vector
+
+
+def test_flow_colours_and_bad_preset():
+    f = np.zeros((8, 8, 2), np.float32)
+    f[:, :4, 0] = 3
+    rgb = flow_to_rgb(f)
+    assert rgb.shape == (8, 8, 3) and rgb.dtype == np.uint8
+    assert (rgb[:, 4:] == 255).all() and not (rgb[:, :4] == 255).all()  # still is white, motion has colour
+    with pytest.raises(UsageError, match="unknown DIS preset"):
+        DISFlow("slowest")

@@ -1,0 +1,252 @@
+"""PlanetZoo-style test videos rendered from bank assets, with ground truth (CASA section 4).
+
+For each asset: every 12 frames 8 random bones get a new random rotation (slerped between those
+keyframes); the camera orbits the animal, its azimuth moving by 15 to 22.5 degrees every 12 frames;
+the light direction, ambient level and background are random. Saved per video, in ``DIR/<name>/``:
+
+- ``video.npz``: frames (T, H, W, 3) uint8, masks (T, H, W) bool, flow (T-1, H, W, 2) float16
+  (exact forward flow of the rendered surface), flow_valid (T-1, H, W) bool, intrinsics (4,)
+  fx, fy, cx, cy; ground truth ``gt_vertices`` (T, V, 3) world, ``gt_faces`` (F, 3),
+  ``gt_joints`` (T, J, 3) world joint origins, ``gt_parents`` (J,), ``gt_skin_joints`` and
+  ``gt_skin_weights`` (V, K), ``gt_cam_rotation`` (T, 3, 3) and ``gt_cam_translation`` (T, 3)
+  world-to-camera, ``gt_novel_vertices`` (V, 3) a held-out pose (8 more bones re-rotated after the
+  last frame, for re-animation) seen by the last frame's camera (OpenCV convention, `zooctl.render.camera`);
+- ``meta.json``: asset name, frames, size, fps, seed; ``video.mp4``: the frames as H.264.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..asset import RiggedAsset
+from ..errors import UsageError
+from ..geometry import compose_trs, quat_normalize, quat_slerp
+from ..store.fs import write_bytes_atomic, write_json_atomic
+
+KEY_EVERY = 12
+BONES_PER_KEY = 8
+
+
+def _random_quat(rng: np.random.Generator, max_deg: float) -> np.ndarray:
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    ang = math.radians(rng.uniform(0.3, 1.0) * max_deg)
+    return np.concatenate(([math.cos(ang / 2)], math.sin(ang / 2) * axis))
+
+
+def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return np.array(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ]
+    )
+
+
+def random_motion(
+    asset: RiggedAsset, frames: int, rng: np.random.Generator, max_deg: float = 35.0
+) -> np.ndarray:
+    """(T, J, 4, 4) local transforms: the rest pose with 8 random bones re-rotated every 12 frames."""
+    t, q, s = asset.rest_trs()
+    dense = asset.skin_weights_dense()
+    movable = [j for j in range(asset.num_joints) if asset.parents[j] >= 0 and dense[:, j].sum() > 0]
+    keys = list(range(0, frames, KEY_EVERY))
+    if keys[-1] != frames - 1 and frames > 1:
+        keys.append(frames - 1)
+    key_q = []
+    cur = q.copy()
+    for _ in keys:
+        cur = cur.copy()
+        if movable:
+            for j in rng.choice(movable, min(BONES_PER_KEY, len(movable)), replace=False):
+                cur[j] = _qmul(q[j], _random_quat(rng, max_deg))  # a random rotation relative to rest
+        key_q.append(cur)
+    rot = np.zeros((frames, asset.num_joints, 4))
+    for i in range(frames):
+        k = max(0, int(np.searchsorted(keys, i, side="right")) - 1)
+        if k >= len(keys) - 1:
+            rot[i] = key_q[-1]
+        else:
+            a = (i - keys[k]) / (keys[k + 1] - keys[k])
+            rot[i] = quat_slerp(key_q[k], key_q[k + 1], a)
+    rot = quat_normalize(rot)
+    return compose_trs(
+        np.broadcast_to(t, rot.shape[:-1] + (3,)), rot, np.broadcast_to(s, rot.shape[:-1] + (3,))
+    )
+
+
+def camera_path(frames: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Azimuth and elevation (T,) in degrees: the azimuth moves 15-22.5 degrees every 12 frames."""
+    az0 = rng.uniform(0, 360)
+    keys = np.arange(0, frames + KEY_EVERY, KEY_EVERY)
+    steps = rng.uniform(15.0, 22.5, len(keys)) * rng.choice([-1.0, 1.0])
+    key_az = az0 + np.concatenate(([0.0], np.cumsum(steps[:-1])))
+    az = np.interp(np.arange(frames), keys, key_az)
+    el = np.full(frames, rng.uniform(5.0, 25.0))
+    return az, el
+
+
+def _background(h: int, w: int, rng: np.random.Generator) -> np.ndarray:
+    c0, c1 = rng.uniform(0.1, 0.9, 3), rng.uniform(0.1, 0.9, 3)
+    t = np.linspace(0, 1, h)[:, None, None]
+    img = c0 * (1 - t) + c1 * t
+    img = np.broadcast_to(img, (h, w, 3)) + rng.normal(0, 0.03, (h, w, 3))
+    return (np.clip(img, 0, 1) * 255).astype(np.uint8)
+
+
+def shade_frames(
+    asset: RiggedAsset,
+    verts: np.ndarray,
+    cams: list,
+    light: np.ndarray,
+    ambient: float,
+    bg: np.ndarray,
+    batch: int = 8,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Flat-shaded frames (T, H, W, 3) uint8 over ``bg`` and masks (T, H, W) from per-frame cameras."""
+    from ..render.camera import Camera
+    from ..render.raster import rasterize
+
+    T = len(verts)
+    H, W = cams[0].height, cams[0].width
+    faces = torch.as_tensor(asset.faces, dtype=torch.long)
+    if asset.vertex_colors is not None:
+        albedo = asset.vertex_colors[asset.faces].mean(1)
+    else:
+        albedo = np.tile([0.72, 0.68, 0.62], (asset.num_faces, 1))
+    rgb = np.zeros((T, H, W, 3), np.uint8)
+    masks = np.zeros((T, H, W), bool)
+    for s in range(0, T, batch):
+        idx = range(s, min(s + batch, T))
+        cam = Camera(
+            torch.cat([cams[i].intrinsics for i in idx]),
+            torch.cat([cams[i].rotation for i in idx]),
+            torch.cat([cams[i].translation for i in idx]),
+            H,
+            W,
+        )
+        v = torch.as_tensor(verts[s : s + len(idx)])
+        with torch.no_grad():
+            frags = rasterize(v, faces, cam)
+        tri = verts[s : s + len(idx)][:, asset.faces]  # (B, F, 3, 3)
+        n = np.cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0])
+        n /= np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-12)
+        centres = cam.centers()[0].numpy()  # (B, 3)
+        view = tri.mean(2) - centres[:, None]
+        n = np.where((n * view).sum(-1, keepdims=True) > 0, -n, n)  # two-sided
+        shade = albedo[None] * (ambient + (1 - ambient) * np.clip(n @ light, 0, 1))[..., None]
+        shade = (np.clip(shade, 0, 1) ** (1 / 2.2) * 255).astype(np.uint8)
+        fid = frags.face_ids.numpy()
+        m = fid >= 0
+        for b, i in enumerate(idx):
+            img = bg.copy()
+            img[m[b]] = shade[b][fid[b][m[b]]]
+            rgb[i], masks[i] = img, m[b]
+    return rgb, masks
+
+
+def make_video(
+    asset: RiggedAsset, out_dir: Path, frames: int = 60, size: int = 320, seed: int = 0, fps: float = 30.0
+) -> Path:
+    """Render one test video of ``asset`` into ``out_dir/<asset.name>/`` (module docstring)."""
+    from ..io.video import write_mp4
+    from ..render.camera import Camera
+    from ..render.preview import fit_camera, orbit_camera
+    from ..render.raster import FlowRenderer
+
+    if frames < 1 or size < 16:
+        raise UsageError("--frames must be >= 1 and --size >= 16")
+    rng = np.random.default_rng([seed, sum(asset.name.encode())])
+    # 12 more frames than shown: the last one is a held-out novel pose for the re-animation metric.
+    local = random_motion(asset, frames + KEY_EVERY, rng)
+    mats = asset.skinning_matrices(local)  # (T + 12, J, 4, 4)
+    from ..asset import lbs
+
+    allv = lbs(asset.vertices, asset.skin_joints, asset.skin_weights, mats).astype(np.float32)
+    verts, novel = allv[:frames], allv[-1]  # (T, V, 3), (V, 3)
+    joints = asset.joint_transforms(local[:frames])[..., :3, 3].astype(np.float32)
+    az, el = camera_path(frames, rng)
+    lo, hi = verts.reshape(-1, 3).min(0), verts.reshape(-1, 3).max(0)
+    centre = 0.5 * (lo + hi)
+    fov = 40.0
+    ref = fit_camera(
+        verts.reshape(-1, 3), size, size, azimuth=float(az[0]), elevation=float(el[0]), fov_y=fov, margin=1.1
+    )
+    dist = float(np.linalg.norm(ref.centers()[0][0].numpy() - centre))
+    cams = []
+    for i in range(frames):
+        a, e = math.radians(az[i]), math.radians(el[i])
+        eye = centre + dist * np.array([math.cos(e) * math.cos(a), math.sin(e), -math.cos(e) * math.sin(a)])
+        cams.append(orbit_camera(eye, centre, size, size, fov))
+    K = cams[0].intrinsics[0].numpy().astype(np.float64)
+    Rs = np.stack([c.rotation[0].numpy() for c in cams]).astype(np.float64)
+    ts = np.stack([c.translation[0].numpy() for c in cams]).astype(np.float64)
+    light = rng.normal(size=3)
+    light[1] = abs(light[1]) + 0.5
+    bg = _background(size, size, rng)
+    faces_t = torch.as_tensor(asset.faces, dtype=torch.long)
+    rgb, masks = shade_frames(
+        asset, verts, cams, light / np.linalg.norm(light), float(rng.uniform(0.25, 0.5)), bg
+    )
+    flow = np.zeros((max(frames - 1, 0), size, size, 2), np.float16)
+    valid = np.zeros((max(frames - 1, 0), size, size), bool)
+    fr = FlowRenderer()
+    B = 8
+    with torch.no_grad():
+        for s0 in range(0, frames - 1, B):
+            idx = list(range(s0, min(s0 + B, frames - 1)))
+            c0 = Camera(
+                torch.cat([cams[i].intrinsics for i in idx]),
+                torch.cat([cams[i].rotation for i in idx]),
+                torch.cat([cams[i].translation for i in idx]),
+                size,
+                size,
+            )
+            c1 = Camera(
+                torch.cat([cams[i + 1].intrinsics for i in idx]),
+                torch.cat([cams[i + 1].rotation for i in idx]),
+                torch.cat([cams[i + 1].translation for i in idx]),
+                size,
+                size,
+            )
+            out = fr(
+                torch.as_tensor(verts[idx]), faces_t, c0, torch.as_tensor(verts[[i + 1 for i in idx]]), c1
+            )
+            flow[idx] = out["flow"].numpy().astype(np.float16)
+            valid[idx] = out["mask"].numpy()
+    dest = Path(out_dir) / asset.name
+    dest.mkdir(parents=True, exist_ok=True)
+    buf = io.BytesIO()
+    np.savez_compressed(
+        buf,
+        frames=rgb,
+        masks=masks,
+        flow=flow,
+        flow_valid=valid,
+        intrinsics=K,
+        gt_vertices=verts,
+        gt_novel_vertices=novel,
+        gt_faces=asset.faces.astype(np.int32),
+        gt_joints=joints,
+        gt_parents=asset.parents.astype(np.int32),
+        gt_skin_joints=asset.skin_joints,
+        gt_skin_weights=asset.skin_weights,
+        gt_cam_rotation=Rs,
+        gt_cam_translation=ts,
+    )
+    write_bytes_atomic(dest / "video.npz", buf.getvalue())
+    write_json_atomic(
+        dest / "meta.json",
+        {"name": asset.name, "frames": frames, "size": size, "fps": fps, "seed": seed, "asset": asset.name},
+    )
+    write_mp4(dest / "video.mp4", rgb, fps)
+    return dest

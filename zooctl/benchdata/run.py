@@ -1,0 +1,135 @@
+"""`bench run`: fit every benchmark video and tabulate CASA's metrics, with ablations.
+
+Each video is fitted with its own asset removed from the template candidates (retrieval sees
+the bank minus that asset); ``template`` fixes the template instead. Ablations (CASA tables 2-5)
+are config switches applied on top of the preset: ``no-flow``, ``no-symmetry``, ``no-smoothness``,
+``no-stretch``, ``no-displacement``, ``fixed-skinning`` and ``retrieval-only``.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError, UsageError
+from ..fit.config import FitConfig, preset
+
+ABLATIONS: dict[str, dict[str, Any]] = {
+    "full": {},
+    "no-flow": {"ablation": {"flow": False}},
+    "no-symmetry": {"ablation": {"symmetry": False}},
+    "no-smoothness": {"ablation": {"smoothness": False}},
+    "no-stretch": {"ablation": {"stretch": False}},
+    "no-displacement": {"ablation": {"displacement": False}},
+    "fixed-skinning": {"ablation": {"learn_skinning": False}},
+    "retrieval-only": {"ablation": {"optimise": False}},
+}
+COLUMNS = ("mask_iou", "miou", "mcham", "joint", "skinning", "reanimation", "wall_s")
+
+
+def bench_videos(folder: Path) -> list[Path]:
+    vids = (
+        sorted(p for p in Path(folder).iterdir() if (p / "video.npz").is_file())
+        if Path(folder).is_dir()
+        else []
+    )
+    if not vids:
+        raise InputError(
+            f"{folder} holds no benchmark videos", hint="make them with `zooctl bench make --out DIR`"
+        )
+    return vids
+
+
+def run_benchmark(
+    folder: Path,
+    store_root: Path,
+    preset_name: str = "fast",
+    ablations: list[str] | None = None,
+    template: str | None = None,
+    limit: int | None = None,
+    overrides: dict[str, Any] | None = None,
+    progress=None,
+) -> dict[str, Any]:
+    """Fit every video under every ablation; returns {"rows": [...], "summary": {ablation: means}}."""
+    from ..fit.job import fit_job
+    from ..store.bank import Bank
+
+    abl = ablations or ["full"]
+    for a in abl:
+        if a not in ABLATIONS:
+            raise UsageError(f"unknown ablation {a!r}", hint=f"use {', '.join(ABLATIONS)}")
+    vids = bench_videos(folder)[: limit or None]
+    bank = Bank.open(store_root)
+    rows = []
+    for a in abl:
+        for v in vids:
+            cfg = FitConfig.from_dict(json.loads(json.dumps(ABLATIONS[a])), preset(preset_name))
+            if overrides:
+                cfg = FitConfig.from_dict(overrides, cfg)
+            meta = json.loads((v / "meta.json").read_text()) if (v / "meta.json").is_file() else {}
+            asset = meta.get("asset", v.name)
+            t = time.perf_counter()
+            name = f"bench-{v.name}-{a}".lower()
+            try:
+                rec = fit_job(
+                    str(v),
+                    store_root,
+                    cfg,
+                    name=name,
+                    template=template,
+                    exclude={asset},
+                    bank=bank,
+                    outputs=("loss",),
+                )
+                m = rec["metrics"]
+                row = {
+                    "video": v.name,
+                    "ablation": a,
+                    "template": rec["template"],
+                    "wall_s": time.perf_counter() - t,
+                }
+                row.update({k: m.get(k) for k in COLUMNS if k != "wall_s"})
+            except UsageError as exc:
+                row = {"video": v.name, "ablation": a, "error": exc.message}
+            rows.append(row)
+            if progress:
+                progress(row)
+    summary = {}
+    for a in abl:
+        rs = [r for r in rows if r["ablation"] == a and "error" not in r]
+        summary[a] = {k: _mean([r.get(k) for r in rs]) for k in COLUMNS}
+        summary[a]["videos"] = len(rs)
+    return {"rows": rows, "summary": summary, "preset": preset_name}
+
+
+def _mean(vals: list) -> float | None:
+    v = [x for x in vals if x is not None and np.isfinite(x)]
+    return float(np.mean(v)) if v else None
+
+
+def markdown_table(res: dict[str, Any]) -> str:
+    """The summary (one row per ablation) and the per-video rows, as markdown."""
+    head = "| ablation | videos | 2D mask IoU | mIoU | mCham | Joint (CD-J2J) | Skinning | Re-animation | wall s |"
+    lines = [head, "|" + "---|" * 9]
+    f = lambda x: "-" if x is None else f"{x:.3f}"  # noqa: E731
+    for a, s in res["summary"].items():
+        lines.append(f"| {a} | {s['videos']} | " + " | ".join(f(s[k]) for k in COLUMNS) + " |")
+    lines += [
+        "",
+        "| video | ablation | template | 2D mask IoU | mIoU | mCham | Joint | Skinning | Re-anim. | wall s |",
+        "|" + "---|" * 10,
+    ]
+    for r in res["rows"]:
+        if "error" in r:
+            lines.append(f"| {r['video']} | {r['ablation']} | error: {r['error']} |" + " |" * 7)
+        else:
+            lines.append(
+                f"| {r['video']} | {r['ablation']} | {r['template']} | "
+                + " | ".join(f(r.get(k)) for k in COLUMNS)
+                + " |"
+            )
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,39 @@
+"""Built-in differentiable renderers: ``soft`` (SoftRas silhouettes), ``fast`` (splatting), ``flow``."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ..components import ComponentSpec
+from ..plugins import hookimpl
+
+
+def _soft(image_size: Any, device: str = "cpu", **options: Any) -> Any:
+    from ..render.soft import SoftSilhouette
+
+    return SoftSilhouette(image_size, device=device, **options)
+
+
+def _fast(image_size: Any, device: str = "cpu", **options: Any) -> Any:
+    from ..render.fast import SplatSilhouette
+
+    return SplatSilhouette(image_size, device=device, **options)
+
+
+def _flow(image_size: Any = None, device: str = "cpu", **options: Any) -> Any:
+    from ..render.raster import FlowRenderer
+
+    return FlowRenderer(image_size, device=device, **options)
+
+
+@hookimpl
+def register_renderers(register):
+    register(
+        ComponentSpec("renderer", "soft", _soft, "SoftRas-style soft silhouette (B, H, W), per-face windows")
+    )
+    register(
+        ComponentSpec("renderer", "fast", _fast, "cheap splatted silhouette (B, H, W) for large batches")
+    )
+    register(
+        ComponentSpec("renderer", "flow", _flow, "hard z-buffer: optical flow, depth, face ids, barycentrics")
+    )

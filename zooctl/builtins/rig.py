@@ -1,0 +1,37 @@
+"""Built-in articulation models: ``casa`` (stretchable bones + displacement field) and ``lbs``."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ..components import ComponentSpec
+from ..plugins import hookimpl
+
+
+def _casa(asset: Any, device: str = "cpu", **options: Any) -> Any:
+    from ..rig.model import ArticulatedModel
+
+    return ArticulatedModel(asset, device=device, **options)
+
+
+def _lbs(asset: Any, device: str = "cpu", **options: Any) -> Any:
+    from ..rig.model import ArticulatedModel
+
+    options.setdefault("stretch", False)
+    options.setdefault("displacement", False)
+    return ArticulatedModel(asset, device=device, **options)
+
+
+@hookimpl
+def register_articulation_models(register):
+    register(
+        ComponentSpec(
+            "articulation_model",
+            "casa",
+            _casa,
+            "CASA: FK with per-bone length scales, stretchable bones, softmax skinning, displacement MLP",
+        )
+    )
+    register(
+        ComponentSpec("articulation_model", "lbs", _lbs, "plain linear blend skinning with learnable weights")
+    )

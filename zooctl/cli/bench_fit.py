@@ -1,0 +1,104 @@
+"""`zooctl bench make` and `zooctl bench run`: CASA's benchmark on videos rendered from bank assets."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from ._common import JsonOpt, console, err_console, print_json, store_root
+
+
+def _assets(bank_path: Path | None, names: list[str] | None):
+    """(name, loader) pairs from a store's bank or a folder of model files."""
+    from ..errors import InputError
+
+    if bank_path is None or (bank_path / "bank" / "index.json").is_file():
+        from ..store.bank import Bank
+
+        bank = Bank.open(bank_path or store_root())
+        chosen = names or bank.names()
+        return [(n, (lambda n=n: bank.get(n))) for n in chosen]
+    if bank_path.is_dir():
+        from ..names import sanitize_name
+        from ..pipelines.ingest import import_file
+
+        files = sorted(p for p in bank_path.rglob("*") if p.suffix.lower() in (".glb", ".gltf"))
+        if names:
+            files = [p for p in files if sanitize_name(p.stem) in names]
+        if not files:
+            raise InputError(f"{bank_path} holds no .glb/.gltf files and is not a store")
+        return [(sanitize_name(p.stem), (lambda p=p: import_file(p, sanitize_name(p.stem)))) for p in files]
+    raise InputError(f"--bank {bank_path} is not a store or a folder of models")
+
+
+def make(
+    out: Path = typer.Option(..., "--out", help="Folder for the videos (one subfolder per asset)."),
+    bank: Path = typer.Option(
+        None, "--bank", help="A store root or a folder of .glb files (default: this store's bank)."
+    ),
+    asset: list[str] = typer.Option(None, "--asset", help="Only these assets (repeatable)."),
+    frames: int = typer.Option(60, "--frames", help="Frames per video."),
+    size: int = typer.Option(320, "--size", help="Image size in pixels (square)."),
+    seed: int = typer.Option(0, "--seed", help="Random seed."),
+) -> None:
+    """Render PlanetZoo-style test videos with ground truth (motion, camera, masks, flow)."""
+    from ..benchdata.make import make_video
+
+    for _name, load in _assets(bank, asset):
+        dest = make_video(load(), out, frames=frames, size=size, seed=seed)
+        console.print(f"made {dest}", highlight=False, markup=False)
+
+
+def run(
+    folder: Path = typer.Argument(..., help="Folder made by `zooctl bench make`."),
+    preset_name: str = typer.Option("fast", "--preset", help="fast or quality."),
+    ablation: list[str] = typer.Option(
+        None,
+        "--ablation",
+        help="full, no-flow, no-symmetry, no-smoothness, no-stretch, no-displacement, fixed-skinning, retrieval-only (repeatable).",
+    ),
+    template: str = typer.Option(
+        None, "--template", help="Fit every video with this bank asset instead of retrieval."
+    ),
+    limit: int = typer.Option(None, "--limit", help="Only the first N videos."),
+    report: Path = typer.Option(None, "--report", help="Also write the markdown table here."),
+    json_out: bool = JsonOpt,
+) -> None:
+    """Fit every benchmark video (its own asset excluded from retrieval) and report CASA's metrics."""
+    from ..benchdata.run import markdown_table, run_benchmark
+    from ..store.fs import write_bytes_atomic
+
+    def progress(row):
+        if "error" in row:
+            err_console.print(
+                f"{row['video']} [{row['ablation']}]: error: {row['error']}", highlight=False, markup=False
+            )
+        else:
+            err_console.print(
+                f"{row['video']} [{row['ablation']}]: template {row['template']}, mask IoU {row['mask_iou']:.3f}, {row['wall_s']:.0f} s",
+                highlight=False,
+                markup=False,
+            )
+
+    res = run_benchmark(
+        folder,
+        store_root(),
+        preset_name,
+        list(ablation) if ablation else None,
+        template,
+        limit,
+        progress=progress,
+    )
+    table = markdown_table(res)
+    if report is not None:
+        write_bytes_atomic(report, table.encode())
+    if json_out:
+        print_json(res)
+    else:
+        console.file.write(table)
+
+
+def register(app: typer.Typer) -> None:
+    app.command("make")(make)
+    app.command("run")(run)

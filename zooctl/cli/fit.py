@@ -1,0 +1,128 @@
+"""`zooctl fit`: a video of an animal in, a rigged, skinned, animated character out."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from ._common import console, err_console, print_json, store_root
+
+
+class RichReporter:
+    """A rich progress bar per stage with the live loss terms."""
+
+    def __init__(self) -> None:
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+        self.progress = Progress(
+            TextColumn("[bold]{task.fields[stage]}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            TextColumn("{task.fields[loss]}"),
+            console=err_console,
+            transient=False,
+        )
+        self.task = None
+
+    def __enter__(self) -> RichReporter:
+        self.progress.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.progress.stop()
+
+    def stage(self, name: str, total: int, done: int = 0) -> None:
+        self.task = self.progress.add_task("", total=total, completed=done, stage=name, loss="")
+
+    def step(self, terms: dict[str, float]) -> None:
+        main = ("total", "mask", "flow", "smooth", "symmetry")
+        text = "  ".join(f"{k} {terms[k]:.4f}" for k in main if k in terms)
+        self.progress.update(self.task, advance=1, loss=text)
+
+    def message(self, text: str) -> None:
+        self.progress.console.print(f"[dim]{text}[/]", highlight=False)
+
+
+def fit(
+    video: str = typer.Argument(
+        ...,
+        help="Video file, image or DAVIS folder (added to the video store first), `bench make` folder, or a stored video name.",
+    ),
+    template: str = typer.Option(None, "--template", help="Bank asset to fit (default: template retrieval)."),
+    masks: str = typer.Option(
+        None, "--masks", help="Folder of mask images (one per frame), or 'auto' (GrabCut)."
+    ),
+    box: str = typer.Option(
+        None,
+        "--box",
+        help="x,y,w,h around the animal in the first frame (original pixels): seeds --masks auto.",
+    ),
+    out: Path = typer.Option(None, "--out", help="Output folder (default: the fit's folder in the store)."),
+    name: str = typer.Option(None, "--name", help="Fit name (default: the video's name)."),
+    preset_name: str = typer.Option("fast", "--preset", help="fast or quality."),
+    iters: int = typer.Option(None, "--iters", help="Stage 2 iterations (overrides the preset)."),
+    device: str = typer.Option(None, "--device", help="cpu or cuda."),
+    focal: float = typer.Option(
+        None, "--focal", help="Focal length in pixels of the input frames (default: estimated)."
+    ),
+    config: Path = typer.Option(None, "--config", help="JSON config applied on top of the preset."),
+    seed: int = typer.Option(None, "--seed", help="Random seed."),
+    max_frames: int = typer.Option(None, "--max-frames", help="Fit only the first N frames."),
+    resume: bool = typer.Option(
+        False, "--resume", help="Continue the interrupted fit --name from its saved state."
+    ),
+    json_out: bool = typer.Option(False, "--json", help="Print the fit record as JSON."),
+) -> None:
+    """Fit a rigged template to a video (CASA): camera search, global placement, articulation."""
+    from rich.markup import escape
+
+    from ..fit.config import load_config
+    from ..fit.job import fit_job
+    from ..video.ingest import parse_box
+
+    cfg = load_config(config, preset_name)
+    if iters is not None:
+        cfg.stage2.iters = iters
+    if device is not None:
+        cfg.device = device
+    if focal is not None:
+        cfg.camera.focal = focal
+    if seed is not None:
+        cfg.seed = seed
+    if max_frames is not None:
+        cfg.max_frames = max_frames
+    cfg.validate()
+    with RichReporter() as rep:
+        rec = fit_job(
+            video,
+            store_root(),
+            cfg,
+            name=name,
+            template=template,
+            masks=masks,
+            out=out,
+            reporter=rep,
+            resume=resume,
+            box=parse_box(box) if box else None,
+        )
+    if json_out:
+        print_json(rec)
+        return
+    if rec.get("retrieval"):
+        console.print(
+            "template candidates: "
+            + ", ".join(f"{escape(c['name'])} ({c['score']:.3f})" for c in rec["retrieval"][:5]),
+            highlight=False,
+        )
+    m = rec["metrics"]
+    console.print(
+        f"fitted [bold]{escape(rec['name'])}[/] with template {escape(rec['template'])}: mask IoU {m['mask_iou']:.3f}, "
+        f"{rec['timings']['total_wall']:.1f} s",
+        highlight=False,
+    )
+    for k, p in rec["outputs"].items():
+        console.print(f"  {k}: {escape(p)}", highlight=False)
+    for n in rec.get("notes", []):
+        err_console.print(f"[yellow]note:[/] {escape(n)}", highlight=False)

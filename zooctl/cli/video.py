@@ -1,0 +1,276 @@
+"""`zooctl video ...`: preprocessed videos (frames, masks, optical flow) in the store."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+from pathlib import Path
+
+import typer
+
+from ._common import JsonOpt, console, err_console, print_json, print_table, store_root
+
+app = typer.Typer(
+    help="Turn videos into frames, masks and optical flow, stored once for every fit.", no_args_is_help=True
+)
+
+
+def _store():
+    from ..store.videos import VideoStore
+
+    return VideoStore.open(store_root())
+
+
+def _parse_options(items: list[str] | None, flag: str) -> dict[str, object]:
+    """``KEY=VALUE`` strings -> dict, values parsed as int, float, bool when they look like one."""
+    from ..errors import UsageError
+
+    out: dict[str, object] = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise UsageError(f"{flag} {item!r} is not KEY=VALUE", hint=f"e.g. {flag} iterations=3")
+        v: object = value
+        for conv in (int, float):
+            try:
+                v = conv(value)
+                break
+            except ValueError:
+                pass
+        if value.lower() in ("true", "false"):
+            v = value.lower() == "true"
+        out[key.strip()] = v
+    return out
+
+
+@contextlib.contextmanager
+def _progress(enabled: bool) -> Iterator[object]:
+    """A rich progress display with one bar per stage; yields the ``(stage, done, total)`` callback."""
+    if not enabled:
+        yield None
+        return
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    with Progress(
+        TextColumn("{task.description:>8}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=err_console,
+        transient=False,
+    ) as prog:
+        tasks: dict[str, object] = {}
+
+        def update(stage: str, done: int, total: int | None) -> None:
+            if stage not in tasks:
+                tasks[stage] = prog.add_task(stage, total=total)
+            prog.update(tasks[stage], completed=done, total=total)
+
+        yield update
+
+
+@app.command("add")
+def add(
+    path: Path = typer.Argument(
+        ...,
+        help="A video (.mp4 .mov .avi .mkv .webm), a folder of images, or a folder with JPEGImages/ (and Annotations/).",
+    ),
+    name: str = typer.Option(None, "--name", help="Video name (default: the file or folder name)."),
+    masks: Path = typer.Option(
+        None, "--masks", help="Your masks: a folder of mask images or a mask video, one per frame."
+    ),
+    segmenter: str = typer.Option(
+        None,
+        "--segmenter",
+        help="masks | grabcut | onnx | a plugin's (default: masks when given, else grabcut).",
+    ),
+    box: str = typer.Option(
+        None,
+        "--box",
+        help="x,y,w,h around the animal in the first frame (original pixels). Default: the moving object.",
+    ),
+    model: Path = typer.Option(None, "--model", help="Local .onnx model for --segmenter onnx."),
+    seg_option: list[str] = typer.Option(
+        None, "--seg-option", help="KEY=VALUE option for the segmenter (repeatable)."
+    ),
+    flow: str = typer.Option("dis", "--flow", help="Flow estimator."),
+    flow_preset: str = typer.Option(
+        None, "--flow-preset", help="DIS preset: ultrafast | fast | medium (default medium)."
+    ),
+    fps: float = typer.Option(
+        None, "--fps", help="Resample a video file to this rate; for image folders, their rate (default 30)."
+    ),
+    start: float = typer.Option(None, "--start", help="First second to keep."),
+    end: float = typer.Option(None, "--end", help="Second to stop at."),
+    max_frames: int = typer.Option(None, "--max-frames", help="Keep at most this many frames."),
+    max_size: int = typer.Option(
+        854, "--max-size", help="Downscale so the longest side is at most this many pixels (0: keep)."
+    ),
+    replace: bool = typer.Option(False, "--replace", help="Overwrite a video of the same name."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars."),
+    json_out: bool = JsonOpt,
+) -> None:
+    """Decode a video, compute forward/backward flow and masks, and store them (atomic: a failure stores nothing)."""
+    from ..video.ingest import AddOptions, add_video, parse_box
+
+    seg_opts = _parse_options(seg_option, "--seg-option")
+    if model is not None:
+        seg_opts["model"] = model
+        segmenter = segmenter or "onnx"
+    flow_opts = _parse_options(None, "--flow-option")
+    if flow_preset:
+        flow_opts["preset"] = flow_preset
+    opts = AddOptions(
+        name=name,
+        masks=masks,
+        segmenter=segmenter,
+        segmenter_options=seg_opts,
+        box=parse_box(box) if box else None,
+        fps=fps,
+        start=start,
+        end=end,
+        max_frames=max_frames,
+        max_size=max_size or None,
+        flow=flow,
+        flow_options=flow_opts,
+        replace=replace,
+    )
+    with _progress(not quiet and not json_out) as progress:
+        summary = add_video(_store(), path, opts, progress=progress)
+    if json_out:
+        print_json(summary)
+    else:
+        console.print(
+            f"added [bold]{summary['name']}[/]: {summary['frames']} frames {summary['width']}x{summary['height']} at {summary['fps']:g} fps, "
+            f"masks by {summary['segmenter']} (mean coverage {summary['mask_coverage_mean']:.1%})",
+            highlight=False,
+        )
+
+
+@app.command("list")
+def list_(json_out: bool = JsonOpt) -> None:
+    """List the stored videos."""
+    rows = _store().list()
+    if json_out:
+        print_json(rows)
+        return
+    table = [
+        [
+            r["name"],
+            str(r["frames"]),
+            f"{r['width']}x{r['height']}",
+            f"{r['fps']:g}",
+            f"{r['mask_coverage_mean']:.1%}",
+            r["segmenter"],
+            r["source"]["kind"],
+        ]
+        for r in rows
+    ]
+    cols = [
+        ("name", "left"),
+        ("frames", "right"),
+        ("size", "right"),
+        ("fps", "right"),
+        ("coverage", "right"),
+        ("masks", "left"),
+        ("source", "left"),
+    ]
+    print_table(cols, table, title=f"{len(rows)} videos")
+
+
+@app.command("show")
+def show(
+    name: str = typer.Argument(..., help="Video name."),
+    preview: Path = typer.Option(
+        None, "--preview", help="Write an H.264 .mp4: frames with mask outline | flow colours."
+    ),
+    json_out: bool = JsonOpt,
+) -> None:
+    """Show a stored video: frames, fps, size, mask coverage per frame, flow statistics."""
+    from ..video.stats import video_stats
+
+    store = _store()
+    rec = store.get(name, what=("masks", "flow") + (("frames",) if preview else ()))
+    info = {**store.summary(name), **video_stats(rec)}
+    if preview:
+        with _progress(not json_out) as progress:
+            from ..video.preview import write_preview
+
+            write_preview(
+                rec, preview, progress=None if progress is None else (lambda d, t: progress("preview", d, t))
+            )
+        info["preview"] = str(preview)
+    if json_out:
+        print_json(info)
+        return
+    src = info["source"]
+    console.print(
+        f"[bold]{info['name']}[/]  {info['frames']} frames, {info['width']}x{info['height']}, {info['fps']:g} fps ({info['duration_s']:g} s)",
+        highlight=False,
+    )
+    console.print(
+        f"source: {src['kind']} {src['path']}  sha256 {src['sha256'][:12]}", highlight=False, markup=False
+    )
+    console.print(
+        f"masks: {info['segmenter']}; flow: {info['flow_estimator']}", highlight=False, markup=False
+    )
+    fs = info["flow"]
+    console.print(
+        f"flow: mean {fs['mean_magnitude']:.2f} px, p99 {fs['p99_magnitude']:.2f} px, max {fs['max_magnitude']:.1f} px; "
+        f"occluded {fs['occluded_fraction']:.1%} (forward-backward check)",
+        highlight=False,
+    )
+    cov = info["mask_coverage"]
+    rows = [
+        [str(i), f"{c:.1%}", " ".join(str(v) for v in b)] for i, (c, b) in enumerate(zip(cov, info["boxes"]))
+    ]
+    print_table([("frame", "right"), ("coverage", "right"), ("box x y w h", "left")], rows)
+    if preview:
+        console.print(f"preview written to {preview}", highlight=False, markup=False)
+
+
+@app.command("rm")
+def rm(names: list[str] = typer.Argument(..., help="Video names to remove.")) -> None:
+    """Remove stored videos."""
+    store = _store()
+    for n in names:
+        store.remove(n)
+        console.print(f"removed {n}", highlight=False, markup=False)
+
+
+@app.command("export")
+def export(
+    name: str = typer.Argument(..., help="Video name."),
+    what: str = typer.Option("frames", "--what", help="frames | masks | flow"),
+    out: Path = typer.Option(..., "-o", "--out", help="Folder to write into (created)."),
+    json_out: bool = JsonOpt,
+) -> None:
+    """Export frames (JPEG), masks (PNG) or flow (.npy per direction and occlusion PNGs) to a folder."""
+    from ..video.export import export_video
+
+    written = export_video(_store(), name, what, out)
+    if json_out:
+        print_json({"name": name, "what": what, "out": str(out), "files": written})
+    else:
+        console.print(f"wrote {written} files to {out}", highlight=False, markup=False)
+
+
+@app.command("clean")
+def clean(json_out: bool = JsonOpt) -> None:
+    """Remove leftovers of killed writers (temporary files, files no index entry names)."""
+    report = _store().cleanup()
+    if json_out:
+        print_json(report)
+    else:
+        console.print(
+            f"removed {report['temporaries']} temporaries and {report['orphans']} unindexed files",
+            highlight=False,
+        )

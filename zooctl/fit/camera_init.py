@@ -1,0 +1,252 @@
+"""Camera and root initialisation from the masks (CASA supplement I).
+
+The camera sits at the origin looking down world -Z (see `zooctl.fit.scene`), so choosing a
+viewpoint on a sphere around the animal is choosing the animal's root rotation. For every
+candidate (azimuth, elevation, roll, focal) the template's rest pose is rotated, its scale and
+translation set by aligning its projected bounding box with the mask's, its hard silhouette
+rendered and scored by IoU against the masks of a few frames. The best candidate is refined on a
+finer local grid, then *tracked*: every ``track_every`` frames a small grid around the previous
+keyframe's rotation is scored on that keyframe, so camera motion and turning animals are
+followed. Frames between keyframes get slerped rotations; every frame's translation comes from
+its own bounding-box alignment (frames whose mask is empty interpolate their neighbours').
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..geometry import matrix_to_quat, quat_slerp, quat_to_matrix
+from .config import CameraConfig
+from .scene import CAMERA_ROTATION
+
+
+@dataclass
+class CameraInit:
+    """focal in fit pixels; root_rotation (T, 4) wxyz; root_translation (T, 3); candidates: the
+    best scored candidates of the global search (for fit.json); iou: frame-0 search IoU."""
+
+    focal: float
+    root_rotation: np.ndarray
+    root_translation: np.ndarray
+    candidates: list[dict] = field(default_factory=list)
+    iou: float = 0.0
+    keyframe_iou: list[float] = field(default_factory=list)
+
+
+def view_rotation(azimuth: float, elevation: float, roll: float = 0.0) -> np.ndarray:
+    """(3, 3) root rotation ``Rz(roll) Rx(elevation) Ry(azimuth)`` (degrees)."""
+    a, e, r = (math.radians(x) for x in (azimuth, elevation, roll))
+    ry = np.array([[math.cos(a), 0, math.sin(a)], [0, 1, 0], [-math.sin(a), 0, math.cos(a)]])
+    rx = np.array([[1, 0, 0], [0, math.cos(e), -math.sin(e)], [0, math.sin(e), math.cos(e)]])
+    rz = np.array([[math.cos(r), -math.sin(r), 0], [math.sin(r), math.cos(r), 0], [0, 0, 1]])
+    return rz @ rx @ ry
+
+
+def mask_box(mask: np.ndarray) -> np.ndarray | None:
+    """(4,) x0, y0, x1, y1 pixel-edge bounds of a boolean mask, or None when empty."""
+    ys, xs = np.nonzero(mask)
+    if len(xs) == 0:
+        return None
+    return np.array([xs.min(), ys.min(), xs.max() + 1, ys.max() + 1], np.float64)
+
+
+def align_translation(
+    points: np.ndarray, box: np.ndarray, focal: float, cx: float, cy: float, iterations: int = 3
+) -> np.ndarray:
+    """(3,) world translation that puts rotated points (N, 3) so their projected box matches ``box``.
+
+    Depth from the geometric mean of the width and height ratios, centre by back-projection;
+    a few fixed-point passes correct for perspective.
+    """
+    cam = points @ CAMERA_ROTATION.T  # camera frame (the camera is at the origin)
+    c0 = 0.5 * (cam.max(0) + cam.min(0))
+    ext = np.maximum(cam.max(0) - cam.min(0), 1e-9)
+    bw, bh = max(box[2] - box[0], 1.0), max(box[3] - box[1], 1.0)
+    d = focal * math.sqrt(ext[0] * ext[1] / (bw * bh)) + ext[2] / 2
+    shift = np.array([0.0, 0.0, d]) - c0  # object centre on the optical axis at depth d
+    target = np.array([(box[0] + box[2]) / 2, (box[1] + box[3]) / 2])
+    for _ in range(iterations):
+        lo, hi = _projected_box(cam + shift, focal, cx, cy)
+        ratio = math.sqrt(max(hi[0] - lo[0], 1e-6) * max(hi[1] - lo[1], 1e-6) / (bw * bh))
+        shift = (shift + c0) * ratio - c0  # scaling the centre about the camera keeps its projection
+        lo, hi = _projected_box(cam + shift, focal, cx, cy)
+        shift[:2] += (target - 0.5 * (lo + hi)) / focal * (shift[2] + c0[2])
+    return CAMERA_ROTATION.T @ shift  # camera-frame shift back to world (R is its own inverse)
+
+
+def _projected_box(p: np.ndarray, focal: float, cx: float, cy: float) -> tuple[np.ndarray, np.ndarray]:
+    z = np.maximum(p[:, 2], 1e-6)
+    uv = p[:, :2] / z[:, None] * focal + np.array([cx, cy])
+    return uv.min(0), uv.max(0)
+
+
+class SilhouetteScorer:
+    """Hard-silhouette IoU of rotated, box-aligned templates against masks at a small size."""
+
+    def __init__(
+        self,
+        rest: np.ndarray,
+        faces: np.ndarray,
+        masks: np.ndarray,
+        size: int,
+        principal: tuple[float, float] | None = None,
+    ):
+        T, H, W = masks.shape
+        s = min(1.0, size / max(H, W))
+        self.h, self.w = max(8, round(H * s)), max(8, round(W * s))
+        import cv2
+
+        self.masks = np.stack(
+            [
+                cv2.resize(m.astype(np.float32), (self.w, self.h), interpolation=cv2.INTER_AREA) >= 0.5
+                for m in masks
+            ]
+        )
+        self.boxes = [mask_box(m) for m in self.masks]
+        self.rest = rest - 0.5 * (rest.max(0) + rest.min(0))
+        self.faces = np.asarray(faces, dtype=np.int64)
+        self.scale = self.h / H  # search pixels per input pixel
+        cx, cy = principal if principal is not None else (W / 2, H / 2)
+        self.cx, self.cy = cx * self.scale, cy * self.scale
+
+    def place(self, rotation: np.ndarray, frame: int, focal: float) -> np.ndarray | None:
+        """World translation of the centred rest template rotated by ``rotation`` for ``frame``."""
+        box = self.boxes[frame]
+        if box is None:
+            return None
+        return align_translation(self.rest @ rotation.T, box, focal * self.scale, self.cx, self.cy)
+
+    def silhouette(self, verts: np.ndarray, focal: float) -> np.ndarray:
+        """(h, w) bool hard silhouette of world vertices (V, 3): every face filled by OpenCV at once."""
+        import cv2
+
+        cam = verts @ CAMERA_ROTATION.T
+        z = np.maximum(cam[:, 2], 1e-6)
+        uv = cam[:, :2] / z[:, None] * (focal * self.scale) + np.array([self.cx, self.cy])
+        # Clip: vertices next to the camera plane project far away and would overflow int32.
+        uv = np.clip(np.nan_to_num(uv, nan=-1e5), -1e5, 1e5)
+        front = self.faces[(cam[self.faces, 2] > 1e-3).all(1)]
+        tri = np.round(uv[front] * 16 - 8).astype(np.int32)  # 4 fractional bits; pixel centres at +0.5
+        img = np.zeros((self.h, self.w), np.uint8)
+        cv2.fillPoly(img, list(tri), 1, lineType=cv2.LINE_8, shift=4)
+        return img.astype(bool)
+
+    def score(self, rotations: list[np.ndarray], frames: list[int], focals: list[float]) -> np.ndarray:
+        """(N,) mean IoU over ``frames`` for N (rotation, focal) candidates."""
+        total = np.zeros(len(rotations))
+        for fr in frames:
+            m = self.masks[fr]
+            for n, (R, f) in enumerate(zip(rotations, focals, strict=True)):
+                sil = self.silhouette(self.rest @ R.T + self.place(R, fr, f), f)
+                total[n] += (sil & m).sum() / max((sil | m).sum(), 1)
+        return total / max(len(frames), 1)
+
+
+def initialise_camera(
+    rest: np.ndarray,
+    faces: np.ndarray,
+    masks: np.ndarray,
+    cfg: CameraConfig,
+    fit_scale: float,
+    seed: int = 0,
+    principal: tuple[float, float] | None = None,
+    image_height: int | None = None,
+) -> CameraInit:
+    """Search focal and viewpoint, track the root rotation, align every frame (module docstring).
+
+    rest (V, 3) template rest vertices; faces (F, 3); masks (T, H, W) bool at the input size (or a
+    crop of the input around the animal, with ``principal`` the principal point in the crop's
+    pixels and ``image_height`` the uncropped height that the focal candidates refer to);
+    fit_scale: fit pixels per input pixel. Returns a `CameraInit` in fit pixels.
+    """
+    T, H, W = masks.shape
+    principal = principal if principal is not None else (W / 2, H / 2)
+    scorer = SilhouetteScorer(rest, faces, masks, cfg.search_size, principal)
+    present = [t for t in range(T) if scorer.boxes[t] is not None]
+    first = present[0]
+    head = [t for t in present if t < first + max(cfg.track_every, 1)]
+    frames = [head[int(round(i))] for i in np.linspace(0, len(head) - 1, min(cfg.search_frames, len(head)))]
+    frames = sorted(set(frames))
+    if cfg.focal is not None:
+        focals = [float(cfg.focal)]
+    else:
+        focals = [0.5 * (image_height or H) / math.tan(math.radians(fov) / 2) for fov in cfg.fov_candidates]
+    cands = []
+    for f in focals:
+        for el in cfg.elevations:
+            for az in np.arange(cfg.azimuths) * 360.0 / cfg.azimuths:
+                for roll in cfg.rolls:
+                    cands.append((float(az), float(el), float(roll), f))
+    scores = scorer.score([view_rotation(*c[:3]) for c in cands], frames, [c[3] for c in cands])
+    order = np.argsort(-scores)
+    best = cands[order[0]]
+    top = [
+        {
+            "azimuth": cands[i][0],
+            "elevation": cands[i][1],
+            "roll": cands[i][2],
+            "focal": cands[i][3] / 1.0,
+            "iou": float(scores[i]),
+        }
+        for i in order[:5]
+    ]
+    # Local refinement: a finer grid around the best view (and focal, unless given).
+    step = 360.0 / cfg.azimuths / 2
+    fsteps = [1.0] if cfg.focal is not None else [0.85, 1.0, 1.18]
+    local = [
+        (best[0] + da, best[1] + de, best[2] + dr, best[3] * fs)
+        for da in (-step, 0.0, step)
+        for de in (-step / 2, 0.0, step / 2)
+        for dr in (-step / 2, 0.0, step / 2)
+        for fs in fsteps
+    ]
+    lscores = scorer.score([view_rotation(*c[:3]) for c in local], frames, [c[3] for c in local])
+    best = local[int(np.argmax(lscores))]
+    iou = float(lscores.max())
+    focal = best[3]
+    # Track the root rotation over keyframes.
+    key_rot = {first: view_rotation(*best[:3])}
+    key_iou = [iou]
+    prev = key_rot[first]
+    ts = cfg.track_step
+    deltas = [
+        view_rotation(a, e, r) for a in (-ts, 0.0, ts) for e in (-ts, 0.0, ts) for r in (-ts / 2, 0.0, ts / 2)
+    ]
+    for k in range(first + cfg.track_every, T, max(cfg.track_every, 1)):
+        if scorer.boxes[k] is None:
+            continue
+        rots = [prev @ d for d in deltas] + [d @ prev for d in deltas]
+        sc = scorer.score(rots, [k], [focal] * len(rots))
+        prev = rots[int(np.argmax(sc))]
+        key_rot[k] = prev
+        key_iou.append(float(sc.max()))
+    # Per-frame rotations by slerp between keyframes (held constant outside them).
+    keys = sorted(key_rot)
+    kq = np.stack([matrix_to_quat(key_rot[k]) for k in keys])
+    rot_q = np.zeros((T, 4))
+    for t in range(T):
+        j = int(np.searchsorted(keys, t, side="right")) - 1
+        if j < 0:
+            rot_q[t] = kq[0]
+        elif j >= len(keys) - 1:
+            rot_q[t] = kq[-1]
+        else:
+            a = (t - keys[j]) / (keys[j + 1] - keys[j])
+            rot_q[t] = quat_slerp(kq[j], kq[j + 1], a)
+    # Translations: each frame's own box alignment, at the input resolution's camera.
+    trans = np.full((T, 3), np.nan)
+    full = SilhouetteScorer.__new__(SilhouetteScorer)
+    full.rest, full.boxes, full.scale, full.w, full.h = scorer.rest, [mask_box(m) for m in masks], 1.0, W, H
+    full.cx, full.cy = principal
+    centre = 0.5 * (rest.max(0) + rest.min(0))
+    for t in present:
+        R = quat_to_matrix(rot_q[t])
+        # The scorer centres the template; the model rotates it about its own origin.
+        trans[t] = full.place(R, t, focal) - R @ centre
+    idx = np.array(present)
+    for c in range(3):
+        trans[:, c] = np.interp(np.arange(T), idx, trans[idx, c])
+    return CameraInit(focal * fit_scale, rot_q, trans, top, iou, key_iou)

@@ -1,0 +1,190 @@
+"""Typed configuration of a CASA fit, with the ``fast`` and ``quality`` presets.
+
+Every run saves its full configuration as JSON (``schemas/fit_config.schema.json``) beside its
+outputs, so a fit can be repeated or resumed exactly. A config file given with ``--config``
+may hold any subset of the fields; it is applied on top of the chosen preset, and command-line
+options are applied last.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ..errors import InputError, UsageError
+
+CONFIG_VERSION = 1
+
+
+@dataclass
+class CameraConfig:
+    """Supplement I: focal / viewpoint search on the mask loss, then local refinement."""
+
+    focal: float | None = None  # pixels at the input resolution; None: estimate it
+    fov_candidates: list[float] = field(default_factory=lambda: [30.0, 45.0, 60.0])  # degrees (vertical)
+    azimuths: int = 12  # viewpoints sampled on the sphere: azimuth x elevation
+    elevations: list[float] = field(default_factory=lambda: [-15.0, 10.0, 35.0])
+    rolls: list[float] = field(default_factory=lambda: [0.0])
+    search_size: int = 64  # image size (px, longest side) of the search renders
+    search_frames: int = 3  # frames scored per candidate
+    track_every: int = 6  # keyframes for the per-frame root rotation tracking
+    track_step: float = 15.0  # degrees of the local tracking grid
+
+
+@dataclass
+class StageConfig:
+    """One optimisation stage (Adam, betas 0.9/0.999)."""
+
+    iters: int = 60
+    lr: float = 5e-2  # rotations, root transforms, skinning logits
+    lr_shape: float = 1e-3  # global scale, bone scales and the displacement field
+    batch: int = 8  # frames per step (stage 2: a contiguous window, so flow sees frame pairs)
+    renderer: str = "soft"  # silhouette renderer: soft (SoftRas) or fast (splatting)
+
+
+@dataclass
+class LossWeights:
+    """lambda1 E_cue (mask + beta * flow) + lambda2 E_smooth + lambda3 E_symm + regularisers."""
+
+    mask: float = 1.0  # lambda1 (soft-silhouette IoU loss)
+    dt: float = 0.5  # contour term: distance transform of the mask (long-range gradient)
+    flow: float = 0.05  # beta: mean |rendered flow - observed flow| in pixels of the fit image
+    smooth: float = 10.0  # lambda2: CASA eq. 6 on joint rotations
+    root_smooth: float = 10.0  # smoothness of the per-frame root transform
+    symmetry: float = 1.0  # lambda3: CASA eq. 7 (relative to the template size squared)
+    bone_length: float = 0.1  # bone scales near 1 and left/right equal
+    skin_prior: float = 0.01  # skinning weights near the template's (KL)
+    displacement: float = 1.0  # mean squared displacement (relative to the template size)
+    pose_prior: float = 0.01  # joint rotations near the rest pose
+    scale_prior: float = 0.01  # log global scale near 0 (the template's size)
+
+
+@dataclass
+class Ablation:
+    """Switches for CASA's ablations (tables 2-5)."""
+
+    flow: bool = True
+    symmetry: bool = True
+    smoothness: bool = True
+    stretch: bool = True
+    displacement: bool = True
+    learn_skinning: bool = True
+    optimise: bool = True  # False: retrieval (template and camera) only
+
+
+@dataclass
+class FitConfig:
+    """A whole fit: image sizes, device, seed, the camera search, two stages and the loss weights."""
+
+    preset: str = "fast"
+    device: str = "cpu"
+    seed: int = 0
+    fit_size: int = 128  # longest side (px) of the images the losses see
+    max_frames: int | None = None
+    soft_sigma: float = 0.05  # SoftRas sigma (px^2): small, since dense meshes dilate soft silhouettes
+    checkpoint_every: int = 25  # steps between saved states (for --resume)
+    hidden: int = 64  # displacement MLP width
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    stage1: StageConfig = field(
+        default_factory=lambda: StageConfig(iters=40, lr=2e-2, lr_shape=5e-2, batch=16, renderer="soft")
+    )
+    stage2: StageConfig = field(
+        default_factory=lambda: StageConfig(
+            iters=300, lr=2e-2, lr_shape=1e-3, batch=6
+        )  # CASA: 4e-3; x5 for ~100x fewer steps
+    )
+    weights: LossWeights = field(default_factory=LossWeights)
+    ablation: Ablation = field(default_factory=Ablation)
+    schema_version: int = CONFIG_VERSION
+
+    # -- serialisation ------------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=1)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], base: FitConfig | None = None) -> FitConfig:
+        """Apply ``data`` (any subset of the fields) on top of ``base`` (default: the fast preset)."""
+        cfg = base if base is not None else preset("fast")
+        _merge(cfg, data, "config")
+        return cfg.validate()
+
+    def validate(self) -> FitConfig:
+        if self.preset not in PRESETS:
+            raise UsageError(f"unknown preset {self.preset!r}", hint=f"use one of {', '.join(PRESETS)}")
+        if self.device not in ("cpu", "cuda") and not self.device.startswith("cuda:"):
+            raise UsageError(f"--device {self.device!r} is not cpu or cuda")
+        if not 16 <= self.fit_size <= 1024:
+            raise UsageError(f"fit_size {self.fit_size} is out of range", hint="use 16 to 1024 pixels")
+        for name in ("stage1", "stage2"):
+            st: StageConfig = getattr(self, name)
+            if st.iters < 0 or st.batch < 1 or st.lr <= 0 or st.lr_shape <= 0:
+                raise UsageError(f"{name}: iters >= 0, batch >= 1 and positive learning rates are required")
+            if st.renderer not in ("soft", "fast"):
+                raise UsageError(f"{name}: renderer {st.renderer!r} is not soft or fast")
+        if self.camera.focal is not None and self.camera.focal <= 0:
+            raise UsageError(f"--focal {self.camera.focal} must be positive (pixels)")
+        if self.max_frames is not None and self.max_frames < 1:
+            raise UsageError("max_frames must be at least 1")
+        return self
+
+
+def _merge(obj: Any, data: dict[str, Any], where: str) -> None:
+    if not isinstance(data, dict):
+        raise InputError(f"{where} must be a JSON object")
+    names = {f.name: f for f in dataclasses.fields(obj)}
+    for key, value in data.items():
+        if key not in names:
+            raise InputError(f"{where}: unknown field {key!r}", hint=f"fields: {', '.join(names)}")
+        cur = getattr(obj, key)
+        if dataclasses.is_dataclass(cur):
+            _merge(cur, value, f"{where}.{key}")
+        else:
+            setattr(obj, key, value)
+
+
+def _fast() -> FitConfig:
+    return FitConfig(preset="fast")
+
+
+def _quality() -> FitConfig:
+    return FitConfig(
+        preset="quality",
+        fit_size=160,
+        soft_sigma=0.05,
+        hidden=128,
+        camera=CameraConfig(azimuths=16, elevations=[-20.0, 0.0, 20.0, 40.0], search_frames=4),
+        stage1=StageConfig(iters=60, lr=2e-2, lr_shape=5e-2, batch=64, renderer="soft"),
+        stage2=StageConfig(iters=800, lr=2e-2, lr_shape=1e-3, batch=8),
+    )
+
+
+PRESETS = {"fast": _fast, "quality": _quality}
+
+
+def preset(name: str) -> FitConfig:
+    if name not in PRESETS:
+        raise UsageError(f"unknown preset {name!r}", hint=f"use one of {', '.join(PRESETS)}")
+    return PRESETS[name]()
+
+
+def load_config(path: Path | None, preset_name: str = "fast") -> FitConfig:
+    """The preset, with a JSON config file applied on top (when given)."""
+    cfg = preset(preset_name)
+    if path is None:
+        return cfg
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise InputError(f"config file {path} does not exist") from None
+    except (OSError, json.JSONDecodeError) as exc:
+        raise InputError(f"config file {path} is not valid JSON: {exc}") from None
+    if isinstance(data, dict) and "preset" in data and data["preset"] != preset_name:
+        cfg = preset(str(data["preset"]))
+    return FitConfig.from_dict(data, cfg)

@@ -1,0 +1,272 @@
+"""What a fit reads: frames, masks, optical flow, optional intrinsics and ground truth.
+
+Sources (`load_fit_video`):
+
+- a benchmark video folder made by `zooctl bench make` (``video.npz`` inside): frames, masks,
+  flow and occlusion, intrinsics, and the ground truth the metrics need;
+- a DAVIS-style folder (``JPEGImages/`` + ``Annotations/``), a folder of images or a video file,
+  decoded by `zooctl.video.decode`; masks from DAVIS annotations, from ``--masks DIR`` (one image
+  per frame, non-zero = animal) or, with ``--masks auto``, from the GrabCut segmenter.
+
+Flow is computed with DIS (`zooctl.video.flow`) on the fit-resolution frames when the source
+has none: the losses only ever see the fit resolution.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError, UsageError
+
+
+@dataclass
+class FitVideo:
+    """A video ready to fit.
+
+    frames (T, H, W, 3) uint8; masks (T, H, W) bool; flow (T-1, H, W, 2) float32 forward flow in
+    pixels of this resolution or None; flow_valid (T-1, H, W) bool; intrinsics (4,) fx, fy, cx, cy
+    in pixels of this resolution or None; gt: ground truth arrays (benchmark videos only).
+    """
+
+    name: str
+    frames: np.ndarray
+    masks: np.ndarray
+    fps: float = 30.0
+    flow: np.ndarray | None = None
+    flow_valid: np.ndarray | None = None
+    intrinsics: np.ndarray | None = None
+    gt: dict[str, Any] = field(default_factory=dict)
+    source: str = ""
+    mask_source: str = "given"
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.frames.shape[0])
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(H, W)."""
+        return int(self.frames.shape[1]), int(self.frames.shape[2])
+
+    def check(self) -> FitVideo:
+        T = self.num_frames
+        if T == 0:
+            raise InputError(f"video {self.name!r} has no frames")
+        if self.masks.shape != self.frames.shape[:3]:
+            raise InputError(
+                f"video {self.name!r}: {self.masks.shape[0]} masks of size {self.masks.shape[1:]} for "
+                f"{T} frames of size {self.frames.shape[1:3]}",
+                hint="give one mask per frame, the size of the frames",
+            )
+        if not self.masks.any():
+            raise InputError(
+                f"video {self.name!r}: every mask is empty, there is no animal to fit",
+                hint="check the masks (non-zero pixels mark the animal)",
+            )
+        return self
+
+    def truncated(self, max_frames: int | None) -> FitVideo:
+        if max_frames is None or max_frames >= self.num_frames:
+            return self
+        n = max_frames
+        return FitVideo(
+            self.name,
+            self.frames[:n],
+            self.masks[:n],
+            self.fps,
+            None if self.flow is None else self.flow[: max(n - 1, 0)],
+            None if self.flow_valid is None else self.flow_valid[: max(n - 1, 0)],
+            self.intrinsics,
+            {k: (v[:n] if k in _PER_FRAME_GT else v) for k, v in self.gt.items()},
+            self.source,
+            self.mask_source,
+        )
+
+
+_PER_FRAME_GT = {"vertices", "joints", "cam_rotation", "cam_translation"}
+
+
+def load_fit_video(
+    source: str | Path, masks: str | None = None, max_frames: int | None = None, max_size: int = 480
+) -> FitVideo:
+    """Read ``source`` (see the module docstring) into a checked `FitVideo`."""
+    path = Path(source).expanduser()
+    if not path.exists():
+        raise InputError(
+            f"{source} is neither a file nor a folder",
+            hint="give a video file, a DAVIS-style folder, an image folder or a `bench make` video folder",
+        )
+    if path.is_dir() and (path / "video.npz").is_file():
+        vid = load_bench_video(path)
+        if masks is not None:
+            raise UsageError("--masks cannot replace the masks of a benchmark video")
+        return vid.truncated(max_frames).check()
+    from ..video.decode import decode
+
+    dec = decode(path, max_frames=max_frames, max_size=max_size)
+    frames = dec.frames
+    name = path.stem if path.is_file() else path.name
+    if masks is None and dec.annotations is not None:
+        m = _read_mask_folder(dec.annotations, dec.source_indices, frames.shape[1:3])
+        src = "davis"
+    elif masks is None:
+        raise UsageError(
+            f"{path.name} comes without masks",
+            hint="give --masks DIR (one image per frame) or --masks auto (GrabCut segmentation)",
+        )
+    elif masks == "auto":
+        m = auto_masks(frames)
+        src = "auto"
+    else:
+        mdir = Path(masks).expanduser()
+        if not mdir.is_dir():
+            raise InputError(f"--masks {masks}: not a folder", hint="give a folder of mask images, or 'auto'")
+        m = _read_mask_folder(mdir, dec.source_indices, frames.shape[1:3])
+        src = "given"
+    return FitVideo(name, frames, m, float(dec.fps), source=str(path), mask_source=src).check()
+
+
+def _read_mask_folder(folder: Path, indices: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    from PIL import Image
+
+    from ..video.decode import image_files
+
+    files = image_files(folder)
+    if len(files) == 0:
+        raise InputError(f"{folder} holds no mask images")
+    H, W = size
+    out = np.zeros((len(indices), H, W), bool)
+    for n, i in enumerate(indices):
+        if i >= len(files):
+            raise InputError(
+                f"{folder} has {len(files)} masks, the video needs {int(indices.max()) + 1}",
+                hint="give one mask per frame",
+            )
+        with Image.open(files[i]) as im:
+            a = np.asarray(im.convert("L").resize((W, H), Image.Resampling.NEAREST))
+        out[n] = a > 0
+    return out
+
+
+def auto_masks(frames: np.ndarray) -> np.ndarray:
+    """(T, H, W) bool masks from the built-in GrabCut segmenter (needs at least 2 frames)."""
+    from ..video.grabcut import GrabCutTracker
+
+    return GrabCutTracker().segment(frames)
+
+
+# -- benchmark videos ---------------------------------------------------------------------------
+
+
+def load_bench_video(folder: Path) -> FitVideo:
+    """A folder written by `zooctl.benchdata.make.make_video` (``video.npz`` + ``meta.json``)."""
+    import json
+
+    try:
+        with np.load(folder / "video.npz") as z:
+            data = {k: z[k] for k in z.files}
+        meta = json.loads((folder / "meta.json").read_text()) if (folder / "meta.json").is_file() else {}
+    except (OSError, ValueError) as exc:
+        raise InputError(
+            f"{folder}/video.npz is unreadable: {exc}", hint="re-run `zooctl bench make`"
+        ) from None
+    need = ("frames", "masks")
+    for k in need:
+        if k not in data:
+            raise InputError(f"{folder}/video.npz has no {k!r}", hint="re-run `zooctl bench make`")
+    gt = {k[3:]: v for k, v in data.items() if k.startswith("gt_")}
+    gt["meta"] = meta
+    return FitVideo(
+        meta.get("name", folder.name),
+        data["frames"],
+        data["masks"].astype(bool),
+        float(meta.get("fps", 30.0)),
+        data.get("flow"),
+        data.get("flow_valid"),
+        data.get("intrinsics"),
+        gt,
+        str(folder),
+        "given",
+    )
+
+
+# -- resampling to the fit resolution ----------------------------------------------------------
+
+
+def fit_resolution(H: int, W: int, longest: int) -> tuple[int, int, float]:
+    """(h, w, s): the fit image size with the longest side ``longest`` and the scale s = h / H."""
+    s = min(1.0, longest / max(H, W))
+    return max(8, round(H * s)), max(8, round(W * s)), s
+
+
+def resample_masks(masks: np.ndarray, h: int, w: int) -> np.ndarray:
+    """(T, H, W) bool -> (T, h, w) float32 coverage in [0, 1] (area averaging)."""
+    import cv2
+
+    return np.stack([cv2.resize(m.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA) for m in masks])
+
+
+def crop_box(masks: np.ndarray, margin: float = 0.15) -> tuple[int, int, int, int]:
+    """(x0, y0, x1, y1): the union of every mask's box grown by ``margin`` of its size, in the image.
+
+    The fit only looks at this window (the camera stays the full image's: the crop just moves
+    the principal point), so a small animal in a large frame gets the fit's full resolution.
+    """
+    T, H, W = masks.shape
+    ys, xs = np.nonzero(masks.any(0))
+    if len(xs) == 0:
+        return 0, 0, W, H
+    x0, x1, y0, y1 = xs.min(), xs.max() + 1, ys.min(), ys.max() + 1
+    side = max(x1 - x0, y1 - y0)
+    mx = my = margin * side
+    return (
+        max(0, int(x0 - mx)),
+        max(0, int(y0 - my)),
+        min(W, int(np.ceil(x1 + mx))),
+        min(H, int(np.ceil(y1 + my))),
+    )
+
+
+def resample_flow(
+    video: FitVideo, h: int, w: int, box: tuple[int, int, int, int] | None = None
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Forward flow (T-1, h, w, 2) in fit pixels and its validity (T-1, h, w) bool, or None (T = 1).
+
+    Uses the video's own flow when it has some, otherwise DIS on the downscaled frames with a
+    forward-backward consistency check.
+    """
+    import cv2
+
+    T, H, W = video.frames.shape[:3]
+    if T < 2:
+        return None
+    x0, y0, x1, y1 = box if box is not None else (0, 0, W, H)
+    H, W = y1 - y0, x1 - x0
+    if video.flow is not None:
+        sx, sy = w / W, h / H
+        ok = (
+            np.ones(video.flow.shape[:3], bool) if video.flow_valid is None else video.flow_valid.astype(bool)
+        )
+        flows, valids = [], []
+        for f, v in zip(video.flow[:, y0:y1, x0:x1], ok[:, y0:y1, x0:x1], strict=True):
+            # Valid-weighted area average: background zeros must not shrink the flow at the edges.
+            wsum = cv2.resize(v.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA)
+            fsum = cv2.resize(f.astype(np.float32) * v[..., None], (w, h), interpolation=cv2.INTER_AREA)
+            flows.append(fsum / np.maximum(wsum, 1e-6)[..., None])
+            valids.append(wsum > 0.5)
+        flow = np.stack(flows) * np.array([sx, sy], np.float32)
+        return flow.astype(np.float32), np.stack(valids)
+    from ..video.flow import DISFlow, compute_video_flow
+
+    small = np.stack(
+        [
+            cv2.resize(np.ascontiguousarray(f[y0:y1, x0:x1]), (w, h), interpolation=cv2.INTER_AREA)
+            for f in video.frames
+        ]
+    )
+    vf = compute_video_flow(DISFlow("medium"), small)
+    return vf.forward.astype(np.float32), ~vf.occlusion_forward

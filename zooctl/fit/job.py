@@ -1,0 +1,328 @@
+"""`zooctl fit` as a library call: input, template, store record, the fit itself, outputs.
+
+`fit_job` is what the CLI, `bench run` and the demo call. The store is touched only through
+`zooctl.store.fits.FitStore` (atomic writes under the lock): a fit that is interrupted leaves its
+record marked ``interrupted`` and its last state in ``state.pt`` for ``--resume``.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError, MissingDependencyError, NotFoundError, UsageError
+from ..names import check_name, sanitize_name
+from ..store.fits import FitStore
+from .config import FitConfig, preset
+from .inputs import FitVideo, load_fit_video
+from .run import FitResult, Reporter, fit_video
+
+
+def load_source(
+    source: str,
+    store_root: Path,
+    masks: str | None,
+    max_frames: int | None,
+    box: tuple[float, float, float, float] | None = None,
+    reporter: Reporter | None = None,
+) -> FitVideo:
+    """A path, added to the store's video store first (see `store_video`), or a stored video's name.
+
+    Benchmark folders (``video.npz``, with ground truth) and single images are read directly: the
+    video store keeps videos of at least 2 frames and no ground truth.
+    """
+    p = Path(source).expanduser()
+    if p.exists():
+        if (p.is_dir() and (p / "video.npz").is_file()) or _single_image(p):
+            if box is not None:
+                raise UsageError("--box only applies to videos segmented by GrabCut (--masks auto)")
+            return load_fit_video(p, masks, max_frames)
+        source = store_video(p, store_root, masks, box, reporter)
+        masks = box = None  # the stored video carries its masks now
+    from ..store.videos import VideoStore
+
+    vs = VideoStore.open(store_root)
+    try:
+        exists = vs.exists(source)
+    except Exception:
+        exists = False
+    if not exists:
+        raise NotFoundError(
+            f"{source!r} is neither a file or folder nor a stored video",
+            hint="give a video file or folder, or a name from `zooctl video list`",
+        )
+    rec = vs.get(source)
+    video = FitVideo(
+        source,
+        rec.frames,
+        rec.masks.astype(bool),
+        float(rec.fps),
+        rec.flow_forward,
+        None if rec.occlusion_forward is None else ~rec.occlusion_forward.astype(bool),
+        source=f"video:{source}",
+        mask_source=str(rec.segmenter.get("name", "stored")) if rec.segmenter else "stored",
+    )
+    if masks is not None or box is not None:
+        raise UsageError(
+            "--masks and --box cannot replace the masks of a stored video",
+            hint="re-add the video with its masks (`zooctl video add --replace`), or fit its file",
+        )
+    return video.truncated(max_frames).check()
+
+
+def _single_image(p: Path) -> bool:
+    from ..video.decode import IMAGE_SUFFIXES, image_files
+
+    if p.is_file():
+        return p.suffix.lower() in IMAGE_SUFFIXES
+    sub = p / "JPEGImages" if (p / "JPEGImages").is_dir() else p
+    return p.is_dir() and len(image_files(sub)) == 1
+
+
+def store_video(
+    path: Path,
+    store_root: Path,
+    masks: str | None,
+    box: tuple[float, float, float, float] | None = None,
+    reporter: Reporter | None = None,
+) -> str:
+    """Add the video at ``path`` to the video store, as `zooctl video add` does; returns its name.
+
+    Masks: ``--masks DIR`` (or a mask video), ``auto`` (GrabCut, optionally seeded by ``box`` =
+    x, y, w, h in original pixels around the animal in the first frame), or by default a DAVIS
+    folder's ``Annotations/`` and otherwise GrabCut. A video already stored from the same source
+    file with the same masks is reused (no second decode, flow and segmentation); one of the same
+    name from another source or with other masks is kept, and this one gets a free name beside it.
+    """
+    from ..store.videos import VideoStore
+    from ..video.ingest import AddOptions, add_video, default_name
+
+    opts = AddOptions(box=box)
+    if masks == "auto":
+        opts.segmenter = "grabcut"
+    elif masks is not None:
+        mp = Path(masks).expanduser()
+        if not mp.exists():
+            raise InputError(f"--masks {masks}: no such folder or video", hint="give mask images, or 'auto'")
+        opts.masks = mp
+    has_annotations = path.is_dir() and (path / "Annotations").is_dir()
+    segmenter = "masks" if opts.masks is not None or (has_annotations and masks is None) else "grabcut"
+    if box is not None and segmenter != "grabcut":
+        raise UsageError("--box seeds GrabCut: use it with --masks auto (or a video without masks)")
+    # What the masks segmenter records as its source: the mask folder, or the DAVIS folder itself.
+    wanted_masks = str((opts.masks or path).resolve()) if segmenter == "masks" else None
+    vs = VideoStore.open(store_root)
+    base = default_name(path)
+    resolved = str(path.resolve())
+    for k in range(1, 100):
+        name = base if k == 1 else f"{base}-{k}"
+        if not vs.exists(name):
+            break
+        if _same_video(vs.get(name, what=()), vs.summary(name), resolved, segmenter, wanted_masks, box):
+            if reporter is not None:
+                reporter.message(f"using the stored video {name!r}")
+            return name
+    else:
+        raise UsageError(f"too many stored videos named {base}-N", hint="remove some with `zooctl video rm`")
+    if reporter is not None:
+        reporter.message(f"adding {path.name} to the video store as {name!r} (decode, flow, masks)")
+    opts.name = name
+    add_video(vs, path, opts)
+    return name
+
+
+def _same_video(
+    rec: Any, summary: dict[str, Any], path: str, segmenter: str, masks: str | None, box: Any
+) -> bool:
+    seg = rec.segmenter or {}
+    if str(rec.source.get("path", "")) != path or seg.get("name") != segmenter:
+        return False
+    if segmenter == "masks":
+        return seg.get("options", {}).get("path") == masks
+    if segmenter == "grabcut":
+        from ..video.ingest import _scale_box
+
+        stored_box = seg.get("box")
+        if (stored_box is None) != (box is None):
+            return False
+        if box is None:
+            return True
+        original = (int(rec.source.get("original_width", 0)), int(rec.source.get("original_height", 0)))
+        scaled = _scale_box(box, original, (int(summary["width"]), int(summary["height"])))
+        return bool(np.allclose(scaled, stored_box, atol=1))
+    return True
+
+
+def fit_job(
+    source: str,
+    store_root: Path,
+    cfg: FitConfig | None = None,
+    name: str | None = None,
+    template: str | None = None,
+    masks: str | None = None,
+    out: Path | None = None,
+    reporter: Reporter | None = None,
+    resume: bool = False,
+    exclude: set[str] | None = None,
+    bank: Any = None,
+    outputs: tuple[str, ...] = ("usd", "glb", "overlay", "loss"),
+    box: tuple[float, float, float, float] | None = None,
+) -> dict[str, Any]:
+    """Fit a video and write its outputs and store record; returns the record (``fit.json``)."""
+    from ..store.bank import Bank
+    from .template import choose_template
+
+    fits = FitStore(store_root)
+    bank = bank if bank is not None else Bank.open(store_root)
+    state = None
+    if resume:
+        if name is None:
+            raise UsageError("--resume needs --name of the fit to continue")
+        old = fits.get(name)
+        state = fits.load_state(name)
+        base = preset(state["config"].get("preset", "fast"))
+        cfg = FitConfig.from_dict(state["config"], base)
+        source, template, masks = old["source"], old["template"], old.get("masks")
+        box = tuple(old["box"]) if old.get("box") else None
+        out = Path(old["out"]) if old.get("out") else out
+        exclude = set(old.get("excluded", [])) or exclude
+    cfg = (cfg or preset("fast")).validate()
+    t_start = time.perf_counter()
+    video = load_source(source, store_root, masks, cfg.max_frames, box, reporter)
+    name = check_name(name or sanitize_name(video.name), "fit name")
+    t_ret = time.perf_counter()
+    asset, candidates = choose_template(
+        bank, template, video.frames, video.masks, exclude=exclude, device=cfg.device
+    )
+    t_ret = time.perf_counter() - t_ret
+    if resume and state is not None:
+        candidates = fits.get(name).get("retrieval", [])
+    out_dir = Path(out) if out is not None else fits.path(name)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    record: dict[str, Any] = {
+        "status": "running",
+        "source": str(source),
+        "video": video.name,
+        "masks": masks,
+        "box": list(box) if box is not None else None,
+        "stored_video": video.source[len("video:") :] if video.source.startswith("video:") else None,
+        "mask_source": video.mask_source,
+        "frames": video.num_frames if cfg.max_frames is None else min(cfg.max_frames, video.num_frames),
+        "image_size": list(video.size),
+        "fps": video.fps,
+        "template": asset.name,
+        "retrieval": candidates,
+        "excluded": sorted(exclude or []),
+        "out": str(out_dir.resolve()),
+        "config": cfg.to_dict(),
+        "outputs": {},
+    }
+    fits.save_record(name, record)
+    from ..store.fs import write_json_atomic
+
+    write_json_atomic(fits.path(name) / "config.json", cfg.to_dict())
+
+    def checkpoint(st: dict[str, Any]) -> None:
+        fits.save_state(name, st)
+
+    try:
+        result = fit_video(video, asset, cfg, reporter, checkpoint, state)
+    except KeyboardInterrupt:
+        record["status"] = "interrupted"
+        fits.save_record(name, record)
+        raise
+    result.timings["retrieval"] = t_ret
+    record.update(write_outputs(result, name, out_dir, fits, outputs, reporter))
+    record["timings"]["total_wall"] = time.perf_counter() - t_start
+    record["status"] = "done"
+    from .outputs import write_fit_json
+
+    write_fit_json(record | {"name": name, "schema_version": 1}, out_dir / "fit.json")
+    record["outputs"]["fit_json"] = str(out_dir / "fit.json")
+    fits.save_record(name, record)
+    return record | {"name": name}
+
+
+def write_outputs(
+    result: FitResult,
+    name: str,
+    out_dir: Path,
+    fits: FitStore,
+    outputs: tuple[str, ...],
+    reporter: Reporter | None,
+) -> dict[str, Any]:
+    """Character, USD, GLB, overlay video, loss plot and metrics; the record fields they fill."""
+    from .export import fitted_asset
+    from .outputs import stage_summary, write_glb, write_loss_png, write_overlay, write_usd
+
+    t = time.perf_counter()
+    asset = fitted_asset(
+        result.scene,
+        result.template,
+        name,
+        result.video.fps,
+        {"source": f"zooctl fit of {result.video.name}"},
+    )
+    fits.save_character(name, asset)
+    cam = result.input_camera()
+    files: dict[str, str] = {}
+    notes: list[str] = []
+    if "usd" in outputs:
+        files["usd"] = str(write_usd(asset, cam, out_dir / f"{name}.usd"))
+    if "glb" in outputs:
+        try:
+            files["glb"] = str(write_glb(asset, out_dir / f"{name}.glb"))
+        except MissingDependencyError as exc:
+            notes.append(f"glb not written: {exc.message}")
+    if "overlay" in outputs:
+        if reporter is not None:
+            reporter.message("rendering overlay.mp4")
+        files["overlay"] = str(
+            write_overlay(asset, cam, result.video.frames, out_dir / "overlay.mp4", result.video.fps)
+        )
+    if "loss" in outputs:
+        files["loss_png"] = str(write_loss_png(result.history, out_dir / "loss.png"))
+    result.timings["outputs"] = time.perf_counter() - t
+    iou = result.iou if result.iou is not None else np.array([np.nan])
+    metrics: dict[str, Any] = {
+        "mask_iou": _nanmean(iou),
+        "mask_iou_per_frame": [None if not np.isfinite(x) else round(float(x), 4) for x in iou],
+    }
+    if result.video.gt:
+        from ..metrics import evaluate_fit
+
+        try:
+            metrics.update(
+                {
+                    k: (None if isinstance(v, float) and not np.isfinite(v) else v)
+                    for k, v in evaluate_fit(result).items()
+                }
+            )
+        except InputError as exc:
+            notes.append(f"3D metrics skipped: {exc.message}")
+    k = result.scene.camera(1).intrinsics[0].detach().cpu().numpy() / result.scale
+    return {
+        "outputs": files,
+        "notes": notes,
+        "camera": {
+            "convention": "static camera at the world origin looking down -Z, +Y up (USD /World/Camera, identity transform)",
+            "focal_px": float(k[0]),
+            "image_size": list(result.video.size),
+            "search": result.camera_init,
+        },
+        "losses": stage_summary(result.history),
+        "timings": {k: round(float(v), 3) for k, v in result.timings.items()},
+        "metrics": metrics,
+        "fitted": {
+            "global_scale": float(result.scene.model.global_scale().detach()),
+            "bone_scales": [round(float(b), 4) for b in result.scene.model.bone_scales().detach().cpu()],
+        },
+    }
+
+
+def _nanmean(a: np.ndarray) -> float | None:
+    a = np.asarray(a, dtype=np.float64)
+    return float(np.nanmean(a)) if np.isfinite(a).any() else None

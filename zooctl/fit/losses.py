@@ -1,0 +1,113 @@
+"""The image terms of E_cue: silhouette IoU, a mask-contour distance term and optical flow.
+
+Targets live at the fit resolution (h, w). ``MaskTargets`` precomputes, per frame, the coverage
+(T, h, w) in [0, 1], the distance from every pixel to the mask (for vertices that fall outside
+it) and a fixed sample of mask pixels (that some vertex should cover).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+Tensor = torch.Tensor
+
+
+@dataclass
+class MaskTargets:
+    """coverage (T, h, w) float; outside_dt (T, 1, h, w) distance to the mask in pixels / max(h, w);
+    samples (T, S, 2) mask pixel centres (x, y); sample_ok (T, S) bool; present (T,) bool (non-empty)."""
+
+    coverage: Tensor
+    outside_dt: Tensor
+    samples: Tensor
+    sample_ok: Tensor
+    present: Tensor
+
+    @classmethod
+    def build(
+        cls, coverage: np.ndarray, num_samples: int = 256, seed: int = 0, device: str = "cpu"
+    ) -> MaskTargets:
+        import cv2
+
+        T, h, w = coverage.shape
+        binary = coverage >= 0.5
+        dt = np.zeros((T, h, w), np.float32)
+        samples = np.zeros((T, num_samples, 2), np.float32)
+        ok = np.zeros((T, num_samples), bool)
+        rng = np.random.default_rng(seed)
+        for t in range(T):
+            if binary[t].any():
+                dt[t] = cv2.distanceTransform((~binary[t]).astype(np.uint8), cv2.DIST_L2, 3)
+                ys, xs = np.nonzero(binary[t])
+                pick = rng.choice(len(xs), num_samples, replace=len(xs) < num_samples)
+                samples[t] = np.stack((xs[pick] + 0.5, ys[pick] + 0.5), -1)
+                ok[t] = True
+        tt = lambda a, dt_=torch.float32: torch.as_tensor(a, dtype=dt_, device=device)  # noqa: E731
+        return cls(
+            tt(coverage),
+            tt(dt / max(h, w))[:, None],
+            tt(samples),
+            tt(ok, torch.bool),
+            tt(binary.reshape(T, -1).any(1), torch.bool),
+        )
+
+
+def soft_iou_loss(sil: Tensor, target: Tensor, weight: Tensor) -> Tensor:
+    """1 - soft IoU per frame, averaged with ``weight`` (B,). sil, target: (B, h, w)."""
+    inter = (sil * target).flatten(1).sum(1)
+    union = (sil + target - sil * target).flatten(1).sum(1).clamp_min(1e-6)
+    per = 1.0 - inter / union
+    return (per * weight).sum() / weight.sum().clamp_min(1.0)
+
+
+def contour_loss(
+    xy: Tensor, frames: Tensor, targets: MaskTargets, weight: Tensor, max_points: int = 1500
+) -> Tensor:
+    """Vertices outside their mask (distance-transform lookup) + mask pixels far from every vertex.
+
+    xy (B, V, 2) projected vertices in fit pixels for the given frame indices (B,). Both halves are
+    in units of the image size, squared. Gives long-range gradients where the soft silhouette has
+    none (a template far from its mask), at a cost independent of the image size.
+    """
+    B, V, _ = xy.shape
+    h, w = targets.coverage.shape[1:]
+    if V > max_points:  # a fixed, even subsample keeps the cost flat for dense meshes
+        xy = xy[:, :: int(np.ceil(V / max_points))]
+    grid = torch.stack((xy[..., 0] / w * 2 - 1, xy[..., 1] / h * 2 - 1), -1)[:, None]  # (B, 1, V', 2)
+    d_out = F.grid_sample(targets.outside_dt[frames], grid, align_corners=False, padding_mode="border")[
+        :, 0, 0
+    ]
+    outside = (d_out**2).mean(1)
+    pts = targets.samples[frames]  # (B, S, 2)
+    near = torch.cdist(pts, xy).min(-1).values / max(h, w)  # (B, S)
+    ok = targets.sample_ok[frames].to(near.dtype)
+    cover = ((near**2) * ok).sum(1) / ok.sum(1).clamp_min(1.0)
+    per = outside + cover
+    return (per * weight).sum() / weight.sum().clamp_min(1.0)
+
+
+def flow_loss(rendered: Tensor, rendered_mask: Tensor, observed: Tensor, valid: Tensor) -> Tensor:
+    """Mean robust (Huber, 1 px) error between rendered and observed flow where both are valid.
+
+    rendered, observed (B, h, w, 2) pixels; rendered_mask, valid (B, h, w) bool.
+    """
+    m = (rendered_mask & valid).to(rendered.dtype)
+    err = F.smooth_l1_loss(rendered, observed, reduction="none", beta=1.0).sum(-1)
+    return (err * m).sum() / m.sum().clamp_min(1.0)
+
+
+def root_smoothness(root_rotation: Tensor, root_translation: Tensor, size: float) -> Tensor:
+    """Accelerations of the root translation (over the template size) and root rotation changes."""
+    T = root_translation.shape[0]
+    if T < 2:
+        return root_translation.sum() * 0.0
+    q = root_rotation / root_rotation.norm(dim=-1, keepdim=True)
+    rot = (1.0 - (q[1:] * q[:-1]).sum(-1) ** 2).mean()
+    if T < 3:
+        return rot
+    acc = root_translation[2:] - 2 * root_translation[1:-1] + root_translation[:-2]
+    return rot + (acc**2).sum(-1).mean() / size**2

@@ -1,0 +1,197 @@
+"""What a fit leaves behind: ``<name>.usd``, ``<name>.glb``, ``overlay.mp4``, ``loss.png``, ``fit.json``.
+
+USD camera convention: the fit camera is static at the world origin looking down world -Z with
++Y up, so ``/World/Camera`` has an identity transform; its focal length and apertures follow
+`zooctl.render.camera.to_usd` for the input video's size (square pixels, centred principal
+point). Projecting the animated mesh through it overlays the input frames: the root motion of the
+``fit`` animation carries any camera motion of the video.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from ..asset import RiggedAsset
+from ..errors import MissingDependencyError
+from ..store.fs import write_bytes_atomic, write_json_atomic
+
+
+def write_usd(asset: RiggedAsset, camera, path: Path) -> Path:
+    """The fitted character (one SkelAnimation ``fit``) plus ``/World/Camera``, written atomically."""
+    from pxr import Gf, Usd, UsdGeom
+
+    from ..io.usd_export import save_usd
+    from ..render.camera import to_usd
+
+    path = Path(path)
+    with tempfile.TemporaryDirectory(prefix=".zooctl-usd-", dir=path.parent) as d:
+        tmp = Path(d) / path.name
+        save_usd(asset, tmp, clips=["fit"])
+        stage = Usd.Stage.Open(str(tmp))
+        UsdGeom.Xform.Define(stage, "/World")
+        attrs = to_usd(camera, 0)
+        cam = UsdGeom.Camera.Define(stage, "/World/Camera")
+        cam.CreateFocalLengthAttr(attrs["focal_length"])
+        cam.CreateHorizontalApertureAttr(attrs["horizontal_aperture"])
+        cam.CreateVerticalApertureAttr(attrs["vertical_aperture"])
+        cam.CreateHorizontalApertureOffsetAttr(attrs["horizontal_aperture_offset"])
+        cam.CreateVerticalApertureOffsetAttr(attrs["vertical_aperture_offset"])
+        cam.CreateClippingRangeAttr(Gf.Vec2f(0.01, 1e5))
+        UsdGeom.Xformable(cam).AddTransformOp().Set(
+            Gf.Matrix4d(np.asarray(attrs["camera_to_world"]).T.tolist())
+        )
+        cam.GetPrim().SetCustomDataByKey("zooctl:image_size", Gf.Vec2i(camera.width, camera.height))
+        stage.GetRootLayer().Save()
+        write_bytes_atomic(path, tmp.read_bytes())
+        for extra in Path(d).iterdir():  # a texture written beside the layer
+            if extra.name != path.name:
+                write_bytes_atomic(path.parent / extra.name, extra.read_bytes())
+    return path
+
+
+def write_glb(asset: RiggedAsset, path: Path) -> Path:
+    """The fitted character as glTF binary, through the registered ``glb`` exporter."""
+    from ..plugins import get_registry
+
+    spec = get_registry().exporter_for("glb")
+    if spec is None:
+        raise MissingDependencyError(
+            "no glTF exporter is registered",
+            hint="see `zooctl plugins`; the glb exporter ships with zooctl's rig export",
+        )
+    spec.save(asset, Path(path), ["fit"])
+    return Path(path)
+
+
+# -- overlay video -------------------------------------------------------------------------------
+
+
+@torch.no_grad()
+def overlay_frames(asset: RiggedAsset, camera, frames: np.ndarray, alpha: float = 0.6) -> np.ndarray:
+    """(T, H, 2W, 3) uint8: the shaded fitted mesh over each frame, beside a novel view turning
+    once around the animal over the video."""
+    from ..render.preview import PreviewRenderer, orbit_camera
+    from ..render.raster import rasterize
+
+    T, H, W = frames.shape[:3]
+    posed = asset.pose("fit", np.arange(T)).astype(np.float32)  # (T, V, 3)
+    faces = torch.as_tensor(asset.faces, dtype=torch.long)
+    renderer = PreviewRenderer()
+    cam = camera
+    out = np.zeros((T, H, 2 * W, 3), np.uint8)
+    size = float(np.linalg.norm(posed[0].max(0) - posed[0].min(0)))
+    for t in range(T):
+        shaded = renderer.render(posed[t], asset.faces, cam, asset.vertex_colors)
+        mask = rasterize(torch.as_tensor(posed[t][None]), faces, cam).mask[0].numpy()
+        img = frames[t].copy()
+        img[mask] = (alpha * shaded[mask] + (1 - alpha) * frames[t][mask]).astype(np.uint8)
+        out[t, :, :W] = img
+        centre = 0.5 * (posed[t].max(0) + posed[t].min(0))
+        ang = 2 * math.pi * t / max(T, 1)
+        eye = centre + 1.6 * size * np.array([math.sin(ang), 0.35, math.cos(ang)])
+        out[t, :, W:] = renderer.render(
+            posed[t], asset.faces, orbit_camera(eye, centre, H, W, 35.0), asset.vertex_colors
+        )
+    return out
+
+
+def write_overlay(asset: RiggedAsset, camera, frames: np.ndarray, path: Path, fps: float) -> Path:
+    from ..io.video import write_mp4
+
+    return write_mp4(path, overlay_frames(asset, camera, frames), fps)
+
+
+# -- loss curves ---------------------------------------------------------------------------------
+
+_COLOURS = [
+    (31, 119, 180),
+    (255, 127, 14),
+    (44, 160, 44),
+    (214, 39, 40),
+    (148, 103, 189),
+    (140, 86, 75),
+    (227, 119, 194),
+    (127, 127, 127),
+    (188, 189, 34),
+    (23, 190, 207),
+    (0, 0, 0),
+    (100, 100, 255),
+]
+
+
+def loss_plot(history: dict[str, list[dict[str, float]]], width: int = 900, height: int = 480) -> np.ndarray:
+    """(H, W, 3) uint8: every loss term per step (log scale), stages one after the other."""
+    from PIL import Image, ImageDraw
+
+    steps = [(stage, terms) for stage in sorted(history) for terms in history[stage]]
+    img = Image.new("RGB", (width, height), (255, 255, 255))
+    d = ImageDraw.Draw(img)
+    left, right, top, bottom = 60, width - 170, 20, height - 40
+    d.rectangle([left, top, right, bottom], outline=(0, 0, 0))
+    if not steps:
+        d.text((left + 10, top + 10), "no optimisation steps", fill=(0, 0, 0))
+        return np.asarray(img)
+    names = sorted({k for _, t in steps for k in t}, key=lambda k: (k != "total", k))
+    vals = np.array([[abs(t.get(k, np.nan)) for k in names] for _, t in steps], dtype=np.float64)
+    pos = vals[np.isfinite(vals) & (vals > 0)]
+    lo, hi = (np.log10(pos.min()), np.log10(pos.max())) if len(pos) else (-3.0, 0.0)
+    hi = max(hi, lo + 1e-6)
+    n = len(steps)
+
+    def xy(i: int, v: float) -> tuple[float, float]:
+        x = left + (right - left) * i / max(n - 1, 1)
+        y = bottom - (bottom - top) * (np.log10(v) - lo) / (hi - lo)
+        return x, y
+
+    for e in range(int(np.floor(lo)), int(np.ceil(hi)) + 1):
+        if lo <= e <= hi:
+            y = xy(0, 10.0**e)[1]
+            d.line([left, y, right, y], fill=(225, 225, 225))
+            d.text((8, y - 6), f"1e{e}", fill=(80, 80, 80))
+    for k, name in enumerate(names):
+        pts = [xy(i, v) for i, v in enumerate(vals[:, k]) if np.isfinite(v) and v > 0]
+        col = _COLOURS[k % len(_COLOURS)]
+        if len(pts) > 1:
+            d.line(pts, fill=col, width=2 if name == "total" else 1)
+        d.rectangle([right + 12, top + 16 * k + 4, right + 24, top + 16 * k + 12], fill=col)
+        d.text((right + 30, top + 16 * k), name, fill=(0, 0, 0))
+    boundary = sum(1 for s, _ in steps if s == "stage1")
+    if 0 < boundary < n:
+        x = xy(boundary, 10.0**lo)[0]
+        d.line([x, top, x, bottom], fill=(150, 150, 150))
+        d.text((x + 4, bottom + 6), "stage 2", fill=(80, 80, 80))
+    d.text((left, bottom + 6), "stage 1", fill=(80, 80, 80))
+    d.text((left + (right - left) // 2 - 40, bottom + 22), "step (|loss|, log scale)", fill=(0, 0, 0))
+    return np.asarray(img)
+
+
+def write_loss_png(history: dict[str, list[dict[str, float]]], path: Path) -> Path:
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(loss_plot(history)).save(buf, format="PNG")
+    write_bytes_atomic(Path(path), buf.getvalue())
+    return Path(path)
+
+
+def stage_summary(history: dict[str, list[dict[str, float]]]) -> dict[str, Any]:
+    """Per stage: steps run and the first and last value of every term."""
+    out = {}
+    for stage, steps in history.items():
+        if steps:
+            out[stage] = {"steps": len(steps), "first": steps[0], "last": steps[-1]}
+        else:
+            out[stage] = {"steps": 0, "first": {}, "last": {}}
+    return out
+
+
+def write_fit_json(record: dict[str, Any], path: Path) -> Path:
+    write_json_atomic(Path(path), record)
+    return Path(path)

@@ -1,0 +1,280 @@
+"""Orchestration of one fit: targets, camera search, stage 1, stage 2, with checkpoints.
+
+`fit_video` is the library entry point (the CLI adds the store, the template choice, outputs and
+a rich progress display). A ``Reporter`` receives stage starts and per-step losses; a
+``checkpoint`` callable receives a resumable state every ``checkpoint_every`` steps and when the
+run is interrupted (Ctrl-C raises ``KeyboardInterrupt`` through here after the state is saved).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+import torch
+
+from ..asset import RiggedAsset
+from ..errors import InputError, UsageError
+from .camera_init import CameraInit, initialise_camera
+from .config import FitConfig
+from .inputs import FitVideo, crop_box, fit_resolution, resample_flow, resample_masks
+from .losses import MaskTargets
+from .scene import FitScene
+from .stages import StageRunner, Targets, make_optimizer, mask_iou, stage_config
+
+STATE_VERSION = 1
+
+
+class Reporter(Protocol):
+    def stage(self, name: str, total: int, done: int = 0) -> None: ...
+    def step(self, terms: dict[str, float]) -> None: ...
+    def message(self, text: str) -> None: ...
+
+
+class _Silent:
+    def stage(self, name: str, total: int, done: int = 0) -> None:
+        pass
+
+    def step(self, terms: dict[str, float]) -> None:
+        pass
+
+    def message(self, text: str) -> None:
+        pass
+
+
+@dataclass
+class FitResult:
+    """scene: the fitted `FitScene` (fit resolution); scale: fit pixels per input pixel; history:
+    per stage, a list of loss-term dicts per step; timings in seconds; iou (T,) per-frame mask IoU
+    at the input resolution (NaN where the mask is empty)."""
+
+    scene: FitScene
+    video: FitVideo
+    template: RiggedAsset
+    config: FitConfig
+    camera_init: dict[str, Any]
+    scale: float
+    history: dict[str, list[dict[str, float]]] = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
+    iou: np.ndarray | None = None
+
+    def input_camera(self):
+        """The fitted camera at the input resolution (one `Camera`)."""
+        from ..render.camera import Camera
+
+        cam = self.scene.camera(1)
+        H, W = self.video.size
+        k = cam.intrinsics.detach().clone()
+        k[:, 0:2] = k[:, 0:2] / self.scale
+        k[:, 2] = W / 2.0
+        k[:, 3] = H / 2.0
+        return Camera(k, cam.rotation.detach(), cam.translation.detach(), H, W)
+
+
+def check_template(template: RiggedAsset) -> None:
+    """Refuse templates the fit cannot use, with a clear reason."""
+    if template.num_faces < 4 or template.num_vertices < 4:
+        raise InputError(f"template {template.name!r} has too few faces to fit a silhouette")
+    if template.num_joints < 1:
+        raise InputError(
+            f"template {template.name!r} has no skeleton",
+            hint="pick a rigged template (see `zooctl bank list`)",
+        )
+
+
+def fit_video(
+    video: FitVideo,
+    template: RiggedAsset,
+    cfg: FitConfig,
+    reporter: Reporter | None = None,
+    checkpoint: Callable[[dict[str, Any]], None] | None = None,
+    resume: dict[str, Any] | None = None,
+) -> FitResult:
+    """Fit ``template`` to ``video`` (see the module docstring). Deterministic for a given seed."""
+    rep = reporter or _Silent()
+    cfg.validate()
+    check_template(template)
+    if cfg.device.startswith("cuda") and not torch.cuda.is_available():
+        raise UsageError(
+            "--device cuda was asked for, but PyTorch sees no CUDA device", hint="use --device cpu"
+        )
+    torch.manual_seed(cfg.seed)
+    video = video.truncated(cfg.max_frames).check()
+    timings: dict[str, float] = dict(resume.get("timings", {})) if resume else {}
+    t0 = time.perf_counter()
+    T, H, W = video.masks.shape
+    box = crop_box(video.masks)
+    x0, y0, x1, y1 = box
+    crop = video.masks[:, y0:y1, x0:x1]
+    h, w, s = fit_resolution(y1 - y0, x1 - x0, cfg.fit_size)
+    s = h / (y1 - y0)
+    coverage = resample_masks(crop, h, w)
+    dev = cfg.device
+    mt = MaskTargets.build(coverage, seed=cfg.seed, device=dev)
+    flow = (
+        resample_flow(video, h, w, box) if (cfg.ablation.flow and cfg.ablation.optimise and T > 1) else None
+    )
+    targets = Targets(
+        mt,
+        None if flow is None else torch.as_tensor(flow[0], device=dev),
+        None if flow is None else torch.as_tensor(flow[1], device=dev),
+    )
+    timings.setdefault("targets", time.perf_counter() - t0)
+    focal_given = cfg.camera.focal is not None or video.intrinsics is not None
+    if cfg.camera.focal is None and video.intrinsics is not None:
+        cfg.camera.focal = float(video.intrinsics[0])
+    scene = FitScene(
+        template,
+        T,
+        h,
+        w,
+        focal=1.0,
+        stretch=cfg.ablation.stretch,
+        displacement=cfg.ablation.displacement,
+        hidden=cfg.hidden,
+        device=dev,
+        principal=((W / 2 - x0) * s, (H / 2 - y0) * s),
+    )
+    if resume is None:
+        rep.message("searching the camera and viewpoint")
+        t1 = time.perf_counter()
+        init = initialise_camera(
+            scene.rest_vertices().cpu().numpy(),
+            template.faces,
+            crop,
+            cfg.camera,
+            s,
+            cfg.seed,
+            (W / 2 - x0, H / 2 - y0),
+            H,
+        )
+        with torch.no_grad():
+            scene.log_focal.fill_(float(np.log(init.focal)))
+            scene.root_rotation.copy_(torch.as_tensor(init.root_rotation, dtype=torch.float32))
+            scene.root_translation.copy_(torch.as_tensor(init.root_translation, dtype=torch.float32))
+        timings["camera"] = time.perf_counter() - t1
+        cam_info = _camera_info(init, s)
+        history: dict[str, list[dict[str, float]]] = {"stage1": [], "stage2": []}
+        start_stage, start_iter, opt_state = 1, 0, None
+    else:
+        if resume.get("version") != STATE_VERSION:
+            raise InputError(
+                "the saved fit state is from another zooctl version",
+                hint="start the fit again without --resume",
+            )
+        scene.load_state_dict(resume["scene"])
+        cam_info = resume["camera_init"]
+        history = resume["history"]
+        start_stage, start_iter, opt_state = resume["stage"], resume["iteration"], resume.get("optimizer")
+    result = FitResult(scene, video, template, cfg, cam_info, s, history, timings)
+    if cfg.ablation.optimise:
+        for stage in (1, 2):
+            if stage < start_stage:
+                continue
+            first = start_iter if stage == start_stage else 0
+            _run_stage(
+                result,
+                targets,
+                stage,
+                first,
+                not focal_given,
+                rep,
+                checkpoint,
+                opt_state if stage == start_stage else None,
+            )
+    t2 = time.perf_counter()
+    result.iou = input_mask_iou(result)
+    timings["evaluate"] = time.perf_counter() - t2
+    return result
+
+
+def _camera_info(init: CameraInit, s: float) -> dict[str, Any]:
+    return {
+        "focal_px": init.focal / s,
+        "search_iou": init.iou,
+        "keyframe_iou": init.keyframe_iou,
+        "candidates": [dict(c, focal=c["focal"]) for c in init.candidates],
+    }
+
+
+def _run_stage(
+    result: FitResult,
+    targets: Targets,
+    stage: int,
+    first: int,
+    learn_focal: bool,
+    rep: Reporter,
+    checkpoint,
+    opt_state,
+) -> None:
+    cfg, scene = result.config, result.scene
+    st = stage_config(cfg, stage)
+    runner = StageRunner(scene, targets, cfg, stage)
+    opt = make_optimizer(scene, cfg, stage, learn_focal)
+    if opt_state is not None:
+        opt.load_state_dict(opt_state)
+    key = f"stage{stage}"
+    rep.stage(key, st.iters, first)
+    t = time.perf_counter()
+    it = first
+
+    def state(next_iter: int) -> dict[str, Any]:
+        timings = dict(result.timings)
+        timings[key] = timings.get(key, 0.0) + time.perf_counter() - t
+        return {
+            "version": STATE_VERSION,
+            "stage": stage,
+            "iteration": next_iter,
+            "scene": scene.state_dict(),
+            "optimizer": opt.state_dict(),
+            "history": result.history,
+            "camera_init": result.camera_init,
+            "config": cfg.to_dict(),
+            "timings": timings,
+        }
+
+    try:
+        # Skip the runner's random windows already drawn before an interruption (resume = same run).
+        for _ in range(first):
+            runner.window()
+        for it in range(first, st.iters):
+            terms = runner.step(opt)
+            result.history[key].append(terms)
+            rep.step(terms)
+            if checkpoint is not None and cfg.checkpoint_every and (it + 1) % cfg.checkpoint_every == 0:
+                checkpoint(state(it + 1))
+    except KeyboardInterrupt:
+        if checkpoint is not None:
+            checkpoint(state(len(result.history[key])))
+        raise
+    result.timings[key] = result.timings.get(key, 0.0) + time.perf_counter() - t
+
+
+@torch.no_grad()
+def input_mask_iou(result: FitResult, masks: np.ndarray | None = None) -> np.ndarray:
+    """(T,) IoU of the fitted silhouettes with the input masks at the input resolution.
+
+    ``masks`` (T, H, W) bool replaces the masks the fit used, e.g. ground truth for a fit made
+    from automatic masks.
+    """
+    from ..render.raster import rasterize
+
+    scene = result.scene
+    masks = result.video.masks if masks is None else masks
+    cam = result.input_camera().to(scene.rotations.device)
+    out = []
+    B = 8
+    for s in range(0, scene.num_frames, B):
+        idx = torch.arange(s, min(s + B, scene.num_frames), device=scene.rotations.device)
+        sil = rasterize(scene.pose(idx).vertices, scene.faces, cam.expand(len(idx))).mask.cpu().numpy()
+        m = masks[idx.cpu().numpy()]
+        inter = (sil & m).reshape(len(idx), -1).sum(1)
+        union = (sil | m).reshape(len(idx), -1).sum(1)
+        out.append(np.where(m.reshape(len(idx), -1).any(1), inter / np.maximum(union, 1), np.nan))
+    return np.concatenate(out)
+
+
+__all__ = ["FitResult", "fit_video", "input_mask_iou", "mask_iou"]

@@ -1,0 +1,177 @@
+"""The two optimisation stages of CASA section 3.4.
+
+Stage 1 (global placement): the global scale u, the per-frame root rotation and translation and,
+unless it was given, the focal length, on the mask terms only (soft-silhouette IoU plus the
+contour distance term) with root smoothness and a weak scale prior.
+
+Stage 2 (articulation): jointly the bone length scales, per-frame joint quaternions, root
+transforms, the displacement MLP and the skinning weights, minimising
+
+    lambda1 E_cue + lambda2 E_smooth + lambda3 E_symm + regularisers,
+    E_cue = E_mask + beta E_flow,
+
+with regularisers (weights in `zooctl.fit.config.LossWeights`): the contour term, root
+smoothness, bone lengths near the template's and left/right equal, skinning weights near the
+template's (KL), small displacements, joint rotations near the rest pose and the global scale
+near the template's. Each step sees a contiguous window of ``batch`` frames (so flow has its
+frame pairs); smoothness always covers the whole sequence (it is cheap: no rendering).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from ..render.fast import SplatSilhouette
+from ..render.raster import FlowRenderer
+from ..render.soft import SoftSilhouette
+from .config import FitConfig, StageConfig
+from .losses import MaskTargets, contour_loss, flow_loss, root_smoothness, soft_iou_loss
+from .scene import FitScene
+
+Tensor = torch.Tensor
+StepCallback = Callable[[int, int, dict[str, float]], None]  # (stage, iteration, loss terms)
+
+
+@dataclass
+class Targets:
+    """What the losses compare against, at the fit resolution (see `MaskTargets`).
+
+    flow (T-1, h, w, 2) observed forward flow in fit pixels and flow_valid (T-1, h, w) bool, or None.
+    """
+
+    masks: MaskTargets
+    flow: Tensor | None = None
+    flow_valid: Tensor | None = None
+
+
+def stage_config(cfg: FitConfig, stage: int) -> StageConfig:
+    return cfg.stage1 if stage == 1 else cfg.stage2
+
+
+def make_optimizer(scene: FitScene, cfg: FitConfig, stage: int, learn_focal: bool) -> torch.optim.Adam:
+    """Adam (0.9, 0.999) over the stage's parameters with CASA's learning-rate split."""
+    st = stage_config(cfg, stage)
+    groups = [{"params": [scene.root_rotation, scene.root_translation], "lr": st.lr}]
+    if stage == 1:
+        groups.append({"params": [scene.model.log_scale], "lr": st.lr_shape})
+        if learn_focal:
+            groups.append({"params": [scene.log_focal], "lr": st.lr_shape * 0.2})
+    else:
+        groups.append({"params": [scene.rotations], "lr": st.lr})
+        if cfg.ablation.learn_skinning:
+            groups.append({"params": [scene.model.skin.logits], "lr": st.lr * 5})
+        groups.append({"params": scene.shape_parameters(), "lr": st.lr_shape})
+    return torch.optim.Adam(groups, betas=(0.9, 0.999))
+
+
+class StageRunner:
+    """Runs one stage's steps; ``step(it)`` returns that step's loss terms."""
+
+    def __init__(self, scene: FitScene, targets: Targets, cfg: FitConfig, stage: int):
+        self.scene, self.targets, self.cfg, self.stage = scene, targets, cfg, stage
+        self.st = stage_config(cfg, stage)
+        size = (scene.height, scene.width)
+        self.silhouette = (
+            SoftSilhouette(size, sigma=cfg.soft_sigma)
+            if self.st.renderer == "soft"
+            else SplatSilhouette(size)
+        )
+        self.flow_renderer = FlowRenderer()
+        self.gen = np.random.default_rng([cfg.seed, stage])
+        present = targets.masks.present.cpu().numpy()
+        self.present_idx = np.nonzero(present)[0]
+
+    def window(self) -> Tensor:
+        """Stage 1: up to ``batch`` frames spread over the video (random offset). Stage 2: a
+        contiguous window of ``batch`` frames around a random frame whose mask is non-empty."""
+        T = self.scene.num_frames
+        B = min(self.st.batch, T)
+        if self.stage == 1:
+            offset = self.gen.uniform(0, T / B)
+            idx = np.unique(np.minimum((offset + np.arange(B) * T / B).astype(int), T - 1))
+            return torch.as_tensor(idx, device=self.scene.rotations.device)
+        centre = int(self.gen.choice(self.present_idx))
+        start = int(np.clip(centre - B // 2, 0, T - B))
+        return torch.arange(start, start + B, device=self.scene.rotations.device)
+
+    def loss(self, frames: Tensor) -> tuple[Tensor, dict[str, float]]:
+        scene, w, ab = self.scene, self.cfg.weights, self.cfg.ablation
+        tg = self.targets
+        verts = scene.pose_rigid(frames) if self.stage == 1 else scene.pose(frames).vertices
+        cam = scene.camera(len(frames))
+        weight = tg.masks.present[frames].to(verts.dtype)
+        terms: dict[str, Tensor] = {}
+        sil = self.silhouette(verts, scene.faces, cam)
+        terms["mask"] = w.mask * soft_iou_loss(sil, tg.masks.coverage[frames], weight)
+        xy, _ = cam.project(verts)
+        terms["contour"] = w.dt * contour_loss(xy, frames, tg.masks, weight)
+        terms["root_smooth"] = w.root_smooth * root_smoothness(
+            scene.root_rotation, scene.root_translation, scene.size
+        )
+        terms["scale"] = w.scale_prior * scene.model.log_scale**2
+        if self.stage == 2:
+            if ab.flow and tg.flow is not None and len(frames) > 1 and w.flow > 0:
+                out = self.flow_renderer(verts[:-1], scene.faces, scene.camera(len(frames) - 1), verts[1:])
+                pairs = frames[:-1]
+                both = weight[:-1] * weight[1:]
+                valid = tg.flow_valid[pairs] & (tg.masks.coverage[pairs] > 0.5) & (both[:, None, None] > 0)
+                terms["flow"] = w.flow * flow_loss(out["flow"], out["mask"], tg.flow[pairs], valid)
+            if ab.smoothness and w.smooth > 0:
+                q_all = scene.rotations / scene.rotations.norm(dim=-1, keepdim=True)
+                terms["smooth"] = w.smooth * scene.model.smoothness_loss(q_all)
+            if ab.symmetry and w.symmetry > 0:
+                terms["symmetry"] = w.symmetry * scene.model.symmetry_loss(sample=400) / scene.size**2
+            if ab.stretch:
+                terms["bone_length"] = w.bone_length * scene.model.bone_length_loss()
+            if ab.learn_skinning:
+                cur = torch.log_softmax(scene.model.skin.logits, -1)
+                init = torch.log_softmax(scene.init_logits, -1)
+                terms["skin"] = w.skin_prior * (init.exp() * (init - cur)).sum(-1).mean()
+            if scene.model.displacement is not None:
+                u = scene.model.global_scale()
+                disp = scene.model.displacement(u * scene.model.points)
+                terms["displacement"] = w.displacement * (disp**2).sum(-1).mean() / scene.size**2
+            q = scene.rotations / scene.rotations.norm(dim=-1, keepdim=True)
+            rest = scene.model.rest_rotation
+            terms["pose"] = w.pose_prior * (1.0 - (q * rest).sum(-1) ** 2).mean()
+        total = sum(terms.values())
+        return total, {k: float(v.detach()) for k, v in terms.items()}
+
+    def step(self, opt: torch.optim.Optimizer) -> dict[str, float]:
+        frames = self.window()
+        opt.zero_grad(set_to_none=True)
+        total, terms = self.loss(frames)
+        total.backward()
+        # Lazy Adam for per-frame parameters: frames outside the batch keep their values (their
+        # stale momentum would otherwise move them without any evidence).
+        keep = torch.ones(self.scene.num_frames, dtype=torch.bool, device=frames.device)
+        keep[frames] = False
+        saved = [p.detach()[keep].clone() for p in self.scene.per_frame_parameters()]
+        opt.step()
+        with torch.no_grad():
+            for p, old in zip(self.scene.per_frame_parameters(), saved, strict=True):
+                p[keep] = old
+        terms["total"] = float(total.detach())
+        return terms
+
+
+@torch.no_grad()
+def mask_iou(scene: FitScene, masks: np.ndarray, batch: int = 16) -> np.ndarray:
+    """(T,) IoU between the fitted hard silhouettes and the binary masks (T, h, w), at the fit size;
+    NaN on frames whose mask is empty."""
+    from ..render.raster import rasterize
+
+    out = []
+    for s in range(0, scene.num_frames, batch):
+        idx = torch.arange(s, min(s + batch, scene.num_frames), device=scene.rotations.device)
+        v = scene.pose(idx).vertices
+        sil = rasterize(v, scene.faces, scene.camera(len(idx))).mask.cpu().numpy()
+        m = masks[idx.cpu().numpy()]
+        inter = (sil & m).reshape(len(idx), -1).sum(1)
+        union = (sil | m).reshape(len(idx), -1).sum(1)
+        out.append(np.where(m.reshape(len(idx), -1).any(1), inter / np.maximum(union, 1), np.nan))
+    return np.concatenate(out)

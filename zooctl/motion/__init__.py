@@ -1,0 +1,17 @@
+"""Motion prior (Ponymation section 3.3 / appendix B), for any skeleton in the bank.
+
+- `skeleton`: `Skeleton`, the skeleton description a motion model sees (rest pose, tree, scale).
+- `dataset`: motion sequences from bank clips (and, later, fits), resampled, cut into windows.
+- `model`: `MotionVAE`, the spatio-temporal transformer VAE over padded bone tokens.
+- `losses`: rotation, posed-joint (through `zooctl.rig` forward kinematics) and KL terms.
+- `train`: the training loop (rich progress, loss history, loss-curve PNG).
+- `prior`: `PonymationPrior`, the object the ``ponymation`` motion-prior plugin returns
+  (``fit``, ``save``, ``sample``), with chained sampling and optimised transition latents.
+- `baselines`: nearest-clip retrieval and a per-skeleton Gaussian/PCA prior.
+- `metrics`: reconstruction error, motion Chamfer distance, diversity, smoothness, foot sliding.
+
+Motion representation: per-bone *local rotations relative to the rest rotation* (``R_local =
+R_rest @ R_delta``) in the continuous 6D form (Zhou et al. 2019), so the identity is the rest pose
+for every skeleton. Root translation is excluded, as in Ponymation: sampled clips keep every joint
+at its rest translation and scale, and the root's rotation is modelled like any other bone.
+"""

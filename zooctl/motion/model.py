@@ -1,0 +1,148 @@
+"""`MotionVAE`: Ponymation's spatio-temporal transformer VAE (section 3.3, appendix B), for
+variable skeletons through padded bone tokens.
+
+Shapes: B windows, T frames, J (padded) joints, W width, Z latent size.
+
+- Spatial encoder E_s: per frame, J bone tokens (6D rotation + static bone features: rest
+  position, offset from parent, leaf flag, index/depth/parent encodings) with a learnable token
+  prepended; padded bones are masked. The learnable token's output is the frame's pose feature.
+- Temporal encoder E_t: [mu token, sigma token, T pose features + time encoding] -> mu, log var.
+- Temporal decoder D_t: T timestamp queries attend to z -> T frame features.
+- Spatial decoder D_s: J bone queries (static features) attend to the frame feature -> 6D per bone,
+  added to the identity so an untrained model outputs the rest pose.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields
+from typing import Any
+
+import torch
+from torch import nn
+
+from ..errors import InputError
+from .skeleton import STATIC_FEATURES, SkeletonBatch
+
+IDENTITY_6D = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0)
+
+
+@dataclass
+class MotionConfig:
+    """Model and training hyper-parameters; stored as the prior's ``config.json`` ``model``."""
+
+    width: int = 256
+    layers: int = 4
+    heads: int = 4
+    ff_mult: int = 2
+    latent: int = 256
+    length: int = 10
+    fps: float = 30.0
+    dropout: float = 0.0  # dropout costs a third of a CPU step and the VAE noise regularises already
+    kl_weight: float = 1e-3
+    rot_weight: float = 1.0
+    joint_weight: float = 10.0  # positions are in skeleton diagonals, so their errors are small
+
+    def __post_init__(self) -> None:
+        if self.width < 8 or self.width % self.heads:
+            raise InputError(f"width must be at least 8 and divisible by heads ({self.heads}), got {self.width}")
+        if self.layers < 1 or self.latent < 1 or self.length < 2 or not self.fps > 0:
+            raise InputError("layers and latent must be >= 1, length >= 2 frames and fps > 0")
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> MotionConfig:
+        known = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in d.items() if k in known})
+
+
+def time_encoding(t: torch.Tensor, dim: int) -> torch.Tensor:
+    """Sinusoidal encoding of (possibly fractional) frame indices. t (...,) -> (..., dim)."""
+    half = dim // 2
+    freq = torch.exp(-math.log(1000.0) * torch.arange(half, device=t.device, dtype=torch.float32) / half)
+    a = t.float()[..., None] * freq
+    return torch.cat([torch.sin(a), torch.cos(a)], -1)
+
+
+def _encoder(cfg: MotionConfig) -> nn.TransformerEncoder:
+    layer = nn.TransformerEncoderLayer(cfg.width, cfg.heads, cfg.width * cfg.ff_mult, cfg.dropout,
+                                       batch_first=True, norm_first=True)
+    return nn.TransformerEncoder(layer, cfg.layers, enable_nested_tensor=False)
+
+
+def _decoder(cfg: MotionConfig) -> nn.TransformerDecoder:
+    layer = nn.TransformerDecoderLayer(cfg.width, cfg.heads, cfg.width * cfg.ff_mult, cfg.dropout,
+                                       batch_first=True, norm_first=True)
+    return nn.TransformerDecoder(layer, cfg.layers)
+
+
+class MotionVAE(nn.Module):
+    def __init__(self, cfg: MotionConfig):
+        super().__init__()
+        self.cfg = cfg
+        W = cfg.width
+        self.rot_in = nn.Linear(6, W)
+        self.bone_in = nn.Linear(STATIC_FEATURES, W)
+        self.frame_token = nn.Parameter(torch.randn(W) * 0.02)
+        self.spatial_encoder = _encoder(cfg)
+        self.mu_token = nn.Parameter(torch.randn(W) * 0.02)
+        self.sigma_token = nn.Parameter(torch.randn(W) * 0.02)
+        self.time_in = nn.Linear(W, W)
+        self.temporal_encoder = _encoder(cfg)
+        self.to_mu = nn.Linear(W, cfg.latent)
+        self.to_logvar = nn.Linear(W, cfg.latent)
+        self.z_in = nn.Linear(cfg.latent, W)
+        self.temporal_decoder = _decoder(cfg)
+        self.bone_query = nn.Linear(STATIC_FEATURES, W)
+        self.spatial_decoder = _decoder(cfg)
+        self.norm_out = nn.LayerNorm(W)
+        self.rot_out = nn.Linear(W, 6)
+        nn.init.zeros_(self.rot_out.weight)
+        nn.init.zeros_(self.rot_out.bias)
+        self.register_buffer("identity6d", torch.tensor(IDENTITY_6D), persistent=False)
+        # Bones move ~0.1 away from identity in 6D while the static features are ~1: without
+        # rescaling, the pose signal drowns and the encoder learns nothing beyond the mean pose.
+        # `fit` sets this to 1 / std of the training deviations; it is saved with the weights.
+        self.register_buffer("rot_gain", torch.tensor(1.0))
+
+    # -- encoder --------------------------------------------------------------------------
+    def encode(self, rot6d: torch.Tensor, sk: SkeletonBatch) -> tuple[torch.Tensor, torch.Tensor]:
+        """rot6d (B, T, J, 6) -> mu, logvar (B, Z)."""
+        B, T, J, _ = rot6d.shape
+        tokens = self.rot_in((rot6d - self.identity6d) * self.rot_gain) + self.bone_in(sk.static)[:, None]  # (B, T, J, W)
+        tokens = torch.cat([self.frame_token.expand(B, T, 1, -1), tokens], 2).reshape(B * T, J + 1, -1)
+        pad = torch.cat([sk.mask.new_zeros(B, 1), ~sk.mask], 1)  # True: ignore
+        pad = pad[:, None].expand(B, T, J + 1).reshape(B * T, J + 1)
+        pose = self.spatial_encoder(tokens, src_key_padding_mask=pad)[:, 0].reshape(B, T, -1)
+        frames = pose + self.time_in(time_encoding(torch.arange(T, device=rot6d.device), self.cfg.width))
+        seq = torch.cat([self.mu_token.expand(B, 1, -1), self.sigma_token.expand(B, 1, -1), frames], 1)
+        out = self.temporal_encoder(seq)
+        return self.to_mu(out[:, 0]), self.to_logvar(out[:, 1]).clamp(-12.0, 6.0)
+
+    # -- decoder --------------------------------------------------------------------------
+    def decode_frames(self, z: torch.Tensor, T: int) -> torch.Tensor:
+        """z (B, Z) -> frame features (B, T, W) at timestamps 0..T-1."""
+        B = z.shape[0]
+        queries = self.time_in(time_encoding(torch.arange(T, device=z.device), self.cfg.width)).expand(B, T, -1)
+        return self.temporal_decoder(queries, self.z_in(z)[:, None])
+
+    def decode_bones(self, frames: torch.Tensor, sk: SkeletonBatch) -> torch.Tensor:
+        """frame features (B, T, W) -> 6D rotations (B, T, J, 6) relative to rest."""
+        B, T, W = frames.shape
+        J = sk.num_joints
+        queries = self.bone_query(sk.static)[:, None].expand(B, T, J, W).reshape(B * T, J, W)
+        pad = (~sk.mask)[:, None].expand(B, T, J).reshape(B * T, J)
+        out = self.spatial_decoder(queries, frames.reshape(B * T, 1, W), tgt_key_padding_mask=pad)
+        return (self.rot_out(self.norm_out(out)) + self.identity6d).reshape(B, T, J, 6)
+
+    def decode(self, z: torch.Tensor, sk: SkeletonBatch, T: int | None = None) -> torch.Tensor:
+        """z (B, Z) -> 6D rotations (B, T, J, 6)."""
+        return self.decode_bones(self.decode_frames(z, T or self.cfg.length), sk)
+
+    def forward(self, rot6d: torch.Tensor, sk: SkeletonBatch, sample: bool = True):
+        """Reconstruct: returns (6D rotations (B, T, J, 6), mu, logvar)."""
+        mu, logvar = self.encode(rot6d, sk)
+        z = mu + torch.randn_like(mu) * torch.exp(0.5 * logvar) if sample else mu
+        return self.decode(z, sk, rot6d.shape[1]), mu, logvar

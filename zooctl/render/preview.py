@@ -1,0 +1,436 @@
+"""A shaded preview renderer on the CPU: z-buffer rasterisation and Lambert shading in PyTorch.
+
+Not differentiable and not for fitting: it draws what an asset looks like, for `bank render`
+stills, videos and contact sheets, on any machine (the same code runs with ``device="cuda"``).
+
+Rasterisation: every face's screen bounding box is covered by a square tile of candidate pixels,
+faces grouped by tile size (1, 2, 4, ... pixels) so one vectorised pass handles each group; each
+covered pixel keeps the face with the smallest depth through one ``scatter_reduce(amin)`` of a
+(depth, face id) key packed into an int64. Shading interpolates smooth vertex normals and vertex
+colours with perspective-correct barycentrics; lighting is two-sided (open meshes look right).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..errors import InputError
+from .camera import Camera
+
+DEFAULT_COLOR = (0.72, 0.68, 0.62)
+BACKGROUND_TOP = (0.93, 0.94, 0.96)
+BACKGROUND_BOTTOM = (0.78, 0.80, 0.84)
+_FACE_BITS = 24  # face ids below 2**24 (16.7 million faces)
+_DEPTH_LEVELS = 2**38
+
+
+def vertex_normals(vertices: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
+    """Area-weighted unit vertex normals. vertices (B, V, 3), faces (F, 3) -> (B, V, 3)."""
+    tri = vertices[:, faces]  # (B, F, 3, 3)
+    fn = torch.cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0], dim=-1)
+    n = torch.zeros_like(vertices)
+    for k in range(3):
+        n.index_add_(1, faces[:, k], fn)
+    return torch.nn.functional.normalize(n, dim=-1, eps=1e-12)
+
+
+def is_closed_and_oriented(faces: torch.Tensor) -> bool:
+    """True when every directed edge occurs once and its reverse once too (closed, outward or
+    inward consistently), so back faces can be culled without opening holes."""
+    f = faces.detach().cpu().numpy().astype(np.int64)
+    a = f.reshape(-1)
+    b = np.roll(f, -1, axis=1).reshape(-1)
+    n = int(max(a.max(), b.max())) + 1
+    fwd = a * n + b
+    if len(np.unique(fwd)) != len(fwd):
+        return False
+    return bool(np.isin(b * n + a, fwd).all())
+
+
+def fit_camera(
+    points: np.ndarray,
+    height: int,
+    width: int,
+    azimuth: float = 30.0,
+    elevation: float = 18.0,
+    fov_y: float = 30.0,
+    margin: float = 1.08,
+) -> Camera:
+    """A camera that frames all ``points`` (N, 3) (e.g. every vertex of every frame of a clip).
+
+    The camera circles the points' centre: ``azimuth`` degrees around +Y from the +X side towards
+    -Z (0: looking at the animal's right side, 90: from its front), ``elevation`` degrees above.
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(pts) == 0 or not np.all(np.isfinite(pts)):
+        raise InputError("cannot frame an empty or non-finite set of points")
+    lo, hi = pts.min(0), pts.max(0)
+    center = 0.5 * (lo + hi)
+    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-6)
+    az, el = math.radians(azimuth), math.radians(elevation)
+    direction = np.array([math.cos(el) * math.cos(az), math.sin(el), -math.cos(el) * math.sin(az)])
+    half = math.radians(fov_y) / 2
+    half_x = math.atan(math.tan(half) * width / height)
+    dist = margin * radius / math.sin(min(half, half_x))
+    return orbit_camera(center + direction * dist, center, height, width, fov_y)
+
+
+def orbit_camera(eye: np.ndarray, target: np.ndarray, height: int, width: int, fov_y: float = 30.0) -> Camera:
+    """One pinhole `Camera` at ``eye`` looking at ``target`` with world +Y up in the image.
+
+    Camera axes in the `zooctl.render.camera` (OpenCV) convention: +X image right, +Y image down,
+    +Z forward.
+    """
+    forward = np.asarray(target, float) - np.asarray(eye, float)
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, [0.0, 1.0, 0.0])
+    if np.linalg.norm(right) < 1e-9:  # looking straight up or down
+        right = np.array([1.0, 0.0, 0.0])
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    R = np.stack([right, down, forward])  # rows: camera axes in world coordinates
+    t = -R @ np.asarray(eye, float)
+    f = 0.5 * height / math.tan(math.radians(fov_y) / 2)
+    return Camera(
+        torch.tensor([[f, f, width / 2.0, height / 2.0]], dtype=torch.float32),
+        torch.tensor(R[None], dtype=torch.float32),
+        torch.tensor(t[None], dtype=torch.float32),
+        height,
+        width,
+    )
+
+
+class PreviewRenderer:
+    """Renders batches of coloured meshes to RGB images.
+
+    ``render(vertices (B, V, 3) or (V, 3), faces (F, 3), camera, colors (V, 3) or None)`` returns
+    uint8 images (B, H, W, 3) (or (H, W, 3) for unbatched vertices). ``supersample`` renders at
+    that many times the resolution and box-filters down (anti-aliasing).
+    """
+
+    def __init__(
+        self,
+        device: str | torch.device = "cpu",
+        supersample: int = 1,
+        light: Sequence[float] = (0.4, 0.8, 0.45),
+        ambient: float = 0.35,
+    ):
+        self.device = torch.device(device)
+        self.supersample = max(1, int(supersample))
+        self.light = torch.nn.functional.normalize(torch.tensor(light, dtype=torch.float32), dim=0).to(
+            self.device
+        )
+        self.ambient = float(ambient)
+
+    @torch.no_grad()
+    def render(
+        self,
+        vertices: np.ndarray | torch.Tensor,
+        faces: np.ndarray | torch.Tensor,
+        camera: Camera,
+        colors: np.ndarray | torch.Tensor | None = None,
+    ) -> np.ndarray:
+        verts = torch.as_tensor(
+            np.asarray(vertices) if not torch.is_tensor(vertices) else vertices, dtype=torch.float32
+        ).to(self.device)
+        single = verts.ndim == 2
+        if single:
+            verts = verts[None]
+        if verts.ndim != 3 or verts.shape[-1] != 3:
+            raise InputError(f"vertices must be (V, 3) or (B, V, 3), got {tuple(verts.shape)}")
+        f = torch.as_tensor(np.asarray(faces) if not torch.is_tensor(faces) else faces, dtype=torch.long).to(
+            self.device
+        )
+        if (
+            f.ndim != 2
+            or f.shape[1] != 3
+            or len(f) == 0
+            or int(f.min()) < 0
+            or int(f.max()) >= verts.shape[1]
+        ):
+            raise InputError("faces must be a non-empty (F, 3) array of vertex indices")
+        if len(f) >= 2**_FACE_BITS:
+            raise InputError(f"too many faces to preview ({len(f)})")
+        col = (
+            torch.tensor(DEFAULT_COLOR).expand(verts.shape[1], 3)
+            if colors is None
+            else torch.as_tensor(np.asarray(colors), dtype=torch.float32)
+        )
+        col = col.to(self.device)
+        s = self.supersample
+        cam = camera.to(self.device, torch.float32).expand(len(verts))
+        if s > 1:
+            cam = Camera(
+                cam.intrinsics * s, cam.rotation, cam.translation, cam.height * s, cam.width * s, cam.near
+            )
+        # Per-frame work is many small tensor ops: on a CPU, intra-op threads only add contention.
+        threads = torch.get_num_threads()
+        if self.device.type == "cpu":
+            torch.set_num_threads(1)
+        try:
+            normals = vertex_normals(verts, f)
+            cull = is_closed_and_oriented(f)
+            img = torch.stack(
+                [self._render_one(verts[b], normals[b], f, col, cam, b, cull) for b in range(len(verts))]
+            )
+        finally:
+            torch.set_num_threads(threads)
+        # img: (B, H*s, W*s, 3) linear RGB in [0, 1]
+        if s > 1:
+            img = torch.nn.functional.avg_pool2d(img.permute(0, 3, 1, 2), s).permute(0, 2, 3, 1)
+        out = (img.clamp(0, 1) ** (1 / 2.2) * 255 + 0.5).to(torch.uint8).cpu().numpy()  # linear -> display
+        return out[0] if single else out
+
+    def _render_one(
+        self,
+        v: torch.Tensor,
+        n: torch.Tensor,
+        f: torch.Tensor,
+        col: torch.Tensor,
+        cam: Camera,
+        b: int,
+        cull: bool,
+    ) -> torch.Tensor:
+        H, W = cam.height, cam.width
+        pc = v @ cam.rotation[b].T + cam.translation[b]  # camera frame, +Z forward
+        z = pc[:, 2]
+        k = cam.intrinsics[b]
+        xy = pc[:, :2] / z.clamp(min=1e-9)[:, None] * k[:2] + k[2:]
+        skip = None
+        if cull:  # a closed, consistently oriented surface hides every face that looks away
+            tri = v[f]
+            fn = torch.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], dim=-1)
+            skip = (fn * (tri[:, 0] - cam.centers()[0][b])).sum(-1) > 0
+        face_ids, bary = rasterize(xy, z, f, H, W, cam.near, skip)
+        bg = _background(H, W, self.device)
+        hit = face_ids >= 0
+        if not bool(hit.any()):
+            return bg
+        fid = face_ids[hit]
+        w = bary[hit]  # (P, 3) perspective-correct barycentrics
+        tri = f[fid]
+        normal = torch.nn.functional.normalize((n[tri] * w[..., None]).sum(1), dim=-1, eps=1e-12)
+        albedo = (col[tri] * w[..., None]).sum(1)
+        # Two-sided: turn normals that face away from the camera towards it.
+        view = torch.nn.functional.normalize(v[tri[:, 0]] - cam.centers()[0][b], dim=-1)
+        flip = (normal * view).sum(-1, keepdim=True) > 0
+        normal = torch.where(flip, -normal, normal)
+        diffuse = (normal @ self.light).clamp(min=0)[:, None]
+        shade = albedo * (self.ambient + (1 - self.ambient) * diffuse)
+        img = bg.clone()
+        img[hit] = shade
+        return img
+
+
+def rasterize(
+    xy: torch.Tensor,
+    z: torch.Tensor,
+    faces: torch.Tensor,
+    height: int,
+    width: int,
+    near: float = 1e-3,
+    skip: torch.Tensor | None = None,
+    max_candidates: int = 1 << 21,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Z-buffer rasterisation of one mesh.
+
+    xy (V, 2) pixel positions (pixel (i, j) is centred at (j + 0.5, i + 0.5)), z (V,) camera
+    depths, faces (F, 3); ``skip`` (F,) bool marks faces not to draw (culled back faces). Returns
+    face ids (H, W) int64 (-1: background) and perspective-correct barycentric weights (H, W, 3).
+    Faces with a vertex nearer than ``near`` are skipped.
+    """
+    dev = xy.device
+    tri = xy[faces]  # (F, 3, 2)
+    tz = z[faces]  # (F, 3)
+    lo = tri.min(1).values
+    hi = tri.max(1).values
+    x0 = torch.floor(lo[:, 0] - 0.5).clamp(min=0)
+    y0 = torch.floor(lo[:, 1] - 0.5).clamp(min=0)
+    x1 = torch.ceil(hi[:, 0] - 0.5).clamp(max=width - 1)
+    y1 = torch.ceil(hi[:, 1] - 0.5).clamp(max=height - 1)
+    area = _edge(tri[:, 0], tri[:, 1], tri[:, 2])
+    ok = (tz.min(1).values > near) & (x1 >= x0) & (y1 >= y0) & (area.abs() > 1e-12)
+    if skip is not None:
+        ok &= ~skip
+    # Barycentric weight i of pixel centre p is the affine function A_i p.x + B_i p.y + C_i.
+    a, b = tri, tri.roll(-1, dims=1)  # edges (v1, v2), (v2, v0), (v0, v1) opposite v0, v1, v2
+    a, b = a.roll(-1, dims=1), b.roll(-1, dims=1)
+    inv = 1.0 / torch.where(area.abs() > 1e-12, area, torch.ones_like(area))
+    A = -(b[..., 1] - a[..., 1]) * inv[:, None]
+    B = (b[..., 0] - a[..., 0]) * inv[:, None]
+    C = ((b[..., 1] - a[..., 1]) * a[..., 0] - (b[..., 0] - a[..., 0]) * a[..., 1]) * inv[:, None]
+    inv_z = 1.0 / tz.clamp(min=1e-12)
+    zbuf = torch.full((height * width,), torch.iinfo(torch.int64).max, dtype=torch.int64, device=dev)
+    if bool(ok.any()):
+        zmin, zmax = float(tz[ok].min()), float(tz[ok].max())
+        scale = (_DEPTH_LEVELS - 1) / max(zmax - zmin, 1e-12)
+        # Faces grouped by the power-of-two size of their box's width and height.
+        bw = _ceil_pow2(x1 - x0 + 1)
+        bh = _ceil_pow2(y1 - y0 + 1)
+        key = torch.where(ok, bw * 4096 + bh, torch.zeros_like(bw))
+        for k in torch.unique(key[ok]).tolist():
+            W_, H_ = int(k) // 4096, int(k) % 4096
+            sel = torch.nonzero(key == k).squeeze(1)
+            oy, ox = torch.meshgrid(torch.arange(H_, device=dev), torch.arange(W_, device=dev), indexing="ij")
+            ox, oy = ox.reshape(-1).float(), oy.reshape(-1).float()
+            chunk = max(1, max_candidates // (W_ * H_))
+            for start in range(0, len(sel), chunk):
+                fi = sel[start : start + chunk]
+                px = x0[fi, None] + ox  # (Fc, P)
+                py = y0[fi, None] + oy
+                cx, cy = px + 0.5, py + 0.5
+                w0 = A[fi, 0, None] * cx + B[fi, 0, None] * cy + C[fi, 0, None]
+                w1 = A[fi, 1, None] * cx + B[fi, 1, None] * cy + C[fi, 1, None]
+                w2 = 1.0 - w0 - w1
+                inside = (
+                    (px <= x1[fi, None])
+                    & (py <= y1[fi, None])
+                    & (w0 >= -1e-6)
+                    & (w1 >= -1e-6)
+                    & (w2 >= -1e-6)
+                )
+                r, c = torch.nonzero(inside, as_tuple=True)
+                if len(r) == 0:
+                    continue
+                f = fi[r]
+                iz = w0[r, c] * inv_z[f, 0] + w1[r, c] * inv_z[f, 1] + w2[r, c] * inv_z[f, 2]
+                depth = 1.0 / iz.clamp(min=1e-12)
+                q = ((depth - zmin) * scale).clamp(0, _DEPTH_LEVELS - 1).to(torch.int64)
+                pix = (py[r, c] * width + px[r, c]).to(torch.int64)
+                zbuf.scatter_reduce_(0, pix, (q << _FACE_BITS) | f, reduce="amin")
+    hit = zbuf != torch.iinfo(torch.int64).max
+    face_ids = torch.where(hit, zbuf & ((1 << _FACE_BITS) - 1), torch.full_like(zbuf, -1))
+    bary = torch.zeros(height * width, 3, device=dev)
+    idx = torch.nonzero(hit).squeeze(1)
+    if len(idx):
+        fi = face_ids[idx]
+        cx = (idx % width).float() + 0.5
+        cy = (idx // width).float() + 0.5
+        w = A[fi] * cx[:, None] + B[fi] * cy[:, None] + C[fi]
+        w = w * inv_z[fi]  # screen-space -> perspective-correct
+        bary[idx] = w / w.sum(-1, keepdim=True)
+    return face_ids.reshape(height, width), bary.reshape(height, width, 3)
+
+
+def _ceil_pow2(n: torch.Tensor) -> torch.Tensor:
+    """Smallest power of two >= n (n >= 1), as int64."""
+    n = n.clamp(min=1).to(torch.int64)
+    return torch.pow(2, torch.ceil(torch.log2(n.double())).to(torch.int64))
+
+
+def _edge(a: torch.Tensor, b: torch.Tensor, c: torch.Tensor) -> torch.Tensor:
+    """Twice the signed area of triangles (a, b, c); points (..., 2)."""
+    return (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (
+        c[..., 0] - a[..., 0]
+    )
+
+
+def _background(height: int, width: int, device: torch.device) -> torch.Tensor:
+    t = torch.linspace(0, 1, height, device=device)[:, None, None]
+    top = torch.tensor(BACKGROUND_TOP, device=device) ** 2.2
+    bottom = torch.tensor(BACKGROUND_BOTTOM, device=device) ** 2.2
+    return (top * (1 - t) + bottom * t).expand(height, width, 3).clone()
+
+
+# -- assets -----------------------------------------------------------------------------------
+def render_asset(
+    asset,
+    clip: str | None = None,
+    frames: Iterable[int] | None = None,
+    size: int = 256,
+    width: int | None = None,
+    azimuth: float = 30.0,
+    elevation: float = 18.0,
+    supersample: int = 2,
+    device: str = "cpu",
+    batch: int = 8,
+) -> np.ndarray:
+    """Render an asset (`zooctl.asset.RiggedAsset`) posed at frames of a clip, or its rest pose.
+
+    Returns uint8 (T, size, width or size, 3). The camera is fixed for the whole clip, framing
+    every vertex of every rendered frame, so motion is visible.
+    """
+    if clip is None:
+        posed = asset.pose(None)[None]
+    else:
+        if clip not in asset.clips:
+            raise InputError(
+                f"asset {asset.name!r} has no clip {clip!r}",
+                hint=f"clips: {', '.join(asset.clips) or 'none'}",
+            )
+        idx = (
+            np.arange(asset.clips[clip].num_frames) if frames is None else np.asarray(list(frames), dtype=int)
+        )
+        if len(idx) == 0:
+            raise InputError("no frames to render")
+        posed = asset.pose(clip, idx)
+    W = width or size
+    cam = fit_camera(posed.reshape(-1, 3), size, W, azimuth, elevation)
+    renderer = PreviewRenderer(device=device, supersample=supersample)
+    colors = asset.vertex_colors
+    out = [
+        renderer.render(posed[i : i + batch], asset.faces, cam, colors) for i in range(0, len(posed), batch)
+    ]
+    return np.concatenate(out)
+
+
+def thumbnail(
+    asset, size: int = 256, clip: str | None = None, frame: int = 0, supersample: int = 2
+) -> np.ndarray:
+    """One (size, size, 3) uint8 image of the asset: the given clip frame, else its rest pose."""
+    return render_asset(asset, clip, None if clip is None else [frame], size=size, supersample=supersample)[0]
+
+
+def contact_sheet(
+    images: Sequence[np.ndarray],
+    labels: Sequence[str] | None = None,
+    columns: int | None = None,
+    pad: int = 6,
+    label_height: int = 18,
+) -> np.ndarray:
+    """Tile equally sized (H, W, 3) uint8 images into one sheet, each with its label underneath."""
+    from PIL import Image, ImageDraw
+
+    if not images:
+        raise InputError("no images for a contact sheet")
+    h, w = images[0].shape[:2]
+    if any(im.shape[:2] != (h, w) for im in images):
+        raise InputError("contact sheet images must all have the same size")
+    n = len(images)
+    cols = columns or max(1, math.ceil(math.sqrt(n * 1.3)))
+    rows = math.ceil(n / cols)
+    lh = label_height if labels else 0
+    sheet = Image.new("RGB", (cols * (w + pad) + pad, rows * (h + lh + pad) + pad), (255, 255, 255))
+    draw = ImageDraw.Draw(sheet)
+    for i, im in enumerate(images):
+        r, c = divmod(i, cols)
+        x, y = pad + c * (w + pad), pad + r * (h + lh + pad)
+        sheet.paste(Image.fromarray(np.asarray(im, dtype=np.uint8)), (x, y))
+        if labels:
+            text = str(labels[i])
+            tw = draw.textlength(text)
+            while tw > w and len(text) > 4:
+                text = text[:-2] + "…"
+                tw = draw.textlength(text)
+            draw.text((x + (w - tw) / 2, y + h + 3), text, fill=(30, 30, 30))
+    return np.asarray(sheet)
+
+
+def save_png(path: str | Path, image: np.ndarray) -> Path:
+    """Write an (H, W, 3) uint8 image as PNG, atomically (temporary file, fsync, rename)."""
+    import io
+
+    from PIL import Image
+
+    from ..store.fs import write_bytes_atomic
+
+    path = Path(path)
+    buf = io.BytesIO()
+    Image.fromarray(np.asarray(image, dtype=np.uint8)).save(buf, format="PNG")
+    write_bytes_atomic(path, buf.getvalue())
+    return path

@@ -1,0 +1,140 @@
+"""Per-face screen-space windows: the (face, pixel) pairs a rasteriser must look at.
+
+Each face is projected, its bounding box grown by a margin (where its soft influence is not yet
+negligible) and clipped to the image; the pixels inside become pairs. Work therefore follows the
+pixels faces actually cover, not pixels x faces. Everything here is integer bookkeeping without
+gradients; the renderers compute their differentiable terms on the pairs (PyTorch path) or
+loop over each face's window directly (CPU kernels, `zooctl.render._kernels`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from ..errors import InputError
+from . import _kernels
+from .camera import Camera
+
+Tensor = torch.Tensor
+
+
+@dataclass
+class ScreenFaces:
+    """Projected faces of a batch: tri (B*F, 3, 2) pixel positions, depth (B*F, 3), valid (B*F,)."""
+
+    tri: Tensor
+    depth: Tensor
+    valid: Tensor
+    batch: int
+    num_faces: int
+
+
+@dataclass
+class Pairs:
+    """Flattened (face, pixel) pairs: face (P,) into B*F, pixel (P,) into B*H*W, px/py (P,) centres."""
+
+    face: Tensor
+    pixel: Tensor
+    px: Tensor
+    py: Tensor
+
+
+def check_face_indices(faces: Tensor, num_vertices: int) -> None:
+    """Raise `InputError` unless faces is (F, 3) with entries in [0, num_vertices) (CPU kernels index raw memory)."""
+    if faces.dim() != 2 or faces.shape[1] != 3:
+        raise InputError(f"faces must be (F, 3), got {tuple(faces.shape)}")
+    if faces.numel() and (int(faces.min()) < 0 or int(faces.max()) >= num_vertices):
+        raise InputError(
+            f"faces index vertices {int(faces.min())}..{int(faces.max())} but there are {num_vertices}",
+            hint="pass faces that index the vertices tensor (0-based)",
+        )
+
+
+class _GatherFacesKernel(torch.autograd.Function):
+    """CPU kernel: xy (B, V, 2), z (B, V) -> tri (B*F, 3, 2), depth (B*F, 3), valid (B*F,) bool."""
+
+    @staticmethod
+    def forward(ctx, xy: Tensor, z: Tensor, faces: Tensor, near: float):  # type: ignore[override]
+        xy, z = xy.detach().contiguous(), z.detach().contiguous()
+        B, V = z.shape
+        F = faces.shape[0]
+        tri, depth = xy.new_empty(B * F, 3, 2), xy.new_empty(B * F, 3)
+        valid = torch.empty(B * F, dtype=torch.uint8)
+        _kernels.kernel_for("gather_faces", xy, z)(xy, z, faces, B, V, F, near, tri, depth, valid)
+        valid = valid.bool()
+        ctx.mark_non_differentiable(valid)
+        ctx.save_for_backward(faces)
+        ctx.shape = (B, V)
+        return tri, depth, valid
+
+    @staticmethod
+    def backward(ctx, g_tri: Tensor, g_depth: Tensor, _g_valid: Tensor):  # type: ignore[override]
+        (faces,) = ctx.saved_tensors
+        B, V = ctx.shape
+        g_tri, g_depth = g_tri.contiguous(), g_depth.to(g_tri.dtype).contiguous()
+        g_xy, g_z = g_tri.new_empty(B, V, 2), g_tri.new_empty(B, V)
+        _kernels.kernel_for("gather_faces_backward", g_tri, g_depth)(
+            g_tri, g_depth, faces, B, V, faces.shape[0], g_xy, g_z
+        )
+        return g_xy, g_z, None, None
+
+
+def project_faces(vertices: Tensor, faces: Tensor, camera: Camera) -> ScreenFaces:
+    """vertices (B, V, 3) world, faces (F, 3) long -> `ScreenFaces` (differentiable tri and depth)."""
+    B = vertices.shape[0]
+    cam = camera.expand(B)
+    xy, z = cam.project(vertices)
+    if xy.dtype == z.dtype and _kernels.kernel_for("gather_faces", xy, z, indices=(faces,)) is not None:
+        check_face_indices(faces, vertices.shape[1])
+        tri, depth, valid = _GatherFacesKernel.apply(xy, z, faces.contiguous(), float(cam.near))
+        return ScreenFaces(tri, depth, valid, B, int(faces.shape[0]))
+    tri = xy[:, faces].reshape(-1, 3, 2)
+    depth = z[:, faces].reshape(-1, 3)
+    # min() propagates NaN, so this equals (depth > near).all(-1), in one reduction instead of two.
+    valid = (depth.min(-1).values > cam.near) & torch.isfinite(tri.reshape(-1, 6)).all(-1)
+    return ScreenFaces(tri, depth, valid, B, int(faces.shape[0]))
+
+
+@torch.no_grad()
+def face_windows(sf: ScreenFaces, height: int, width: int, margin: float) -> Tensor:
+    """(B*F, 4) long inclusive pixel bounds x0, y0, x1, y1 of each face's box grown by ``margin``.
+
+    A pixel (row i, column j) is in the window when its centre (j + 0.5, i + 0.5) is within
+    ``margin`` of the face's bounding box; clipped to the image. Invalid faces and faces off the
+    image get an empty window (x1 < x0 or y1 < y0).
+    """
+    tri = sf.tri.detach()
+    lo = tri.min(1).values - margin - 0.5  # centre of pixel j is j + 0.5
+    hi = tri.max(1).values + margin - 0.5
+    x0 = lo[:, 0].ceil().clamp(0, width).long()
+    y0 = lo[:, 1].ceil().clamp(0, height).long()
+    x1 = hi[:, 0].floor().clamp(-1, width - 1).long()
+    y1 = hi[:, 1].floor().clamp(-1, height - 1).long()
+    win = torch.stack((x0, y0, x1, y1), -1)
+    # Invalid faces may have NaN corners (garbage after .long()): give them a fixed empty window.
+    empty = torch.tensor([0, 0, -1, -1], dtype=win.dtype, device=win.device)
+    return torch.where(sf.valid[:, None], win, empty)
+
+
+@torch.no_grad()
+def face_pixel_pairs(sf: ScreenFaces, height: int, width: int, margin: float) -> Pairs:
+    """Every (face, pixel) pair with the pixel centre within ``margin`` px of the face's box."""
+    win = face_windows(sf, height, width, margin)
+    x0, y0 = win[:, 0], win[:, 1]
+    w = (win[:, 2] - x0 + 1).clamp_min(0)
+    h = (win[:, 3] - y0 + 1).clamp_min(0)
+    counts = w * h
+    total = int(counts.sum())
+    dev = win.device
+    face = torch.repeat_interleave(torch.arange(len(counts), device=dev), counts, output_size=total)
+    start = torch.cumsum(counts, 0) - counts
+    local = torch.arange(total, device=dev) - start[face]
+    wf = w[face]
+    col = x0[face] + local % wf
+    row = y0[face] + torch.div(local, wf, rounding_mode="floor")
+    b = torch.div(face, sf.num_faces, rounding_mode="floor")
+    pixel = (b * height + row) * width + col
+    dt = sf.tri.dtype
+    return Pairs(face, pixel, col.to(dt) + 0.5, row.to(dt) + 0.5)

@@ -1,0 +1,144 @@
+"""Index bank assets for retrieval: render views, embed them with every enabled embedder, store.
+
+``index_asset`` is what `bank add` (``views=True``) and `bank reindex` call; ``current_pack`` gives
+search one (A, Vmax, D) matrix per embedder, rebuilt from the sidecars only when the bank index
+names views the pack does not hold (`zooctl.store.views_h5`).
+"""
+
+from __future__ import annotations
+
+import os
+import zlib
+from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
+
+from ..embed.base import DEFAULT_EMBEDDERS, Embedder, get_embedder
+from ..errors import StoreError, UsageError
+from ..store import views_h5
+from .views import DEFAULT_SIZE, DEFAULT_VIEWS, ViewSet, render_views
+
+_EMBEDDERS: dict[tuple[str, str, tuple], Embedder] = {}
+
+
+def enabled_embedders() -> list[str]:
+    """Embedders whose view embeddings `bank add` stores: ZOOCTL_EMBEDDERS (comma list) or the defaults."""
+    v = os.environ.get("ZOOCTL_EMBEDDERS")
+    names = [s.strip() for s in v.split(",") if s.strip()] if v is not None else list(DEFAULT_EMBEDDERS)
+    return list(dict.fromkeys(names))
+
+
+def cached_embedder(name: str, device: str = "cpu", **options: Any) -> Embedder:
+    """Build an embedder once per process (loading weights is the slow part of a small `bank add`)."""
+    key = (name, device, tuple(sorted(options.items())))
+    if key not in _EMBEDDERS:
+        _EMBEDDERS[key] = get_embedder(name, device=device, **options)
+    return _EMBEDDERS[key]
+
+
+def embed_inputs(embedder: Embedder, images: np.ndarray, masks: np.ndarray | None) -> np.ndarray:
+    """Run an embedder on what it takes: RGB crops (N, S, S, 3) or masks (N, S, S)."""
+    if getattr(embedder, "input_kind", "rgb") == "mask":
+        if masks is None:
+            raise UsageError(
+                f"the {embedder.name!r} embedder needs masks of the animal",
+                hint="give masks (--masks) or choose another --embedder",
+            )
+        return embedder.embed_batch(masks)
+    return embedder.embed_batch(images)
+
+
+def view_seed(name: str, seed: int = 0) -> int:
+    """A per-asset seed: the same asset name always gets the same views."""
+    return (zlib.crc32(name.encode()) + 7919 * seed) & 0x7FFFFFFF
+
+
+def index_asset(
+    bank,
+    asset,
+    embedders: Iterable[str] | None = None,
+    n_views: int = DEFAULT_VIEWS,
+    size: int = DEFAULT_SIZE,
+    seed: int = 0,
+    device: str = "cpu",
+) -> dict[str, Any]:
+    """Render, embed and store the retrieval views of ``asset`` (already in ``bank``).
+
+    Returns the ``views`` entry recorded in the bank index: count, size, embedder dims, views_id.
+    """
+    names = list(embedders) if embedders is not None else enabled_embedders()
+    summary = bank.summary(asset.name)
+    digest = views_h5.summary_digest(summary)
+    vs: ViewSet = render_views(
+        asset, n_views=n_views, size=size, seed=view_seed(asset.name, seed), device=device
+    )
+    embs, kinds = {}, {}
+    for e in names:
+        emb = cached_embedder(e, device)
+        embs[e] = embed_inputs(emb, vs.images, vs.masks)
+        kinds[e] = getattr(emb, "input_kind", "rgb")
+    views_id = views_h5.write_views(bank.root, asset.name, vs, embs, digest, kinds)
+    if views_h5.summary_digest(bank.summary(asset.name)) != digest:
+        raise StoreError(
+            f"asset {asset.name!r} was replaced while its views were rendered",
+            hint=f"run `zooctl bank reindex {asset.name}`",
+        )
+    entry = {
+        "count": len(vs),
+        "size": size,
+        "embedders": {e: int(a.shape[1]) for e, a in embs.items()},
+        "views_id": views_id,
+    }
+    bank.update_summary(asset.name, views=entry)
+    return entry
+
+
+def views_entries(bank, summaries: list[dict[str, Any]] | None = None) -> dict[str, dict[str, Any]]:
+    """{asset name: its index ``views`` entry} for every asset that has views (``summaries``: a
+    `Bank.list()` already read)."""
+    rows = bank.list() if summaries is None else summaries
+    return {s["name"]: s["views"] for s in rows if isinstance(s.get("views"), dict)}
+
+
+def current_pack(
+    bank, embedder: str, summaries: list[dict[str, Any]] | None = None
+) -> tuple[views_h5.Pack | None, list[str]]:
+    """The search pack of ``embedder`` for the bank as it is now, and the assets left out of it
+    (no views, or none for this embedder). Rebuilds the pack from sidecars when it is stale.
+    ``summaries``: `Bank.list()` when the caller has read it already (it is the slow part)."""
+    summaries = bank.list() if summaries is None else summaries
+    entries = views_entries(bank, summaries)
+    wanted = {n: e["views_id"] for n, e in entries.items() if embedder in e.get("embedders", {})}
+    missing = sorted({s["name"] for s in summaries} - set(wanted))
+    pack = views_h5.read_pack(bank.root, embedder)
+    if pack is not None and pack.views_ids == wanted:
+        return pack, missing
+    if not wanted:
+        return None, missing
+    old_rows = {n: i for i, n in enumerate(pack.names)} if pack is not None else {}
+    names, rows, counts, ids = [], [], [], {}
+    for n in sorted(wanted):
+        if pack is not None and pack.views_ids.get(n) == wanted[n]:
+            i = old_rows[n]
+            rows.append(np.asarray(pack.emb[i, : pack.counts[i]], np.float16))
+        else:
+            try:
+                sv = views_h5.read_views(views_h5.views_path(bank.root, n), embedders=[embedder])
+            except StoreError:
+                missing.append(n)
+                continue
+            if sv.views_id != wanted[n] or embedder not in sv.embeddings:  # being rewritten right now
+                missing.append(n)
+                continue
+            rows.append(sv.embeddings[embedder].astype(np.float16))
+        names.append(n)
+        counts.append(len(rows[-1]))
+        ids[n] = wanted[n]
+    if not names:
+        return None, sorted(missing)
+    D = rows[0].shape[1]
+    emb = np.zeros((len(names), max(counts), D), np.float16)
+    for i, r in enumerate(rows):
+        emb[i, : len(r)] = r
+    return views_h5.write_pack(bank.root, embedder, names, np.array(counts), emb, ids), sorted(missing)

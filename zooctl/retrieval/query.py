@@ -1,0 +1,155 @@
+"""Query frames for retrieval: decode a video (file, image folder, DAVIS folder), pick K frames,
+crop each to the animal through its mask (`zooctl.retrieval.crop`), as bank views are cropped.
+
+Masks come from, in order: ``--masks DIR`` (one image per source frame, natural order, non-zero
+= animal), a DAVIS ``Annotations/`` folder beside ``JPEGImages/``. Without masks the frames are
+centre-cropped to a square and mask-only embedders (``silhouette``) cannot be used.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError, NotFoundError, UsageError
+from .crop import square_crop
+
+DEFAULT_QUERY_FRAMES = 8
+
+
+@dataclass
+class QueryFrames:
+    """K query crops. images (K, S, S, 3) uint8; masks (K, S, S) bool or None; frames (K,) indices
+    of the chosen frames in the decoded video; source: what was decoded."""
+
+    images: np.ndarray
+    masks: np.ndarray | None
+    frames: np.ndarray
+    source: str
+    notes: list[str] = field(default_factory=list)
+
+
+def sample_indices(n: int, k: int) -> np.ndarray:
+    """k indices spread evenly over range(n) (all of them when n <= k)."""
+    if n <= k:
+        return np.arange(n)
+    return np.unique(np.round(np.linspace(0, n - 1, k)).astype(int))
+
+
+def read_mask(path: Path, shape: tuple[int, int]) -> np.ndarray:
+    """A mask image -> (H, W) bool at ``shape`` (non-zero pixels are the animal)."""
+    import cv2
+
+    m = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if m is None:
+        raise InputError(f"{path} is not a readable mask image")
+    if m.ndim == 3:
+        m = m.max(axis=2)
+    if m.shape != shape:
+        m = cv2.resize(m, (shape[1], shape[0]), interpolation=cv2.INTER_NEAREST)
+    return m > 0
+
+
+def crops_from_frames(
+    frames: np.ndarray, masks: np.ndarray | None, k: int, size: int
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """Pick up to k frames (with a non-empty mask when masks are given) and crop them.
+
+    frames (T, H, W, 3) uint8, masks (T, H, W) bool or None -> crops (K, S, S, 3), masks (K, S, S)
+    or None, chosen frame indices (K,).
+    """
+    import cv2
+
+    T = len(frames)
+    if masks is not None:
+        usable = np.flatnonzero(masks.reshape(T, -1).any(1))
+        if len(usable) == 0:
+            raise InputError(
+                "every mask of the query video is empty", hint="check the masks, or search without them"
+            )
+        chosen = usable[sample_indices(len(usable), k)]
+        crops = [square_crop(frames[i], masks[i], size) for i in chosen]
+        return np.stack([c[0] for c in crops]), np.stack([c[1] for c in crops]), chosen
+    chosen = sample_indices(T, k)
+    out = []
+    for i in chosen:
+        h, w = frames[i].shape[:2]
+        s = min(h, w)
+        y0, x0 = (h - s) // 2, (w - s) // 2
+        out.append(
+            cv2.resize(frames[i][y0 : y0 + s, x0 : x0 + s], (size, size), interpolation=cv2.INTER_AREA)
+        )
+    return np.stack(out), None, chosen
+
+
+def load_query(
+    source: str | Path,
+    k: int = DEFAULT_QUERY_FRAMES,
+    size: int = 224,
+    masks_dir: str | Path | None = None,
+    store_root: str | Path | None = None,
+) -> QueryFrames:
+    """Decode ``source`` and return K cropped query frames. See the module docstring.
+
+    ``source`` is a video file, a frame folder, a DAVIS folder, or (with ``store_root``) the name
+    of a video in the store, whose stored masks are used for cropping.
+    """
+    from ..video.decode import decode, image_files
+
+    if k < 1:
+        raise UsageError(f"--frames {k} must be at least 1")
+    path = Path(source).expanduser()
+    if not path.exists() and store_root is not None and masks_dir is None:
+        from ..store.videos import VideoStore
+
+        videos = VideoStore(store_root)
+        if videos.exists(str(source)):
+            rec = videos.get(str(source), what=("frames", "masks"))
+            has = rec.masks.reshape(len(rec.masks), -1).any(1)
+            frames, masks = (rec.frames[has], rec.masks[has]) if has.any() else (rec.frames, None)
+            images, crop_masks, chosen = crops_from_frames(frames, masks, k, size)
+            notes = [] if masks is not None else ["the stored video has no masks: frames are centre-cropped"]
+            return QueryFrames(images, crop_masks, chosen, f"stored video {source}", notes)
+    if not path.exists():
+        raise NotFoundError(
+            f"{source} is not a file or folder",
+            hint="give a video file, a folder of frames, a DAVIS folder (JPEGImages/, Annotations/) "
+            "or the name of a stored video (`zooctl video list`)",
+        )
+    video = decode(path)
+    frames = video.frames
+    T, H, W = frames.shape[:3]
+    masks = None
+    notes = []
+    if masks_dir is not None:
+        mdir = Path(masks_dir).expanduser()
+        if not mdir.is_dir():
+            raise InputError(
+                f"--masks {mdir} is not a folder", hint="give a folder with one mask image per frame"
+            )
+        files = image_files(mdir)
+        need = int(video.source_indices.max()) + 1
+        if len(files) < need:
+            raise InputError(
+                f"--masks {mdir} has {len(files)} images, the video needs {need}",
+                hint="one mask per source frame, in frame order",
+            )
+        masks = np.stack([read_mask(files[int(i)], (H, W)) for i in video.source_indices])
+    elif video.annotations is not None:
+        masks = np.zeros((T, H, W), bool)
+        found = np.zeros(T, bool)
+        for t, img in enumerate(video.image_files):
+            p = video.annotations / f"{img.stem}.png"
+            if p.exists():
+                masks[t], found[t] = read_mask(p, (H, W)), True
+        if not found.any():
+            masks = None
+            notes.append(f"no annotation in {video.annotations} matches a frame: frames are centre-cropped")
+        else:
+            frames, masks = frames[found], masks[found]
+    if masks is None and not notes:
+        notes.append("no masks: frames are centre-cropped and mask-only embedders are skipped")
+    images, crop_masks, chosen = crops_from_frames(frames, masks, k, size)
+    return QueryFrames(images, crop_masks, chosen, str(path), notes)

@@ -1,0 +1,204 @@
+"""`bank search`: rank the bank's assets by how well their rendered views match query frames.
+
+Per embedder: embed the K query crops, take the bank's pack (A, Vmax, D), score every asset
+(`zooctl.retrieval.score`), then fuse embedders. Banks larger than ``shortlist`` assets are scored
+in two stages: every asset by its *mean* view embedding (one (K, D) x (D, A) product per embedder,
+fused), then the best ``shortlist`` exactly. With ``shortlist`` >= the bank size the result is exact.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import UsageError
+from .index import cached_embedder, current_pack, embed_inputs
+from .query import QueryFrames
+from .score import aggregate, best_views, fuse
+
+DEFAULT_TOP = 5
+DEFAULT_SHORTLIST = 256
+
+
+@dataclass
+class Match:
+    """One ranked asset: fused ``score`` (lower is better), per-embedder ``distances`` (the chosen
+    aggregation of cosine distances), its ``best_view`` overall and each query frame's nearest view."""
+
+    name: str
+    score: float
+    distances: dict[str, float]
+    best_view: int
+    frame_views: list[int]
+
+
+@dataclass
+class SearchResult:
+    matches: list[Match]
+    embedders: list[str]
+    aggregation: str
+    fusion: str
+    candidates: int
+    notes: list[str] = field(default_factory=list)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "embedders": self.embedders,
+            "aggregation": self.aggregation,
+            "fusion": self.fusion,
+            "candidates": self.candidates,
+            "notes": self.notes,
+            "matches": [
+                {
+                    "rank": i + 1,
+                    "name": m.name,
+                    "score": m.score,
+                    "distances": m.distances,
+                    "best_view": m.best_view,
+                    "frame_views": m.frame_views,
+                }
+                for i, m in enumerate(self.matches)
+            ],
+        }
+
+
+def embed_query(
+    query: QueryFrames, embedders: list[str], device: str = "cpu"
+) -> tuple[dict[str, np.ndarray], list[str]]:
+    """{embedder: (K, D)} for the embedders the query can feed; notes for the ones it cannot."""
+    out, notes = {}, []
+    for e in embedders:
+        emb = cached_embedder(e, device)
+        if getattr(emb, "input_kind", "rgb") == "mask" and query.masks is None:
+            notes.append(f"{e}: skipped, the query has no masks")
+            continue
+        out[e] = embed_inputs(emb, query.images, query.masks)
+    return out, notes
+
+
+def load_packs(bank, embedders: list[str]) -> tuple[dict[str, Any], list[str]]:
+    """The current pack of each embedder (one read of the bank index) and notes on missing views."""
+    entries = bank.list()
+    notes = []
+    packs = {}
+    for e in embedders:
+        pack, missing = current_pack(bank, e, entries)
+        if missing:
+            notes.append(
+                f"{e}: {len(missing)} assets have no views for it (run `zooctl bank reindex --embedder {e}`)"
+            )
+        if pack is not None:
+            packs[e] = pack
+    if len(packs) < len(embedders):
+        absent = sorted(set(embedders) - set(packs))
+        raise UsageError(
+            f"no asset in the bank has views for {', '.join(absent)}",
+            hint="run `zooctl bank reindex` (or `bank add` assets)",
+        )
+    return packs, notes
+
+
+def score_packs(
+    packs: dict[str, Any],
+    query_emb: dict[str, np.ndarray],
+    aggregation: str = "nearest",
+    fusion: str = "zsum",
+    k: int = 5,
+    shortlist: int = DEFAULT_SHORTLIST,
+    exclude: set[str] | None = None,
+    weights: dict[str, float] | None = None,
+) -> SearchResult:
+    """Rank the assets every pack holds (minus ``exclude``) for the query embeddings {embedder: (K, D)}."""
+    import torch
+
+    first = packs[next(iter(query_emb))]
+    common = set(first.names)
+    for p in packs.values():
+        if p is not first:
+            common &= set(p.names)
+    common -= exclude or set()
+    if not common:
+        raise UsageError("no asset has views for every chosen embedder", hint="run `zooctl bank reindex`")
+    cand = sorted(common)
+    # Stage 1 (large banks): fused score of each asset's mean view embedding; keep the best.
+    if len(cand) > shortlist:
+        coarse = {}
+        for e, p in packs.items():
+            pos = p.positions()
+            sims = query_emb[e].astype(np.float32) @ p.mean.T  # (K, A_e)
+            rows = np.array([pos[n] for n in cand])
+            coarse[e] = -sims.mean(0)[rows]
+        top = np.argpartition(fuse(coarse, fusion, weights), shortlist - 1)[:shortlist]
+        cand = sorted(cand[i] for i in top)
+    # Stage 2: exact scores of the candidates (torch: fast float16 -> float32 and batched matmul).
+    per_e: dict[str, np.ndarray] = {}
+    views_best: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for e, p in packs.items():
+        pos = p.positions()
+        rows = np.array([pos[n] for n in cand])
+        if len(rows) == len(p.names) and np.array_equal(rows, np.arange(len(rows))):
+            emb = np.asarray(p.emb)
+        elif np.all(np.diff(rows) > 0):  # packs are sorted by name, as cand is: read in file order
+            emb = p.emb[rows]
+        else:
+            order = np.argsort(rows)
+            emb = np.empty((len(rows), *p.emb.shape[1:]), np.float16)
+            emb[order] = p.emb[rows[order]]
+        v = torch.from_numpy(
+            np.require(emb, requirements=["C", "W"])
+        ).float()  # (A, V, D); W: torch wants writable
+        q = torch.from_numpy(np.ascontiguousarray(query_emb[e], dtype=np.float32))  # (Q, D)
+        sim = (
+            (v.reshape(-1, v.shape[-1]) @ q.T).reshape(v.shape[0], v.shape[1], -1).transpose(1, 2)
+        )  # (A, Q, V)
+        valid = torch.arange(v.shape[1])[None, :] < torch.from_numpy(p.counts[rows])[:, None]
+        d = torch.where(valid[:, None, :], 1 - sim, torch.tensor(float("inf"))).numpy()
+        per_e[e] = aggregate(d, aggregation, k)
+        views_best[e] = best_views(d)
+    total = fuse(per_e, fusion, weights)
+    ranked = np.argsort(total, kind="stable")
+    lead = next(iter(query_emb))
+    matches = [
+        Match(
+            cand[i],
+            float(total[i]),
+            {e: float(s[i]) for e, s in per_e.items()},
+            int(views_best[lead][0][i]),
+            [int(x) for x in views_best[lead][1][i]],
+        )
+        for i in ranked
+    ]
+    return SearchResult(matches, list(query_emb), aggregation, fusion, len(cand))
+
+
+def score_bank(bank, query_emb: dict[str, np.ndarray], **options: Any) -> SearchResult:
+    """Rank every asset with views for all of ``query_emb``'s embedders. See the module docstring."""
+    if not query_emb:
+        raise UsageError(
+            "no embedder could embed this query",
+            hint="give masks for mask embedders, or choose another --embedder",
+        )
+    packs, notes = load_packs(bank, list(query_emb))
+    res = score_packs(packs, query_emb, **options)
+    res.notes = notes
+    return res
+
+
+def search(
+    bank,
+    query: QueryFrames,
+    embedders: list[str],
+    top: int = DEFAULT_TOP,
+    device: str = "cpu",
+    **options: Any,
+) -> SearchResult:
+    """Embed ``query`` and rank the bank; keeps the ``top`` best matches."""
+    if top < 1:
+        raise UsageError(f"--top {top} must be at least 1")
+    q, notes = embed_query(query, embedders, device)
+    res = score_bank(bank, q, **options)
+    res.matches = res.matches[:top]
+    res.notes = query.notes + notes + res.notes
+    return res

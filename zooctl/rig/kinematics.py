@@ -1,0 +1,74 @@
+"""Forward kinematics over a joint tree, batched over frames (and animals) in PyTorch.
+
+A joint's model transform is its parent's times its local transform ``T @ R @ S`` (the asset
+convention). FK runs level by level (all joints of one tree depth in one batched matmul), so the
+Python loop is as long as the tree is deep, not as long as it has joints.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from .rotations import quat_to_matrix
+
+Tensor = torch.Tensor
+
+
+class KinematicTree:
+    """The level schedule of a ``parents`` array (``parents[j] < j``, roots ``-1``).
+
+    ``levels[d]`` holds the joints of depth ``d``; ``parent_slot[d]`` the position of each one's
+    parent inside ``levels[d - 1]``; ``order`` maps the concatenated levels back to joint order.
+    """
+
+    def __init__(self, parents: np.ndarray | list[int], device: torch.device | str | None = None):
+        parents = np.asarray(parents, dtype=np.int64)
+        depth = np.zeros(len(parents), dtype=np.int64)
+        for j, p in enumerate(parents):
+            if p >= j:
+                raise ValueError("parents must be topologically sorted (parents[j] < j)")
+            depth[j] = 0 if p < 0 else depth[p] + 1
+        self.parents = parents
+        self.num_joints = len(parents)
+        levels = [np.nonzero(depth == d)[0] for d in range(int(depth.max()) + 1 if len(depth) else 0)]
+        slot = np.empty(len(parents), dtype=np.int64)
+        for lv in levels:
+            slot[lv] = np.arange(len(lv))
+        self.levels = [torch.as_tensor(lv, device=device) for lv in levels]
+        self.parent_slot = [None] + [torch.as_tensor(slot[parents[lv]], device=device) for lv in levels[1:]]
+        cat = np.concatenate(levels) if levels else np.zeros(0, dtype=np.int64)
+        self.order = torch.as_tensor(np.argsort(cat), device=device)
+
+    def to(self, device: torch.device | str) -> KinematicTree:
+        self.levels = [lv.to(device) for lv in self.levels]
+        self.parent_slot = [None] + [s.to(device) for s in self.parent_slot[1:]]
+        self.order = self.order.to(device)
+        return self
+
+
+def compose_trs(translation: Tensor, rotation: Tensor, scale: Tensor | None = None) -> Tensor:
+    """Local transforms ``T @ R @ S``.
+
+    translation (..., 3), rotation (..., 4) wxyz, scale (..., 3) or None -> (..., 4, 4).
+    """
+    r = quat_to_matrix(rotation)
+    if scale is not None:
+        r = r * scale[..., None, :]
+    top = torch.cat((r, translation[..., :, None]), -1)  # (..., 3, 4)
+    bottom = top.new_zeros(top.shape[:-2] + (1, 4))
+    bottom[..., 0, 3] = 1.0
+    return torch.cat((top, bottom), -2)
+
+
+def forward_kinematics(local: Tensor, tree: KinematicTree) -> Tensor:
+    """Joint-to-model transforms.
+
+    local: (..., J, 4, 4) local transforms; returns (..., J, 4, 4) with
+    ``G[j] = G[parents[j]] @ local[j]`` (roots: ``G[j] = local[j]``).
+    """
+    out = [local[..., tree.levels[0], :, :]]
+    for d in range(1, len(tree.levels)):
+        parent = out[-1][..., tree.parent_slot[d], :, :]
+        out.append(parent @ local[..., tree.levels[d], :, :])
+    return torch.cat(out, -3)[..., tree.order, :, :]

@@ -1,0 +1,249 @@
+"""`ArticulatedModel`: an asset's articulation as one differentiable ``nn.Module``.
+
+Learnable shape (per animal): log bone-length scales ``log b_k`` (J,), skinning-weight logits over
+each vertex's K candidate bones (V, K), the displacement MLP ``V_theta`` and the log global scale
+``log u``. Per-frame motion is an input: local joint rotations, optionally local translations and
+scales (default: the rest pose's), and a root rotation and translation applied on top.
+
+Pipeline for frame t (see `zooctl.rig.skinning` for the stretch rule):
+
+1. local_j = T(o_j + stretch shift) @ R(q_j^t) @ S(s_j);  G = FK(local)
+2. v_i = sum_k w_ik (G_k @ inverse_bind_k) (p_i + e_k(p_i) s_k)          (stretchable LBS)
+3. v'_i = u v_i + V_theta(u p_i)                                          (CASA eq. 3)
+4. world = R_root v' + t_root
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import nn
+
+from ..asset import RiggedAsset
+from .displacement import DisplacementField
+from .kinematics import KinematicTree, compose_trs, forward_kinematics
+from .priors import (
+    bone_length_prior,
+    find_symmetry_plane,
+    smoothness_loss,
+    symmetric_joint_pairs,
+    symmetry_loss,
+)
+from .rotations import quat_to_matrix
+from .skinning import (
+    SkinWeights,
+    bone_segments,
+    candidate_bones,
+    child_offset_shift,
+    endpoint_weights,
+    linear_blend_skinning,
+    stretch_vectors,
+)
+
+Tensor = torch.Tensor
+
+
+@dataclass
+class Pose:
+    """What `ArticulatedModel.forward` returns.
+
+    vertices (..., V, 3) world positions; joints (..., J, 3) world joint positions;
+    transforms (..., J, 4, 4) joint-to-model transforms G (before global scale and root).
+    """
+
+    vertices: Tensor
+    joints: Tensor
+    transforms: Tensor
+
+
+class ArticulatedModel(nn.Module):
+    """CASA's articulation model for one `RiggedAsset` (Y-up, bind-space template).
+
+    Options: ``num_candidates`` K bones per vertex for the skinning softmax; ``stretch`` enables
+    stretchable bones (else plain LBS with bone scales ignored); ``displacement`` adds the MLP
+    field (``hidden`` width, ``num_freqs`` positional-encoding octaves); ``dtype``/``device``.
+    """
+
+    def __init__(
+        self,
+        asset: RiggedAsset,
+        num_candidates: int = 4,
+        stretch: bool = True,
+        displacement: bool = True,
+        hidden: int = 128,
+        num_freqs: int = 0,
+        device: torch.device | str = "cpu",
+        dtype: torch.dtype = torch.float32,
+    ):
+        super().__init__()
+        self.asset_name = asset.name
+        self.stretch = stretch
+        points = asset.vertices.astype(np.float64)
+        bind = np.linalg.inv(asset.inverse_bind)
+        heads = bind[:, :3, 3]
+        dense = asset.skin_weights_dense().astype(np.float64)
+        tails = bone_segments(heads, asset.parents, points, dense)
+        bones, init = candidate_bones(dense, points, heads, tails, num_candidates)
+        rt, rq, rs = asset.rest_trs()
+        parents = asset.parents.astype(np.int64)
+        # e_parent(c_j): how far along its parent bone each joint's head sits (for the FK shift).
+        pj = np.maximum(parents, 0)
+        axis = tails[pj] - heads[pj]
+        den = np.maximum((axis * axis).sum(-1), 1e-12)
+        child_e = np.clip(((heads - heads[pj]) * axis).sum(-1) / den, 0.0, 1.0) * (
+            (axis * axis).sum(-1) > 1e-12
+        )
+
+        def buf(name: str, arr: np.ndarray, dt: torch.dtype = dtype) -> None:
+            self.register_buffer(name, torch.as_tensor(np.ascontiguousarray(arr), dtype=dt))
+
+        buf("points", points)
+        buf("faces", asset.faces.astype(np.int64), torch.long)
+        buf("parents", parents, torch.long)
+        buf("inverse_bind", asset.inverse_bind)
+        buf("rest_translation", rt)
+        buf("rest_rotation", rq)
+        buf("rest_scale", rs)
+        buf("heads", heads)
+        buf("tails", tails)
+        buf("child_e", child_e)
+        # Joints that skin nothing (armature nodes, helpers) have no bone to stretch.
+        self.register_buffer("stretchable", torch.as_tensor(dense.sum(0) > 0))
+        pts_t = torch.as_tensor(points, dtype=dtype)
+        bones_t = torch.as_tensor(bones)
+        e = endpoint_weights(
+            pts_t[:, None, :],
+            torch.as_tensor(heads, dtype=dtype)[bones_t],
+            torch.as_tensor(tails, dtype=dtype)[bones_t],
+        )
+        self.register_buffer("endpoint", e)
+        self.skin = SkinWeights(bones_t, torch.as_tensor(init, dtype=dtype))
+        self.log_bone_scales = nn.Parameter(torch.zeros(asset.num_joints, dtype=dtype))
+        self.log_scale = nn.Parameter(torch.zeros((), dtype=dtype))
+        self.displacement = (
+            DisplacementField(asset.size(), hidden=hidden, num_freqs=num_freqs).to(dtype)
+            if displacement
+            else None
+        )
+        self.tree = KinematicTree(parents)
+        self.to(device)
+
+    def _apply(self, fn, *args, **kwargs):  # keep the FK schedule on the module's device
+        out = super()._apply(fn, *args, **kwargs)
+        self.tree.to(self.points.device)
+        return out
+
+    # -- sizes -----------------------------------------------------------------------------
+    @property
+    def num_joints(self) -> int:
+        return int(self.parents.shape[0])
+
+    @property
+    def num_vertices(self) -> int:
+        return int(self.points.shape[0])
+
+    def bone_scales(self) -> Tensor:
+        """(J,) bone-length scales b_k (always positive)."""
+        return self.log_bone_scales.exp()
+
+    def global_scale(self) -> Tensor:
+        """() the global scale u."""
+        return self.log_scale.exp()
+
+    # -- posing ----------------------------------------------------------------------------
+    def forward(
+        self,
+        rotations: Tensor | None = None,
+        root_rotation: Tensor | None = None,
+        root_translation: Tensor | None = None,
+        translations: Tensor | None = None,
+        scales: Tensor | None = None,
+    ) -> Pose:
+        """Pose the model.
+
+        rotations (..., J, 4) local wxyz (default: rest); root_rotation (..., 4) and
+        root_translation (..., 3) world transform on top (default: identity); translations and
+        scales (..., J, 3) local overrides (default: rest). ``...`` is typically (T,) frames or
+        (B, T). Returns a `Pose` with vertices (..., V, 3) and joints (..., J, 3).
+        """
+        batch = self._batch_shape(rotations, root_rotation, root_translation, translations, scales)
+        J = self.num_joints
+        rot = self.rest_rotation.expand(*batch, J, 4) if rotations is None else rotations
+        trans = self.rest_translation.expand(*batch, J, 3) if translations is None else translations
+        scl = self.rest_scale.expand(*batch, J, 3) if scales is None else scales
+        s = None
+        if self.stretch:
+            s = (
+                stretch_vectors(self.bone_scales(), self.heads, self.tails) * self.stretchable[:, None]
+            )  # (J, 3)
+            trans = trans + child_offset_shift(s, self.parents, self.child_e, self.inverse_bind)
+        G = forward_kinematics(compose_trs(trans, rot, scl), self.tree)
+        mats = G @ self.inverse_bind
+        v = linear_blend_skinning(
+            self.points, mats, self.skin.bones, self.skin(), s, self.endpoint if s is not None else None
+        )
+        u = self.global_scale()
+        v = u * v
+        if self.displacement is not None:
+            v = v + self.displacement(u * self.points)
+        joints = u * G[..., :3, 3]
+        if root_rotation is not None:
+            R = quat_to_matrix(root_rotation)[..., None, :, :]
+            v = (R @ v[..., None]).squeeze(-1)
+            joints = (R @ joints[..., None]).squeeze(-1)
+        if root_translation is not None:
+            v = v + root_translation[..., None, :]
+            joints = joints + root_translation[..., None, :]
+        return Pose(v, joints, G)
+
+    def _batch_shape(
+        self, rotations, root_rotation, root_translation, translations, scales
+    ) -> tuple[int, ...]:
+        for t, tail in (
+            (rotations, 2),
+            (translations, 2),
+            (scales, 2),
+            (root_rotation, 1),
+            (root_translation, 1),
+        ):
+            if t is not None:
+                return tuple(t.shape[:-tail])
+        return ()
+
+    def canonical_vertices(self) -> Tensor:
+        """(V, 3) the rest-shape template after global scale and displacement: ``u p + V(u p)``."""
+        u = self.global_scale()
+        v = u * self.points
+        return v if self.displacement is None else v + self.displacement(v)
+
+    # -- priors ----------------------------------------------------------------------------
+    def symmetry_plane(self) -> tuple[Tensor, float]:
+        """The template's mirror plane (unit normal (3,), offset), found once and cached."""
+        if not hasattr(self, "_plane"):
+            n, d, _ = find_symmetry_plane(self.points.detach().cpu().numpy())
+            self._plane = (torch.as_tensor(n, dtype=self.points.dtype, device=self.points.device), d)
+            tol = 0.02 * float((self.points.max(0).values - self.points.min(0).values).norm())
+            pairs = symmetric_joint_pairs(self.heads.cpu().numpy(), n, d, tol)
+            self._pairs = torch.as_tensor(pairs, device=self.points.device)
+        return self._plane
+
+    def symmetry_loss(self, sample: int | None = 2000) -> Tensor:
+        """CASA eq. 7 on `canonical_vertices` (u scales the plane offset too)."""
+        n, d = self.symmetry_plane()
+        idx = None
+        if sample is not None and self.num_vertices > sample:
+            gen = torch.Generator().manual_seed(0)
+            idx = torch.randperm(self.num_vertices, generator=gen)[:sample].to(self.points.device)
+        return symmetry_loss(self.canonical_vertices(), n, d * self.global_scale(), idx)
+
+    def bone_length_loss(self) -> Tensor:
+        """Bone scales near 1 and equal between mirrored joints."""
+        self.symmetry_plane()
+        return bone_length_prior(self.log_bone_scales, self._pairs)
+
+    @staticmethod
+    def smoothness_loss(rotations: Tensor) -> Tensor:
+        """CASA eq. 6 on (..., T, J, 4) rotations."""
+        return smoothness_loss(rotations)

@@ -1,0 +1,152 @@
+"""Rotation utilities in PyTorch, batched over any leading ``...`` dimensions.
+
+Conventions match `zooctl.geometry`: quaternions are (w, x, y, z) Hamilton quaternions, matrices
+act on column vectors. The 6D representation (Zhou et al. 2019) is the first two *columns* of the
+rotation matrix, concatenated: ``(..., 6) = [m[:, 0], m[:, 1]]``.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+Tensor = torch.Tensor
+
+
+def quat_identity(
+    *shape: int, dtype: torch.dtype = torch.float32, device: torch.device | str | None = None
+) -> Tensor:
+    """(*shape, 4) identity quaternions."""
+    q = torch.zeros(*shape, 4, dtype=dtype, device=device)
+    q[..., 0] = 1.0
+    return q
+
+
+def quat_normalize(q: Tensor, eps: float = 1e-12) -> Tensor:
+    """(..., 4) -> (..., 4) unit quaternions (differentiable; a zero input stays near zero)."""
+    return q / q.norm(dim=-1, keepdim=True).clamp_min(eps)
+
+
+def quat_mul(a: Tensor, b: Tensor) -> Tensor:
+    """Hamilton product a * b of (..., 4) quaternions (broadcasting): rotate by b, then by a."""
+    aw, ax, ay, az = a.unbind(-1)
+    bw, bx, by, bz = b.unbind(-1)
+    return torch.stack(
+        (
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ),
+        -1,
+    )
+
+
+def quat_conjugate(q: Tensor) -> Tensor:
+    """(..., 4) conjugate; the inverse of a unit quaternion."""
+    return q * q.new_tensor([1.0, -1.0, -1.0, -1.0])
+
+
+def quat_inverse(q: Tensor, eps: float = 1e-12) -> Tensor:
+    """(..., 4) inverse of any non-zero quaternion: conj(q) / |q|^2."""
+    return quat_conjugate(q) / (q * q).sum(-1, keepdim=True).clamp_min(eps)
+
+
+def quat_rotate(q: Tensor, v: Tensor) -> Tensor:
+    """Rotate (..., 3) vectors by unit quaternions (..., 4) (broadcasting)."""
+    w = q[..., :1]
+    u = q[..., 1:]
+    t = 2.0 * torch.linalg.cross(u, v)
+    return v + w * t + torch.linalg.cross(u, t)
+
+
+def quat_to_matrix(q: Tensor) -> Tensor:
+    """(..., 4) wxyz (normalised here) -> (..., 3, 3) rotation matrices."""
+    q = quat_normalize(q)
+    w, x, y, z = q.unbind(-1)
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    wx, wy, wz = w * x, w * y, w * z
+    m = torch.stack(
+        (
+            1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy),
+            2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx),
+            2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy),
+        ),
+        -1,
+    )  # fmt: skip
+    return m.reshape(q.shape[:-1] + (3, 3))
+
+
+def matrix_to_quat(m: Tensor) -> Tensor:
+    """(..., 3, 3) rotation matrices -> (..., 4) wxyz with w >= 0.
+
+    Shepperd's method, vectorised: of the four candidate formulas the one with the largest pivot
+    is used, so the result (and its gradient) is well conditioned for every rotation.
+    """
+    m00, m11, m22 = m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]
+    piv = torch.stack(
+        (1 + m00 + m11 + m22, 1 + m00 - m11 - m22, 1 - m00 + m11 - m22, 1 - m00 - m11 + m22), -1
+    )
+    d21, d02, d10 = m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]
+    s01, s02, s12 = m[..., 0, 1] + m[..., 1, 0], m[..., 0, 2] + m[..., 2, 0], m[..., 1, 2] + m[..., 2, 1]
+    cand = torch.stack(
+        (
+            torch.stack((piv[..., 0], d21, d02, d10), -1),
+            torch.stack((d21, piv[..., 1], s01, s02), -1),
+            torch.stack((d02, s01, piv[..., 2], s12), -1),
+            torch.stack((d10, s02, s12, piv[..., 3]), -1),
+        ),
+        -2,
+    )  # (..., 4, 4): row k is 4 * sqrt(piv_k / 4) * q
+    k = piv.argmax(-1, keepdim=True)
+    best = torch.gather(cand, -2, k[..., None].expand(k.shape[:-1] + (1, 4))).squeeze(-2)
+    q = best / (2.0 * torch.gather(piv, -1, k).clamp_min(1e-12).sqrt())
+    q = torch.where(q[..., :1] < 0, -q, q)
+    return quat_normalize(q)
+
+
+def rot6d_to_matrix(d6: Tensor) -> Tensor:
+    """(..., 6) -> (..., 3, 3) by Gram-Schmidt on the two columns (Zhou et al. 2019)."""
+    a1, a2 = d6[..., :3], d6[..., 3:]
+    b1 = F.normalize(a1, dim=-1)
+    b2 = F.normalize(a2 - (b1 * a2).sum(-1, keepdim=True) * b1, dim=-1)
+    b3 = torch.cross(b1, b2, dim=-1)
+    return torch.stack((b1, b2, b3), -1)
+
+
+def matrix_to_rot6d(m: Tensor) -> Tensor:
+    """(..., 3, 3) -> (..., 6): the first two columns."""
+    return torch.cat((m[..., :, 0], m[..., :, 1]), -1)
+
+
+def axis_angle_to_quat(aa: Tensor) -> Tensor:
+    """(..., 3) rotation vectors (axis * angle in radians) -> (..., 4) wxyz.
+
+    Uses sin(x/2)/x with its Taylor expansion near zero so the gradient at the identity is exact.
+    """
+    angle = aa.norm(dim=-1, keepdim=True)
+    half = 0.5 * angle
+    small = angle < 1e-4
+    safe = torch.where(small, torch.ones_like(angle), angle)
+    k = torch.where(small, 0.5 - angle * angle / 48.0, torch.sin(half) / safe)
+    return torch.cat((torch.cos(half), aa * k), -1)
+
+
+def quat_to_axis_angle(q: Tensor) -> Tensor:
+    """(..., 4) unit wxyz -> (..., 3) rotation vectors with angle in [0, pi] (q and -q agree)."""
+    q = torch.where(q[..., :1] < 0, -q, q)
+    v = q[..., 1:]
+    s = v.norm(dim=-1, keepdim=True)
+    angle = 2.0 * torch.atan2(s, q[..., :1])
+    small = s < 1e-6
+    k = torch.where(
+        small, 2.0 / q[..., :1].clamp_min(1e-12), angle / torch.where(small, torch.ones_like(s), s)
+    )
+    return v * k
+
+
+def quat_angle(a: Tensor, b: Tensor) -> Tensor:
+    """(...) rotation angle in radians between unit quaternions a and b (sign-invariant)."""
+    d = (a * b).sum(-1).abs().clamp(max=1.0)
+    return 2.0 * torch.acos(d)

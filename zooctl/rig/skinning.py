@@ -1,0 +1,172 @@
+"""Stretchable bones and linear blend skinning (CASA supplement D, after Jacobson & Sorkine 2011).
+
+Bones. Bone k runs from its head ``c_k`` (the joint's bind position) to its tail ``d_k``:
+
+- a joint with children: the head of its *main* child, the child whose subtree has the most
+  joints (ties: the first), so a spine bone points up the spine and not into a leg;
+- a leaf joint: the bone continues its parent's direction ``c_k - c_parent`` up to the farthest
+  projection of the vertices it dominates (skin weight >= 0.5), or half its parent bone's length
+  when it dominates none; a root without children gets ``d_k = c_k`` (it cannot stretch).
+
+Stretch. With length scale ``b_k`` the stretch vector is ``s_k = (b_k - 1)(d_k - c_k)`` and a
+bind-space point ``p`` moves with bone k to ``p + e_k(p) s_k`` where ``e_k(p)`` is the fraction of
+the projection of ``p`` onto the segment, clamped to [0, 1]. The posed vertex is
+
+    v_i = sum_k w_ik M_k (p_i + e_k(p_i) s_k),   M_k = G_k @ inverse_bind_k,
+
+which for rigid ``M_k`` is exactly CASA's ``c_k^t + R_k^t (e_k(p_i) s_k + (p_i - c_k))``. The
+skeleton moves consistently: a child joint's head is carried by its parent's stretch,
+``o_j += L(inverse_bind_parent) e_parent(c_j) s_parent`` (``L``: the 3x3 part), which is the
+parent's rest offset scaled by ``b_parent`` for the main child, so the mesh stays continuous at
+every joint, branching ones included.
+
+Weights stay on the simplex: each vertex keeps ``K`` candidate bones (its template bones, then the
+nearest others) and its weights are a softmax over learnable logits.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+Tensor = torch.Tensor
+
+
+def bone_segments(
+    heads: np.ndarray, parents: np.ndarray, points: np.ndarray, dense_weights: np.ndarray
+) -> np.ndarray:
+    """(J, 3) bone tails ``d_k`` for heads (J, 3); see the module docstring for the rule.
+
+    points (V, 3) bind vertices, dense_weights (V, J) skin weights (used for leaf lengths).
+    """
+    J = len(parents)
+    subtree = np.ones(J, dtype=np.int64)
+    for j in range(J - 1, 0, -1):
+        if parents[j] >= 0:
+            subtree[parents[j]] += subtree[j]
+    main_child = np.full(J, -1, dtype=np.int64)
+    for j in range(J):
+        p = parents[j]
+        if p >= 0 and (main_child[p] < 0 or subtree[j] > subtree[main_child[p]]):
+            main_child[p] = j
+    tails = heads.astype(np.float64).copy()
+    for k in range(J):
+        if main_child[k] >= 0:
+            tails[k] = heads[main_child[k]]
+    for k in range(J):
+        p = parents[k]
+        if main_child[k] >= 0 or p < 0:
+            continue
+        axis = heads[k] - heads[p]
+        parent_len = float(np.linalg.norm(tails[p] - heads[p]))
+        n = float(np.linalg.norm(axis))
+        if n < 1e-9:
+            continue
+        axis = axis / n
+        owned = dense_weights[:, k] >= 0.5
+        length = float(((points[owned] - heads[k]) @ axis).max()) if owned.any() else 0.0
+        if length <= 1e-9:
+            length = 0.5 * parent_len
+        tails[k] = heads[k] + axis * length
+    return tails
+
+
+def endpoint_weights(points: Tensor, heads: Tensor, tails: Tensor, eps: float = 1e-12) -> Tensor:
+    """``e_k(p)``: the clamped fraction of the projection of p onto each bone segment.
+
+    points (..., N, 3) and heads/tails (..., N, 3) (already gathered per point) -> (..., N) in [0, 1].
+    A zero-length bone gives 0.
+    """
+    axis = tails - heads
+    num = ((points - heads) * axis).sum(-1)
+    den = (axis * axis).sum(-1)
+    return (num / den.clamp_min(eps)).clamp(0.0, 1.0) * (den > eps)
+
+
+def stretch_vectors(bone_scales: Tensor, heads: Tensor, tails: Tensor) -> Tensor:
+    """``s_k = (b_k - 1)(d_k - c_k)``: bone_scales (..., J), heads/tails (J, 3) -> (..., J, 3)."""
+    return (bone_scales - 1.0)[..., None] * (tails - heads)
+
+
+def child_offset_shift(stretch: Tensor, parents: Tensor, child_e: Tensor, inverse_bind: Tensor) -> Tensor:
+    """How much each joint's local translation moves when its parent bone stretches.
+
+    stretch (..., J, 3) bind-space stretch vectors; parents (J,) long (roots -1); child_e (J,) the
+    parent's endpoint weight at each joint's head; inverse_bind (J, 4, 4).
+    Returns (..., J, 3) in each parent's joint frame (zero for roots).
+    """
+    has_parent = parents >= 0
+    p = parents.clamp_min(0)
+    lin = inverse_bind[p, :3, :3]  # (J, 3, 3)
+    shift = torch.einsum("jab,...jb->...ja", lin, stretch[..., p, :] * child_e[:, None])
+    return shift * has_parent[:, None].to(shift.dtype)
+
+
+def linear_blend_skinning(
+    points: Tensor,
+    mats: Tensor,
+    bones: Tensor,
+    weights: Tensor,
+    stretch: Tensor | None = None,
+    endpoint: Tensor | None = None,
+) -> Tensor:
+    """Posed vertices ``sum_k w_k M_k (p + e_k s_k)``.
+
+    points (V, 3) or (..., V, 3) bind vertices; mats (..., J, 4, 4) skinning matrices
+    ``G_k @ inverse_bind_k``; bones (V, K) long candidate bones; weights (V, K) or (..., V, K)
+    on the simplex; stretch (..., J, 3) bind-space stretch vectors and endpoint (V, K) the
+    ``e_k(p)`` of each candidate, both optional. Returns (..., V, 3).
+    """
+    A = mats[..., :3, :]  # (..., J, 3, 4): affine part only
+    blended = torch.einsum("...vk,...vkij->...vij", weights, A[..., bones, :, :])  # (..., V, 3, 4)
+    out = (blended[..., :3] @ points[..., None]).squeeze(-1) + blended[..., 3]
+    if stretch is not None:
+        moved = (A[..., :3] @ stretch[..., None]).squeeze(-1)  # (..., J, 3): L_k s_k
+        we = weights * endpoint
+        out = out + torch.einsum("...vk,...vkc->...vc", we, moved[..., bones, :])
+    return out
+
+
+def candidate_bones(
+    dense_weights: np.ndarray, points: np.ndarray, heads: np.ndarray, tails: np.ndarray, k: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each vertex's K candidate bones: its template bones by weight, then the nearest bone segments.
+
+    dense_weights (V, J), points (V, 3), heads/tails (J, 3) -> bones (V, K) int64, weights (V, K)
+    (the template weights of the candidates, rows summing to one).
+    """
+    V, J = dense_weights.shape
+    k = min(k, J)
+    axis = tails - heads
+    den = np.maximum((axis * axis).sum(-1), 1e-12)
+    rel = points[:, None, :] - heads[None]  # (V, J, 3)
+    t = np.clip((rel * axis[None]).sum(-1) / den, 0.0, 1.0)
+    dist = np.linalg.norm(rel - t[..., None] * axis[None], axis=-1)  # (V, J)
+    # Weight first, distance breaks ties (and orders the zero-weight fill-ins).
+    order = np.lexsort((dist, -dense_weights), axis=-1)[:, :k]
+    w = np.take_along_axis(dense_weights, order, 1).clip(min=0)
+    s = w.sum(1, keepdims=True)
+    w = np.where(s > 0, w / np.where(s > 0, s, 1), np.eye(1, k, 0))
+    return order.astype(np.int64), w
+
+
+class SkinWeights(nn.Module):
+    """Learnable skinning weights on the simplex: softmax over each vertex's K candidate bones.
+
+    bones: (V, K) candidate bones; init: (V, K) initial weights on the simplex.
+    ``forward()`` -> (V, K) weights, rows summing to one.
+    """
+
+    def __init__(self, bones: Tensor, init: Tensor, floor: float = 1e-8):
+        super().__init__()
+        self.register_buffer("bones", bones.long())
+        self.logits = nn.Parameter(torch.log(init.clamp_min(floor)))
+
+    def forward(self) -> Tensor:
+        return torch.softmax(self.logits, dim=-1)
+
+    def dense(self, num_joints: int) -> Tensor:
+        """(V, J) dense weights (for inspection and export)."""
+        w = self()
+        return w.new_zeros(w.shape[0], num_joints).scatter_add_(1, self.bones, w)

@@ -1,0 +1,140 @@
+"""Fit records: ``<store>/fits/<name>/``, one folder per fit, written atomically under the lock.
+
+Layout (``schemas/fit_record.schema.json`` describes ``record.json``)::
+
+    fits/<name>/record.json    what `fits list` / `fits show` read: status, template, outputs, metrics
+    fits/<name>/state.pt       the resumable optimisation state (`zooctl fit --resume`)
+    fits/<name>/character.h5   the fitted character (a RiggedAsset) that `fits export` re-exports
+    fits/<name>/config.json    the full configuration of the run
+
+and, unless ``--out`` sent them elsewhere, the outputs (``<name>.usd``, ``<name>.glb``,
+``overlay.mp4``, ``loss.png``, ``fit.json``). A fit exists once its ``record.json`` exists.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+from ..errors import NotFoundError, StoreError
+from ..names import check_name
+from .fs import store_lock, write_bytes_atomic, write_json_atomic
+
+RECORD_VERSION = 1
+
+
+class FitStore:
+    """The fits of one store root."""
+
+    def __init__(self, root: str | Path):
+        self.root = Path(root)
+        self.dir = self.root / "fits"
+
+    def path(self, name: str) -> Path:
+        return self.dir / check_name(name, "fit name")
+
+    def record_path(self, name: str) -> Path:
+        return self.path(name) / "record.json"
+
+    def state_path(self, name: str) -> Path:
+        return self.path(name) / "state.pt"
+
+    def character_path(self, name: str) -> Path:
+        return self.path(name) / "character.h5"
+
+    def exists(self, name: str) -> bool:
+        return self.record_path(name).is_file()
+
+    def names(self) -> list[str]:
+        if not self.dir.is_dir():
+            return []
+        return sorted(p.name for p in self.dir.iterdir() if (p / "record.json").is_file())
+
+    def get(self, name: str) -> dict[str, Any]:
+        p = self.record_path(name)
+        try:
+            return json.loads(p.read_text())
+        except FileNotFoundError:
+            import difflib
+
+            close = difflib.get_close_matches(name, self.names(), n=3)
+            raise NotFoundError(
+                f"no fit named {name!r} in {self.root}",
+                hint=f"did you mean {', '.join(close)}?" if close else "see `zooctl fits list`",
+            ) from None
+        except (OSError, json.JSONDecodeError) as exc:
+            raise StoreError(f"the record of fit {name!r} is unreadable: {exc}") from None
+
+    def list(self) -> list[dict[str, Any]]:
+        out = []
+        for n in self.names():
+            try:
+                out.append(self.get(n))
+            except StoreError:
+                continue
+        return out
+
+    def save_record(self, name: str, record: dict[str, Any]) -> None:
+        record = dict(record, schema_version=RECORD_VERSION, name=name)
+        with store_lock(self.root):
+            write_json_atomic(self.record_path(name), record)
+
+    def save_state(self, name: str, state: dict[str, Any]) -> None:
+        import io
+
+        import torch
+
+        buf = io.BytesIO()
+        torch.save(state, buf)
+        with store_lock(self.root):
+            write_bytes_atomic(self.state_path(name), buf.getvalue())
+
+    def load_state(self, name: str) -> dict[str, Any]:
+        import torch
+
+        p = self.state_path(name)
+        if not p.is_file():
+            raise NotFoundError(
+                f"fit {name!r} has no saved state to resume", hint="start it again without --resume"
+            )
+        try:
+            return torch.load(p, map_location="cpu", weights_only=False)
+        except Exception as exc:
+            raise StoreError(
+                f"the saved state of fit {name!r} is unreadable: {exc}",
+                hint="start it again without --resume",
+            ) from None
+
+    def save_character(self, name: str, asset: Any) -> None:
+        from .asset_h5 import write_asset
+        from .fs import publish, temp_path
+
+        final = self.character_path(name)
+        tmp = temp_path(final)
+        try:
+            write_asset(tmp, asset)
+            with store_lock(self.root):
+                publish(tmp, final)
+        finally:
+            tmp.unlink(missing_ok=True)
+
+    def character(self, name: str) -> Any:
+        from .asset_h5 import read_asset
+
+        self.get(name)
+        p = self.character_path(name)
+        if not p.is_file():
+            raise NotFoundError(
+                f"fit {name!r} has no fitted character (it did not finish)",
+                hint="resume it with `zooctl fit --resume`",
+            )
+        return read_asset(p)
+
+    def remove(self, name: str) -> None:
+        with store_lock(self.root):
+            if not self.exists(name):
+                raise NotFoundError(f"no fit named {name!r} in {self.root}", hint="see `zooctl fits list`")
+            self.record_path(name).unlink()  # the fit is gone once its record is
+        shutil.rmtree(self.path(name), ignore_errors=True)

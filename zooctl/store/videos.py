@@ -1,0 +1,341 @@
+"""The video store: one HDF5 file per preprocessed video plus a JSON index, crash-safe.
+
+Layout under the store root (JSON Schemas: ``schemas/video_index.schema.json`` and
+``schemas/video_h5.schema.json``)::
+
+    videos/index.json      {"schema_version": 1, "videos": {name: summary}}  - what `video list` reads
+    videos/<name>.h5       frames, masks, boxes, forward/backward flow, occlusion masks, source metadata
+
+Same rules as the bank: the HDF5 file is written to a temporary beside its final path outside the
+lock (the slow part), then under the store's writers' lock the name is checked again, the file is
+fsynced and ``os.replace``d into place, and the index is replaced last. A failure at any point
+leaves the store as it was (at worst an unindexed temporary that `cleanup` removes).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import AlreadyExistsError, NotFoundError, StoreError
+from ..names import check_name
+from .fs import publish, remove_stale_temps, store_lock, temp_path, write_json_atomic
+
+INDEX_VERSION = 1
+FILE_VERSION = 1
+_GZIP = 3  # frames and masks: a fair size/speed trade; flow is float16 with the shuffle filter
+
+
+@dataclass
+class VideoRecord:
+    """A preprocessed video, as stored.
+
+    ``frames`` (T, H, W, 3) uint8 RGB; ``masks`` (T, H, W) bool; ``flow_forward`` / ``flow_backward``
+    (T-1, H, W, 2) float32 pixels (t -> t+1 and t+1 -> t); ``occlusion_forward`` / ``occlusion_backward``
+    (T-1, H, W) bool (forward-backward check failed, see `zooctl.video.flow.VideoFlow`);
+    ``source_indices`` (T,) int64 frame index in the source; ``source`` is metadata (path, kind,
+    sha256, fps, original_width, original_height); ``segmenter`` / ``flow_estimator`` name what made
+    the masks and flow, with their options.
+    """
+
+    name: str
+    frames: np.ndarray
+    masks: np.ndarray
+    flow_forward: np.ndarray
+    flow_backward: np.ndarray
+    occlusion_forward: np.ndarray
+    occlusion_backward: np.ndarray
+    fps: float
+    source: dict[str, Any]
+    source_indices: np.ndarray
+    segmenter: dict[str, Any] = field(default_factory=dict)
+    flow_estimator: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def boxes(self) -> np.ndarray:
+        """(T, 4) int32 x, y, w, h of each mask; zeros where the mask is empty."""
+        return boxes_of(self.masks)
+
+    def validate(self) -> None:
+        t, h, w = self.frames.shape[:3]
+        if self.frames.dtype != np.uint8 or self.frames.shape != (t, h, w, 3):
+            raise ValueError(
+                f"frames must be (T, H, W, 3) uint8, got {self.frames.shape} {self.frames.dtype}"
+            )
+        if t < 2:
+            raise ValueError("a stored video needs at least 2 frames")
+        if self.masks.shape != (t, h, w):
+            raise ValueError(f"masks {self.masks.shape} do not match frames {(t, h, w)}")
+        for n in ("flow_forward", "flow_backward"):
+            if getattr(self, n).shape != (t - 1, h, w, 2):
+                raise ValueError(f"{n} {getattr(self, n).shape} should be {(t - 1, h, w, 2)}")
+        for n in ("occlusion_forward", "occlusion_backward"):
+            if getattr(self, n).shape != (t - 1, h, w):
+                raise ValueError(f"{n} {getattr(self, n).shape} should be {(t - 1, h, w)}")
+        if len(self.source_indices) != t:
+            raise ValueError("source_indices needs one entry per frame")
+
+    def summary(self) -> dict[str, Any]:
+        """The index entry: what `video list` prints without opening the HDF5 file."""
+        t, h, w = self.frames.shape[:3]
+        cov = self.masks.reshape(t, -1).mean(1)
+        return {
+            "name": self.name,
+            "frames": int(t),
+            "fps": float(self.fps),
+            "width": int(w),
+            "height": int(h),
+            "duration_s": round(t / self.fps, 3),
+            "mask_coverage_mean": round(float(cov.mean()), 4),
+            "empty_masks": int((cov == 0).sum()),
+            "segmenter": str(self.segmenter.get("name", "")),
+            "flow_estimator": str(self.flow_estimator.get("name", "")),
+            "source": {
+                "path": str(self.source.get("path", "")),
+                "kind": str(self.source.get("kind", "")),
+                "sha256": str(self.source.get("sha256", "")),
+            },
+        }
+
+
+def boxes_of(masks: np.ndarray) -> np.ndarray:
+    """(T, H, W) bool -> (T, 4) int32 x, y, w, h boxes (zeros for an empty mask)."""
+    out = np.zeros((len(masks), 4), np.int32)
+    for i, m in enumerate(masks):
+        rows, cols = np.flatnonzero(m.any(1)), np.flatnonzero(m.any(0))
+        if rows.size:
+            out[i] = (cols[0], rows[0], cols[-1] - cols[0] + 1, rows[-1] - rows[0] + 1)
+    return out
+
+
+# -- the HDF5 file -----------------------------------------------------------------------------------
+
+
+def write_video_h5(path: Path, rec: VideoRecord) -> None:
+    """Write ``rec`` to ``path`` (a temporary: callers publish it). Layout: schemas/video_h5.schema.json."""
+    import h5py
+
+    rec.validate()
+    t, h, w = rec.frames.shape[:3]
+    with h5py.File(path, "w") as f:
+        f.attrs["zooctl_kind"] = "video"
+        f.attrs["schema_version"] = FILE_VERSION
+        f.attrs["name"] = rec.name
+        f.attrs["fps"] = float(rec.fps)
+        f.attrs["source"] = json.dumps(rec.source, sort_keys=True, default=str)
+        f.attrs["segmenter"] = json.dumps(rec.segmenter, sort_keys=True, default=str)
+        f.attrs["flow_estimator"] = json.dumps(rec.flow_estimator, sort_keys=True, default=str)
+        f.create_dataset(
+            "frames", data=rec.frames, chunks=(1, h, w, 3), compression="gzip", compression_opts=_GZIP
+        )
+        f.create_dataset(
+            "masks",
+            data=rec.masks.astype(np.uint8),
+            chunks=(1, h, w),
+            compression="gzip",
+            compression_opts=_GZIP,
+        )
+        f.create_dataset("boxes", data=rec.boxes)
+        f.create_dataset("source_indices", data=np.asarray(rec.source_indices, np.int64))
+        g = f.create_group("flow")
+        for key, arr in (("forward", rec.flow_forward), ("backward", rec.flow_backward)):
+            g.create_dataset(
+                key,
+                data=arr.astype(np.float16),
+                chunks=(1, h, w, 2),
+                compression="gzip",
+                compression_opts=1,
+                shuffle=True,
+            )
+        for key, arr in (
+            ("occlusion_forward", rec.occlusion_forward),
+            ("occlusion_backward", rec.occlusion_backward),
+        ):
+            g.create_dataset(
+                key, data=arr.astype(np.uint8), chunks=(1, h, w), compression="gzip", compression_opts=_GZIP
+            )
+
+
+def read_video_h5(path: Path, what: tuple[str, ...] = ("frames", "masks", "flow")) -> VideoRecord:
+    """Read a stored video; leave out parts with ``what`` (missing parts come back as empty arrays)."""
+    import h5py
+
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise StoreError(
+            f"the video file {path} is unreadable: {exc}",
+            hint="remove it with `zooctl video rm` and add it again",
+        ) from None
+    with f:
+        if f.attrs.get("zooctl_kind") != "video" or int(f.attrs.get("schema_version", -1)) != FILE_VERSION:
+            raise StoreError(
+                f"{path} is not a version-{FILE_VERSION} zooctl video file", hint="add the video again"
+            )
+        empty = np.zeros((0,), np.float32)
+        fl = "flow" in what
+        return VideoRecord(
+            name=str(f.attrs["name"]),
+            frames=f["frames"][()] if "frames" in what else np.zeros((0, 0, 0, 3), np.uint8),
+            masks=f["masks"][()].astype(bool) if "masks" in what else np.zeros((0, 0, 0), bool),
+            flow_forward=f["flow/forward"][()].astype(np.float32) if fl else empty,
+            flow_backward=f["flow/backward"][()].astype(np.float32) if fl else empty,
+            occlusion_forward=f["flow/occlusion_forward"][()].astype(bool) if fl else empty,
+            occlusion_backward=f["flow/occlusion_backward"][()].astype(bool) if fl else empty,
+            fps=float(f.attrs["fps"]),
+            source=json.loads(f.attrs["source"]),
+            source_indices=f["source_indices"][()],
+            segmenter=json.loads(f.attrs["segmenter"]),
+            flow_estimator=json.loads(f.attrs["flow_estimator"]),
+        )
+
+
+def describe_h5(path: Path) -> dict[str, Any]:
+    """The file's layout as JSON (groups, datasets with dtype and shape, attributes): what the schema test validates."""
+    import h5py
+
+    def attrs(obj: Any) -> dict[str, Any]:
+        return {
+            k: (v.item() if isinstance(v, np.generic) else v.decode() if isinstance(v, bytes) else v)
+            for k, v in obj.attrs.items()
+        }
+
+    def walk(g: Any) -> dict[str, Any]:
+        node: dict[str, Any] = {"attrs": attrs(g), "groups": {}, "datasets": {}}
+        for key, obj in g.items():
+            if isinstance(obj, h5py.Group):
+                node["groups"][key] = walk(obj)
+            else:
+                node["datasets"][key] = {
+                    "dtype": obj.dtype.str,
+                    "shape": list(obj.shape),
+                    "attrs": attrs(obj),
+                    "compression": obj.compression,
+                }
+        return node
+
+    with h5py.File(path, "r") as f:
+        return walk(f)
+
+
+# -- the store -------------------------------------------------------------------------------------
+
+
+class VideoStore:
+    """The preprocessed videos of one store root."""
+
+    def __init__(self, root: str | Path):
+        self.root = Path(root)
+        self.dir = self.root / "videos"
+        self.index_path = self.dir / "index.json"
+
+    @classmethod
+    def open(cls, root: str | Path) -> VideoStore:
+        return cls(root)
+
+    # -- reading (no lock: every visible file is complete) --------------------------------------
+    def _read_index(self) -> dict[str, Any]:
+        try:
+            data = json.loads(self.index_path.read_text())
+        except FileNotFoundError:
+            return {"schema_version": INDEX_VERSION, "videos": {}}
+        except (OSError, json.JSONDecodeError) as exc:
+            raise StoreError(f"the video index {self.index_path} is unreadable: {exc}") from None
+        if data.get("schema_version") != INDEX_VERSION:
+            raise StoreError(
+                f"the video index has schema version {data.get('schema_version')}, this zooctl reads {INDEX_VERSION}",
+                hint="upgrade zooctl",
+            )
+        return data
+
+    def names(self) -> list[str]:
+        return sorted(self._read_index()["videos"])
+
+    def exists(self, name: str) -> bool:
+        return name in self._read_index()["videos"]
+
+    def list(self) -> list[dict[str, Any]]:
+        videos = self._read_index()["videos"]
+        return [videos[n] for n in sorted(videos)]
+
+    def summary(self, name: str) -> dict[str, Any]:
+        videos = self._read_index()["videos"]
+        if name not in videos:
+            raise self._not_found(name, videos)
+        return videos[name]
+
+    def path(self, name: str) -> Path:
+        return self.dir / f"{name}.h5"
+
+    def get(self, name: str, what: tuple[str, ...] = ("frames", "masks", "flow")) -> VideoRecord:
+        """Load a stored video (only the parts in ``what``). Raises `NotFoundError` for an unknown name."""
+        self.summary(name)
+        return read_video_h5(self.path(name), what)
+
+    def _not_found(self, name: str, videos: dict[str, Any]) -> NotFoundError:
+        import difflib
+
+        close = difflib.get_close_matches(name, list(videos), n=3)
+        hint = f"did you mean {', '.join(close)}?" if close else "see `zooctl video list`"
+        return NotFoundError(f"no video named {name!r} in the store at {self.root}", hint=hint)
+
+    def exists_error(self, name: str) -> AlreadyExistsError:
+        return AlreadyExistsError(
+            f"a video named {name!r} is already in the store",
+            hint="pass --replace to overwrite it, or --name to choose another name",
+        )
+
+    # -- writing ---------------------------------------------------------------------------------
+    def check_new(self, name: str, replace: bool = False) -> str:
+        """Fail early (before minutes of preprocessing) on a bad or taken name."""
+        check_name(name, "video name")
+        if not replace and self.exists(name):
+            raise self.exists_error(name)
+        return name
+
+    def add(self, rec: VideoRecord, replace: bool = False) -> dict[str, Any]:
+        """Store a video atomically; returns its index summary."""
+        name = self.check_new(rec.name, replace)
+        self.dir.mkdir(parents=True, exist_ok=True)
+        final = self.path(name)
+        tmp = temp_path(final)
+        try:
+            write_video_h5(tmp, rec)
+            summary = rec.summary()
+            summary["bytes"] = tmp.stat().st_size
+            with store_lock(self.root):
+                index = self._read_index()
+                if not replace and name in index["videos"]:
+                    raise self.exists_error(name)
+                publish(tmp, final)
+                index["videos"][name] = summary
+                write_json_atomic(self.index_path, index)
+        finally:
+            tmp.unlink(missing_ok=True)
+        return summary
+
+    def remove(self, name: str) -> None:
+        with store_lock(self.root):
+            index = self._read_index()
+            if name not in index["videos"]:
+                raise self._not_found(name, index["videos"])
+            del index["videos"][name]
+            write_json_atomic(self.index_path, index)  # the video is gone once the index says so
+            self.path(name).unlink(missing_ok=True)
+
+    def cleanup(self) -> dict[str, int]:
+        """Remove what killed writers left: temporaries and files the index does not name."""
+        with store_lock(self.root):
+            temps = remove_stale_temps(self.dir)
+            index = self._read_index()
+            orphans = 0
+            if self.dir.is_dir():
+                for p in self.dir.glob("*.h5"):
+                    if p.stem not in index["videos"]:
+                        p.unlink(missing_ok=True)
+                        orphans += 1
+        return {"temporaries": temps, "orphans": orphans}

@@ -1,0 +1,183 @@
+"""`video add` as a library call: decode, flow, segment, store; nothing is stored unless all succeed."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError, UsageError
+from ..names import sanitize_name
+
+# (stage, done, total): stages are "decode", "flow", "segment"
+StageProgress = Callable[[str, int, int | None], None]
+
+
+@dataclass
+class AddOptions:
+    """What `zooctl video add` accepts; see its --help for each field."""
+
+    name: str | None = None
+    masks: Path | None = None
+    segmenter: str | None = None
+    segmenter_options: dict[str, Any] = field(default_factory=dict)
+    box: tuple[float, float, float, float] | None = None  # x, y, w, h in pixels of the original video
+    fps: float | None = None
+    start: float | None = None
+    end: float | None = None
+    max_frames: int | None = None
+    max_size: int | None = None  # None: the decoder's default (854)
+    flow: str = "dis"
+    flow_options: dict[str, Any] = field(default_factory=dict)
+    replace: bool = False
+
+
+def parse_box(text: str) -> tuple[float, float, float, float]:
+    """``"x,y,w,h"`` -> floats; UsageError for anything else."""
+    parts = [p.strip() for p in text.split(",")]
+    try:
+        vals = tuple(float(p) for p in parts)
+    except ValueError:
+        vals = ()
+    if len(vals) != 4 or vals[2] <= 0 or vals[3] <= 0:
+        raise UsageError(
+            f"--box {text!r} is not x,y,w,h", hint="give four numbers in pixels, e.g. --box 120,80,300,200"
+        )
+    return vals  # type: ignore[return-value]
+
+
+def default_name(path: Path) -> str:
+    p = Path(path)
+    stem = p.name if p.is_dir() else p.stem
+    if stem == "JPEGImages":
+        stem = p.parent.name
+    return sanitize_name(stem)
+
+
+def preprocess(path: str | Path, opts: AddOptions, progress: StageProgress | None = None):
+    """Decode ``path`` and compute flow and masks; returns a `zooctl.store.videos.VideoRecord`."""
+    from ..plugins import get_registry
+    from ..store.videos import VideoRecord
+    from .decode import DEFAULT_MAX_SIZE, decode
+    from .flow import compute_video_flow
+
+    path = Path(path).expanduser()
+    name = opts.name or default_name(path)
+    registry = get_registry()
+    flow_spec = registry.get("flow_estimator", opts.flow)
+    seg_name, seg_opts = _choose_segmenter(path, opts)
+    seg_spec = registry.get("segmenter", seg_name)  # unknown names fail before decoding
+
+    def stage(label: str) -> Callable[[int, int | None], None] | None:
+        return None if progress is None else (lambda done, total: progress(label, done, total))
+
+    max_size = DEFAULT_MAX_SIZE if opts.max_size is None else opts.max_size
+    dv = decode(
+        path,
+        fps=opts.fps,
+        start=opts.start,
+        end=opts.end,
+        max_frames=opts.max_frames,
+        max_size=max_size,
+        progress=stage("decode"),
+    )
+    t, h, w = dv.frames.shape[:3]
+    if t < 2:
+        raise InputError(
+            f"{path.name} gives only {t} frame"
+            + (" in the chosen window" if opts.start or opts.end is not None else ""),
+            hint="a video needs at least 2 frames (flow and tracking need motion); give a longer clip or window",
+        )
+    estimator = flow_spec.create(**opts.flow_options)
+    vf = compute_video_flow(estimator, dv.frames, progress=stage("flow"))
+
+    if seg_name == "masks":
+        seg_opts.setdefault("source_indices", dv.source_indices)
+        seg_opts.setdefault("original_size", dv.original_size)
+        seg_opts.setdefault("path", path)  # a DAVIS folder: MaskSegmenter reads its Annotations/
+    segmenter = seg_spec.create(**seg_opts)
+    box = _scale_box(opts.box, dv.original_size, (w, h))
+    kwargs: dict[str, Any] = {"box": box, "progress": stage("segment")}
+    if getattr(segmenter, "uses_flow", False):
+        kwargs["flow"] = vf
+    masks = np.asarray(segmenter.segment(dv.frames, **kwargs), dtype=bool)
+    if masks.shape != (t, h, w):
+        raise InputError(
+            f"segmenter {seg_name!r} returned masks of shape {masks.shape}, expected {(t, h, w)}"
+        )
+
+    empty = int((~masks.reshape(t, -1).any(1)).sum())
+    if empty > t // 2:
+        raise InputError(
+            f"the {seg_name} segmenter found no animal in {empty} of {t} frames; nothing was stored",
+            hint="give --box x,y,w,h around the animal in the first frame, or your own --masks",
+        )
+    recorded = {
+        k: str(Path(v).resolve()) if isinstance(v, Path) else str(v)
+        for k, v in seg_opts.items()
+        if k not in ("source_indices", "original_size")
+    }
+    return VideoRecord(
+        name=name,
+        frames=dv.frames,
+        masks=masks,
+        flow_forward=vf.forward,
+        flow_backward=vf.backward,
+        occlusion_forward=vf.occlusion_forward,
+        occlusion_backward=vf.occlusion_backward,
+        fps=dv.fps,
+        source={
+            "path": str(dv.path),
+            "kind": dv.kind,
+            "sha256": dv.sha256,
+            "fps": dv.source_fps,
+            "original_width": dv.original_size[0],
+            "original_height": dv.original_size[1],
+            "start": opts.start,
+            "end": opts.end,
+        },
+        source_indices=dv.source_indices,
+        segmenter={"name": seg_name, "options": recorded, "box": list(box) if box is not None else None},
+        flow_estimator={"name": opts.flow, "options": {k: str(v) for k, v in opts.flow_options.items()}},
+    )
+
+
+def add_video(
+    store, path: str | Path, opts: AddOptions, progress: StageProgress | None = None
+) -> dict[str, Any]:
+    """Preprocess ``path`` and add it to ``store`` (a `VideoStore`); returns the index summary."""
+    name = opts.name or default_name(Path(path))
+    store.check_new(name, opts.replace)  # fail before minutes of work
+    rec = preprocess(path, AddOptions(**{**opts.__dict__, "name": name}), progress)
+    return store.add(rec, replace=opts.replace)
+
+
+def _choose_segmenter(path: Path, opts: AddOptions) -> tuple[str, dict[str, Any]]:
+    seg_opts = dict(opts.segmenter_options)
+    if opts.masks is not None:
+        if opts.segmenter not in (None, "masks"):
+            raise UsageError(
+                f"--masks and --segmenter {opts.segmenter} disagree",
+                hint="--masks uses your masks; drop one of the two",
+            )
+        seg_opts["path"] = opts.masks
+        return "masks", seg_opts
+    has_annotations = path.is_dir() and (path / "Annotations").is_dir()
+    if opts.segmenter is None:
+        return ("masks" if has_annotations else "grabcut"), seg_opts
+    if opts.segmenter == "masks" and not has_annotations:
+        raise UsageError(
+            "the masks segmenter needs masks", hint="pass --masks DIR|VIDEO (or a folder with Annotations/)"
+        )
+    return opts.segmenter, seg_opts
+
+
+def _scale_box(box, original: tuple[int, int], stored: tuple[int, int]) -> tuple[int, int, int, int] | None:
+    if box is None:
+        return None
+    sx, sy = stored[0] / original[0], stored[1] / original[1]
+    x, y, bw, bh = box
+    return round(x * sx), round(y * sy), max(round(bw * sx), 1), max(round(bh * sy), 1)

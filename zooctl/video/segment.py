@@ -1,0 +1,216 @@
+"""Segmenters: the user's own masks, and a learned model run from a local ONNX file.
+
+Every segmenter has ``segment(frames, box=None, progress=None) -> (T, H, W) bool`` for frames
+(T, H, W, 3) uint8 RGB. The classical automatic one is `zooctl.video.grabcut.GrabCutTracker`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..errors import InputError, MissingDependencyError, UsageError
+from .decode import IMAGE_SUFFIXES, VIDEO_SUFFIXES, image_files
+
+Progress = Callable[[int, int], None]
+
+
+def mask_from_image(img: np.ndarray, mode: str) -> np.ndarray:
+    """A mask image -> (H, W) bool. Palette images: index != 0; with alpha: alpha > 127; else grey > 127
+    (or > 0 when the file holds only 0/1 values)."""
+    a = np.asarray(img)
+    if mode == "P":
+        return a != 0
+    if a.ndim == 3 and a.shape[2] in (2, 4) and (a[..., -1] < 255).any():
+        return a[..., -1] > 127
+    grey = a if a.ndim == 2 else a[..., : min(3, a.shape[2])].max(-1)
+    return grey > (0 if grey.max() <= 1 else 127)
+
+
+class MaskSegmenter:
+    """User-supplied masks: a folder of mask images (PNG...) or a mask video, one per source frame.
+
+    Matching: as many masks as stored frames (taken in order), or as many as the source has
+    frames (then the stored frames' ``source_indices`` pick theirs). Size: the source's original
+    size or the stored size; masks are resized to the stored size.
+    """
+
+    name = "masks"
+
+    def __init__(
+        self,
+        path: str | Path,
+        source_indices: Sequence[int] | None = None,
+        original_size: tuple[int, int] | None = None,
+    ) -> None:
+        self.path = Path(path).expanduser()
+        if not self.path.exists():
+            raise InputError(
+                f"mask source {self.path} does not exist", hint="give a folder of mask images or a mask video"
+            )
+        self.source_indices = None if source_indices is None else np.asarray(source_indices, dtype=np.int64)
+        self.original_size = original_size
+
+    def segment(self, frames: np.ndarray, box=None, progress: Progress | None = None) -> np.ndarray:
+        t, h, w = frames.shape[:3]
+        if self.path.is_dir():
+            return self._from_folder(t, h, w, progress)
+        if self.path.suffix.lower() in VIDEO_SUFFIXES:
+            return self._from_video(t, h, w, progress)
+        raise InputError(
+            f"{self.path.name} is neither a folder of masks nor a mask video",
+            hint=f"give a folder of {'/'.join(IMAGE_SUFFIXES)} images or a {' '.join(VIDEO_SUFFIXES)} video",
+        )
+
+    def _pick(self, count: int, t: int) -> np.ndarray:
+        if count == t:
+            return np.arange(t)
+        if self.source_indices is not None and count > int(self.source_indices.max()) and count != t:
+            return self.source_indices
+        raise InputError(
+            f"{count} masks in {self.path} for a video of {t} frames",
+            hint="give exactly one mask per frame (in the same order as the frames)",
+        )
+
+    def _fit(self, mask: np.ndarray, h: int, w: int, where: str) -> np.ndarray:
+        mh, mw = mask.shape
+        allowed = {(w, h)} | ({tuple(self.original_size)} if self.original_size else set())
+        if (mw, mh) not in allowed:
+            sizes = " or ".join(f"{a}x{b}" for a, b in sorted(allowed))
+            raise InputError(
+                f"mask {where} is {mw}x{mh}, the frames are {sizes}",
+                hint="masks must have the video's frame size",
+            )
+        if (mw, mh) != (w, h):
+            mask = cv2.resize(mask.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA) > 0.5
+        return mask
+
+    def _from_folder(self, t, h, w, progress) -> np.ndarray:
+        from PIL import Image
+
+        folder = self.path / "Annotations" if (self.path / "Annotations").is_dir() else self.path
+        files = image_files(folder)
+        if not files:
+            raise InputError(
+                f"{folder} holds no mask images",
+                hint=f"masks are image files ({' '.join(IMAGE_SUFFIXES)}), one per frame",
+            )
+        pick = self._pick(len(files), t)
+        out = np.zeros((t, h, w), bool)
+        for k, i in enumerate(pick):
+            try:
+                with Image.open(files[i]) as im:
+                    im.load()
+                    m = mask_from_image(np.asarray(im), im.mode)
+            except OSError as exc:
+                raise InputError(f"{files[i]} is not a readable mask image: {exc}") from None
+            out[k] = self._fit(m, h, w, files[i].name)
+            if progress:
+                progress(k + 1, t)
+        return out
+
+    def _from_video(self, t, h, w, progress) -> np.ndarray:
+        from .decode import decode
+
+        dv = decode(self.path, max_size=None)
+        masks = dv.frames.max(-1) > 127
+        pick = self._pick(len(masks), t)
+        out = np.stack([self._fit(masks[i], h, w, f"frame {i} of {self.path.name}") for i in pick])
+        if progress:
+            progress(t, t)
+        return out
+
+
+class OnnxSegmenter:
+    """A salient-object or matting network from a local ``.onnx`` file (nothing is downloaded).
+
+    Pre-processing (the U^2-Net / ISNet / MODNet convention): RGB resized to the model's input size
+    (its static input shape, else ``input_size`` square), scaled to [0, 1], minus ``mean``, over
+    ``std``, NCHW float32, batch 1. Post-processing: the first output's first map ((1, 1, h, w),
+    (1, h, w) or (1, h, w, 1)), put through a sigmoid if its values leave [0, 1], min-max
+    normalised when ``normalize`` (what U^2-Net's reference code does), resized to the frame,
+    thresholded at ``threshold``. With a box, only the components that touch it are kept on every frame.
+    """
+
+    name = "onnx"
+
+    def __init__(
+        self,
+        model: str | Path | None = None,
+        input_size: int = 320,
+        mean: Sequence[float] = (0.485, 0.456, 0.406),
+        std: Sequence[float] = (0.229, 0.224, 0.225),
+        threshold: float = 0.5,
+        normalize: bool = True,
+        threads: int = 0,
+    ) -> None:
+        if model is None:
+            raise UsageError(
+                "the onnx segmenter needs a model", hint="pass --model PATH to a local .onnx file"
+            )
+        path = Path(model).expanduser()
+        if not path.is_file():
+            raise InputError(f"ONNX model {path} does not exist", hint="give the path of a local .onnx file")
+        try:
+            import onnxruntime as ort
+        except ImportError:
+            raise MissingDependencyError(
+                "the onnx segmenter needs the onnxruntime package", hint="pip install onnxruntime"
+            ) from None
+        opts = ort.SessionOptions()
+        if threads:
+            opts.intra_op_num_threads = threads
+        try:
+            self.session = ort.InferenceSession(
+                str(path), sess_options=opts, providers=["CPUExecutionProvider"]
+            )
+        except Exception as exc:
+            raise InputError(
+                f"{path.name} is not a loadable ONNX model: {str(exc).splitlines()[0][:200]}"
+            ) from None
+        inp = self.session.get_inputs()[0]
+        self.input_name = inp.name
+        shape = list(inp.shape)
+        if len(shape) != 4:
+            raise InputError(
+                f"{path.name} takes a {len(shape)}-d input, the onnx segmenter feeds NCHW images"
+            )
+        hh, ww = shape[2], shape[3]
+        self.size = (ww if isinstance(ww, int) else input_size, hh if isinstance(hh, int) else input_size)
+        self.mean = np.asarray(mean, np.float32).reshape(1, 3, 1, 1)
+        self.std = np.asarray(std, np.float32).reshape(1, 3, 1, 1)
+        self.threshold = threshold
+        self.normalize = normalize
+
+    def probability(self, frame: np.ndarray) -> np.ndarray:
+        """(H, W, 3) uint8 RGB -> (H, W) float32 foreground probability."""
+        h, w = frame.shape[:2]
+        x = cv2.resize(
+            frame, self.size, interpolation=cv2.INTER_AREA if self.size[0] < w else cv2.INTER_LINEAR
+        )
+        x = x.astype(np.float32).transpose(2, 0, 1)[None] / 255.0
+        x = (x - self.mean) / self.std
+        out = np.asarray(self.session.run(None, {self.input_name: x})[0], np.float32)
+        m = out.reshape(-1, *out.shape[-2:])[0] if out.ndim != 4 or out.shape[-1] != 1 else out[0, ..., 0]
+        if m.min() < 0 or m.max() > 1:
+            m = 1.0 / (1.0 + np.exp(-m))
+        if self.normalize and m.max() > m.min():
+            m = (m - m.min()) / (m.max() - m.min())
+        return cv2.resize(m, (w, h), interpolation=cv2.INTER_LINEAR)
+
+    def segment(self, frames: np.ndarray, box=None, progress: Progress | None = None) -> np.ndarray:
+        from .cues import box_mask, largest_components
+
+        t, h, w = frames.shape[:3]
+        out = np.zeros((t, h, w), bool)
+        keep = box_mask((h, w), tuple(int(v) for v in box)) if box is not None else None
+        for i in range(t):
+            out[i] = self.probability(frames[i]) > self.threshold
+            if keep is not None:
+                out[i] = largest_components(out[i], keep_ratio=1e-9, reference=keep) & out[i]
+            if progress:
+                progress(i + 1, t)
+        return out
