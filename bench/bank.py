@@ -30,7 +30,7 @@ def main() -> None:
         sys.exit(f"bench/bank.py needs the shared assets at {SHARED / 'assets'}")
     root = Path(tempfile.mkdtemp(prefix="zooctl-bench-bank-"))
     try:
-        env = {"ZOOCTL_STORE": str(root)}
+        env = {"ZOOCTL_STORE": str(root), "ZOOCTL_VIEWS": "0"}  # views: see bench/retrieval.py
         # 1. import + store, whole command: all 28 files in one `bank add`
         t = time.perf_counter()
         import subprocess

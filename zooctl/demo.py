@@ -64,6 +64,37 @@ def main(argv: list[str] | None = None) -> int:
     for k, p in rec["outputs"].items():
         con.print(f"  {k}: {p}")
     con.print("open the .usd or .glb in Blender; overlay.mp4 shows the fit over the video")
+    return _export_and_animate(con, args, rec)
+
+
+def _zooctl(*args: str) -> None:
+    """Run one real `zooctl` command, as a user would type it (the demo shows the user path)."""
+    import subprocess
+
+    cmd = [sys.executable, "-m", "zooctl", *args]
+    print("$ zooctl " + " ".join(args), flush=True)
+    if subprocess.run(cmd).returncode != 0:
+        raise SystemExit(f"demo step failed: zooctl {' '.join(args)}")
+
+
+def _export_and_animate(con, args, rec) -> int:
+    """Export a starter animal, draw the bank's contact sheet, then put the fitted character in
+    the bank, train a small motion prior on the starter clips and sample 5 motions for it."""
+    out = args.out
+    _zooctl("bank", "export", args.animal, "--all-clips", "-o", str(out / f"{args.animal}.usdz"))
+    _zooctl("bank", "export", args.animal, "--all-clips", "-o", str(out / f"{args.animal}.glb"))
+    _zooctl("bank", "render", "--sheet", "--tag", "procedural", "-o", str(out / "bank.png"))
+    glb = next((v for v in rec["outputs"].values() if str(v).endswith(".glb")), None)
+    if glb is None:
+        con.print("[yellow]the fit wrote no .glb: skipping the motion demo[/]")
+        return 0
+    _zooctl("bank", "add", glb, "--name", "demo-fit", "--replace", "--no-views", "--tag", "fitted")
+    _zooctl(
+        "motion", "train", "--assets", "quadruped,quadruped-longneck,quadruped-stout,biped,bird,spider,insect",
+        "--name", "demo", "--width", "64", "--layers", "2", "--max-minutes", "2",
+    )  # fmt: skip
+    _zooctl("animate", "demo-fit", "--sample", "5", "--prior", "demo", "--out", str(out / "animate"))
+    con.print(f"done: everything is in {out}/ (fit, exports, bank.png, animate/)")
     return 0
 
 
