@@ -21,6 +21,21 @@ def quat_normalize(q: np.ndarray) -> np.ndarray:
     return np.where(n > 1e-12, q / np.maximum(n, 1e-12), ident)
 
 
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product of (..., 4) wxyz quaternions (broadcasting)."""
+    aw, ax, ay, az = np.moveaxis(np.asarray(a), -1, 0)
+    bw, bx, by, bz = np.moveaxis(np.asarray(b), -1, 0)
+    return np.stack(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ],
+        -1,
+    )
+
+
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     """(..., 4) wxyz -> (..., 3, 3) rotation matrices."""
     q = quat_normalize(q)

@@ -19,22 +19,9 @@ import torch
 
 from ..asset import Clip, RiggedAsset, sparsify_weights
 from ..geometry import compose_trs, quat_normalize
+from ..geometry import quat_mul as _quat_mul
 from ..rig.skinning import child_offset_shift, stretch_vectors
 from .scene import FitScene
-
-
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack(
-        (
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ),
-        -1,
-    )
 
 
 @torch.no_grad()

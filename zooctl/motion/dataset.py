@@ -21,27 +21,12 @@ import numpy as np
 import torch
 
 from ..errors import InputError
-from ..geometry import quat_normalize, quat_slerp, quat_to_matrix
+from ..geometry import quat_mul, quat_normalize, quat_slerp, quat_to_matrix
 from .skeleton import Skeleton, SkeletonBatch
 
 
 def quat_conj(q: np.ndarray) -> np.ndarray:
     return q * np.array([1.0, -1.0, -1.0, -1.0])
-
-
-def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of (..., 4) wxyz quaternions (broadcasting)."""
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack(
-        [
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ],
-        -1,
-    )
 
 
 def matrix_to_rot6d(m: np.ndarray) -> np.ndarray:
@@ -71,7 +56,9 @@ class MotionSequence:
 def sequence_from_clip(asset, clip: str, skeleton: Skeleton | None = None) -> MotionSequence:
     """The rotations of one clip of ``asset`` relative to its rest pose (translations are dropped)."""
     if clip not in asset.clips:
-        raise InputError(f"asset {asset.name!r} has no clip {clip!r}", hint=f"clips: {', '.join(asset.clips) or 'none'}")
+        raise InputError(
+            f"asset {asset.name!r} has no clip {clip!r}", hint=f"clips: {', '.join(asset.clips) or 'none'}"
+        )
     sk = skeleton or Skeleton.from_asset(asset)
     c = asset.clips[clip]
     delta = quat_mul(quat_conj(sk.rest_rotations)[None], quat_normalize(c.rotations))
@@ -84,14 +71,17 @@ def sequences_from_asset(asset, clips: Sequence[str] | None = None) -> list[Moti
     return [sequence_from_clip(asset, c, sk) for c in (clips if clips is not None else list(asset.clips))]
 
 
-def sequence_from_fit(name: str, parents: np.ndarray, rest_joint_positions: np.ndarray,
-                      local_rotations: np.ndarray, fps: float) -> MotionSequence:
+def sequence_from_fit(
+    name: str, parents: np.ndarray, rest_joint_positions: np.ndarray, local_rotations: np.ndarray, fps: float
+) -> MotionSequence:
     """A fitted video sequence: parents (J,), rest joint positions (J, 3) in model space, per-frame
     local rotations (T, J, 4) wxyz relative to a rest pose with identity rotations, at ``fps``."""
     sk = Skeleton.from_joint_positions(name, parents, rest_joint_positions)
     q = np.asarray(local_rotations, dtype=np.float64)
     if q.ndim != 3 or q.shape[1:] != (sk.num_joints, 4) or len(q) == 0 or not np.all(np.isfinite(q)):
-        raise InputError(f"fit {name!r}: local rotations must be finite (T, {sk.num_joints}, 4), got {q.shape}")
+        raise InputError(
+            f"fit {name!r}: local rotations must be finite (T, {sk.num_joints}, 4), got {q.shape}"
+        )
     if not fps > 0:
         raise InputError(f"fit {name!r}: fps must be positive, got {fps}")
     return MotionSequence(name, sk, quat_normalize(q), float(fps), "fit")
@@ -105,7 +95,9 @@ def resample(seq: MotionSequence, fps: float) -> MotionSequence:
     t = np.arange(int(np.floor(duration * fps + 1e-6)) + 1) * seq.fps / fps  # in source frames
     i0 = np.clip(np.floor(t).astype(int), 0, seq.num_frames - 2)
     w = (t - i0)[:, None]
-    q = quat_slerp(seq.rotations[i0], seq.rotations[i0 + 1], np.broadcast_to(w, (len(t), seq.rotations.shape[1])))
+    q = quat_slerp(
+        seq.rotations[i0], seq.rotations[i0 + 1], np.broadcast_to(w, (len(t), seq.rotations.shape[1]))
+    )
     return MotionSequence(seq.name, seq.skeleton, q, fps, seq.source)
 
 
@@ -153,8 +145,14 @@ class MotionDataset:
     included); ``stride``: frames between window starts (default half the window).
     """
 
-    def __init__(self, sequences: Sequence[MotionSequence], length: int = 10, fps: float = 30.0,
-                 stride: int | None = None, speeds: Sequence[float] = (0.8, 1.25)):
+    def __init__(
+        self,
+        sequences: Sequence[MotionSequence],
+        length: int = 10,
+        fps: float = 30.0,
+        stride: int | None = None,
+        speeds: Sequence[float] = (0.8, 1.25),
+    ):
         if length < 2:
             raise InputError(f"window length must be at least 2 frames, got {length}")
         self.length, self.fps = int(length), float(fps)
@@ -171,7 +169,10 @@ class MotionDataset:
             n_before = len(rots)
             for speed in sorted({1.0, *speeds}):
                 # Playing at `speed` = resampling to fps / speed while keeping the frame rate.
-                r = resample(MotionSequence(seq.name, seq.skeleton, seq.rotations, seq.fps * speed, seq.source), self.fps)
+                r = resample(
+                    MotionSequence(seq.name, seq.skeleton, seq.rotations, seq.fps * speed, seq.source),
+                    self.fps,
+                )
                 for w in windows(r, self.length, stride):
                     rots.append(w)
                     skel_ids.append(sid)
@@ -210,7 +211,9 @@ class MotionDataset:
         rot6d = torch.as_tensor(x, device=device)
         return Batch(rot6d, rot6d_to_matrix(rot6d), sk, [self.sources[i] for i in ids])
 
-    def batches(self, batch_size: int, rng: np.random.Generator, device: torch.device | str = "cpu") -> Iterator[Batch]:
+    def batches(
+        self, batch_size: int, rng: np.random.Generator, device: torch.device | str = "cpu"
+    ) -> Iterator[Batch]:
         """One epoch of shuffled batches, bucketed: chunks of 8 batches are sorted by joint count."""
         order = rng.permutation(len(self))
         counts = np.array([s.num_joints for s in self.skeletons])[self.skel_ids]

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..asset import Clip
-from ..geometry import decompose_trs
+from ..geometry import decompose_trs, quat_mul
 
 FPS = 30.0
 
@@ -41,21 +41,6 @@ def axis_angle_quat(axis: np.ndarray | tuple[float, ...], angle: np.ndarray) -> 
     a = a / np.linalg.norm(a)
     half = 0.5 * np.asarray(angle, dtype=np.float64)
     return np.concatenate([np.cos(half)[:, None], np.sin(half)[:, None] * a[None]], axis=1)
-
-
-def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of (..., 4) wxyz quaternions."""
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack(
-        [
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ],
-        axis=-1,
-    )
 
 
 class ClipBuilder:
