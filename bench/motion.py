@@ -53,8 +53,11 @@ def main() -> None:
     cfg = MotionConfig(width=args.width, layers=args.layers, latent=args.width)
     prior = PonymationPrior(cfg, device=args.device)
     data = prior.dataset(train)
-    print(f"{len(assets)} assets, {len(train)} training clips ({len(data)} windows), {len(test)} held out; "
-          f"model {args.width}x{args.layers}, {sum(p.numel() for p in prior.model.parameters()) / 1e6:.2f} M parameters", flush=True)
+    print(
+        f"{len(assets)} assets, {len(train)} training clips ({len(data)} windows), {len(test)} held out; "
+        f"model {args.width}x{args.layers}, {sum(p.numel() for p in prior.model.parameters()) / 1e6:.2f} M parameters",
+        flush=True,
+    )
     last = [time.perf_counter()]
 
     def on_step(step: int, total: int, losses: dict[str, float]) -> None:
@@ -62,7 +65,9 @@ def main() -> None:
             last[0] = time.perf_counter()
             print(f"  step {step}/{total} loss {losses['total']:.4f}", flush=True)
 
-    opts = TrainOptions(epochs=args.epochs, batch_size=args.batch_size, max_minutes=args.minutes, device=args.device)
+    opts = TrainOptions(
+        epochs=args.epochs, batch_size=args.batch_size, max_minutes=args.minutes, device=args.device
+    )
     hist = prior.fit(data, opts, on_step)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.with_name("motion_loss.png").write_bytes(loss_curve_png(hist))
@@ -81,7 +86,9 @@ def main() -> None:
         rots = prior.sample(big, n=5, frames=60, seed=r)
         sample_only.append(time.perf_counter() - t)
         names = [f"s{i}" for i in range(5)]
-        animated = dataclasses.replace(big, clips={n: motion_clip(big, q, 30.0, n) for n, q in zip(names, rots, strict=True)})
+        animated = dataclasses.replace(
+            big, clips={n: motion_clip(big, q, 30.0, n) for n, q in zip(names, rots, strict=True)}
+        )
         for n in names:
             usd.save(animated, tmp / f"{n}.usd", clips=[n])
             glb.save(animated, tmp / f"{n}.glb", clips=[n])
@@ -91,12 +98,21 @@ def main() -> None:
         "torch_threads": torch.get_num_threads(),
         "command": " ".join(["bench/motion.py", *sys.argv[1:]]),
         "model": cfg.to_json(),
-        "training": {**prior.training, "sequences": len(prior.training["sequences"]), "held_out_clips": sum(len(v) for v in held.values())},
+        "training": {
+            **prior.training,
+            "sequences": len(prior.training["sequences"]),
+            "held_out_clips": sum(len(v) for v in held.values()),
+        },
         "evaluation": {k: v for k, v in result.items() if k != "per_skeleton"},
         "per_skeleton": result["per_skeleton"],
-        "sampling": {"asset": big.name, "joints": big.num_joints, "samples": 5, "frames": 60,
-                     "median_sample_s": round(statistics.median(sample_only), 3),
-                     "median_sample_and_export_s": round(statistics.median(times), 3)},
+        "sampling": {
+            "asset": big.name,
+            "joints": big.num_joints,
+            "samples": 5,
+            "frames": 60,
+            "median_sample_s": round(statistics.median(sample_only), 3),
+            "median_sample_and_export_s": round(statistics.median(times), 3),
+        },
     }
     args.out.write_text(json.dumps(out, indent=1) + "\n")
     widths = [max(len(c[0]), 12) for c in TABLE_COLUMNS]
@@ -104,8 +120,10 @@ def main() -> None:
     for row in format_table(result):
         print(" | ".join(x.ljust(w) for x, w in zip(row, widths, strict=True)))
     s = out["sampling"]
-    print(f"sampling 5x60 frames, {s['joints']} joints: {s['median_sample_s']} s; with USD+GLB export: "
-          f"{s['median_sample_and_export_s']} s (median of 5); results in {args.out}")
+    print(
+        f"sampling 5x60 frames, {s['joints']} joints: {s['median_sample_s']} s; with USD+GLB export: "
+        f"{s['median_sample_and_export_s']} s (median of 5); results in {args.out}"
+    )
 
 
 if __name__ == "__main__":

@@ -17,7 +17,20 @@ from zooctl.motion.prior import PonymationPrior
 from zooctl.store.motion_store import MotionStore
 
 SCHEMA = Path(__file__).resolve().parents[1] / "schemas" / "motion_prior.schema.json"
-TINY = ["--width", "16", "--layers", "1", "--latent", "8", "--length", "8", "--epochs", "1", "--batch-size", "32"]
+TINY = [
+    "--width",
+    "16",
+    "--layers",
+    "1",
+    "--latent",
+    "8",
+    "--length",
+    "8",
+    "--epochs",
+    "1",
+    "--batch-size",
+    "32",
+]
 
 
 @pytest.fixture(autouse=True)
@@ -69,12 +82,29 @@ def test_train_list_show_animate_bench_rm(seeded_store, capsys, monkeypatch, tmp
     assert r.code == 0 and "held out: 2 clips of 2 assets" in r.out
 
     out = tmp_path / "anim"
-    r = run_inprocess(capsys, "animate", "quadruped", "--sample", "2", "--frames", "12", "--seed", "3", "--out", str(out),
-                      "--size", "48", "--json")
+    r = run_inprocess(
+        capsys,
+        "animate",
+        "quadruped",
+        "--sample",
+        "2",
+        "--frames",
+        "12",
+        "--seed",
+        "3",
+        "--out",
+        str(out),
+        "--size",
+        "48",
+        "--json",
+    )
     assert r.code == 0, r.err
     manifest = r.json()
     assert manifest["prior"] == "tiny" and manifest["samples"] == 2
-    assert [Path(p).name for p in manifest["files"]["usd"]] == ["quadruped_sample00.usd", "quadruped_sample01.usd"]
+    assert [Path(p).name for p in manifest["files"]["usd"]] == [
+        "quadruped_sample00.usd",
+        "quadruped_sample01.usd",
+    ]
     assert Path(manifest["files"]["preview"][0]).stat().st_size > 0
     assert Path(manifest["files"]["contact_sheet"][0]).stat().st_size > 0
 
@@ -96,7 +126,20 @@ def test_train_list_show_animate_bench_rm(seeded_store, capsys, monkeypatch, tmp
     assert len(anims) == 1
     assert len(UsdSkel.Animation(anims[0]).GetRotationsAttr().GetTimeSamples()) == 12
 
-    r = run_inprocess(capsys, "bench", "motion", "--prior", "tiny", "--samples", "4", "--repeats", "1", "--frames", "12", "--json")
+    r = run_inprocess(
+        capsys,
+        "bench",
+        "motion",
+        "--prior",
+        "tiny",
+        "--samples",
+        "4",
+        "--repeats",
+        "1",
+        "--frames",
+        "12",
+        "--json",
+    )
     assert r.code == 0, r.err
     res = r.json()
     assert set(res["table"]) == {"ponymation", "pca", "retrieval", "real"}

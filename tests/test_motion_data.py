@@ -49,7 +49,9 @@ def test_clip_rotations_are_relative_to_rest_and_round_trip(quadruped):
     # A clip that holds the rest pose is the identity everywhere.
     rest = Skeleton.from_asset(quadruped)
     still = MotionSequence("still", rest, np.tile([1.0, 0, 0, 0], (4, quadruped.num_joints, 1)), 30.0)
-    assert np.allclose(still.local_rotations(), np.broadcast_to(rest.rest_rotations, (4, quadruped.num_joints, 4)))
+    assert np.allclose(
+        still.local_rotations(), np.broadcast_to(rest.rest_rotations, (4, quadruped.num_joints, 4))
+    )
 
 
 def test_unknown_clip_is_a_clear_error(quadruped):
@@ -109,7 +111,10 @@ def test_fit_sequences_build_their_skeleton_from_joint_positions():
 def test_padded_fk_matches_numpy_fk_for_mixed_skeletons(quadruped, fish):
     """Joint positions through the padded batch equal the asset's own (numpy) FK of a clip frame."""
     batch = SkeletonBatch([Skeleton.from_asset(fish), Skeleton.from_asset(quadruped)])
-    assert batch.num_joints == quadruped.num_joints and batch.mask.sum() == fish.num_joints + quadruped.num_joints
+    assert (
+        batch.num_joints == quadruped.num_joints
+        and batch.mask.sum() == fish.num_joints + quadruped.num_joints
+    )
     deltas = []
     for a, clip in ((fish, "swim"), (quadruped, "walk")):
         seq = sequence_from_clip(a, clip)
@@ -151,7 +156,9 @@ def test_dataset_pads_with_identity_and_serves_every_window_once(quadruped, fish
         pad = ~b.skeletons.mask
         if pad.any():
             ident = torch.tensor([1.0, 0, 0, 0, 1, 0])
-            assert torch.allclose(b.rot6d.permute(0, 2, 1, 3)[pad], ident.expand_as(b.rot6d.permute(0, 2, 1, 3)[pad]))
+            assert torch.allclose(
+                b.rot6d.permute(0, 2, 1, 3)[pad], ident.expand_as(b.rot6d.permute(0, 2, 1, 3)[pad])
+            )
         seen.append(len(b.rot6d))
     assert sum(seen) == len(ds)
     with pytest.raises(InputError, match="no motion windows"):
@@ -159,7 +166,9 @@ def test_dataset_pads_with_identity_and_serves_every_window_once(quadruped, fish
 
 
 def test_metrics_on_known_motions():
-    sk = Skeleton.from_joint_positions("leg", np.array([-1, 0, 1]), np.array([[0.0, 1, 0], [0, 0.5, 0], [0, 0, 0]]))
+    sk = Skeleton.from_joint_positions(
+        "leg", np.array([-1, 0, 1]), np.array([[0.0, 1, 0], [0, 0.5, 0], [0, 0, 0]])
+    )
     T = 10
     still = np.tile([1.0, 0, 0, 0], (3, T, 3, 1))
     p_still = M.joint_positions(still, sk)

@@ -122,7 +122,9 @@ def test_transition_latents_close_the_gap_between_segments(animals):
     L, n = prior.cfg.length, 3
     g = torch.Generator().manual_seed(0)
     with torch.no_grad():
-        content = prior.model.decode(torch.randn(n * 2, 16, generator=g), prior._skeletons(sk, n * 2)).reshape(n, 2, L, -1, 6)
+        content = prior.model.decode(
+            torch.randn(n * 2, 16, generator=g), prior._skeletons(sk, n * 2)
+        ).reshape(n, 2, L, -1, 6)
     z0 = torch.randn(n, 16, generator=g)
     batch = prior._skeletons(sk, n)
 
@@ -147,7 +149,10 @@ def test_save_and_load_give_the_same_samples(tmp_path, animals):
     prior.save(tmp_path / "p", "p")
     again = PonymationPrior.load(tmp_path / "p")
     assert again.cfg == prior.cfg
-    assert np.allclose(prior.sample(quad, 2, 12, seed=1, transition_steps=2), again.sample(quad, 2, 12, seed=1, transition_steps=2))
+    assert np.allclose(
+        prior.sample(quad, 2, 12, seed=1, transition_steps=2),
+        again.sample(quad, 2, 12, seed=1, transition_steps=2),
+    )
 
 
 def test_bad_configs_are_clear_errors():

@@ -173,7 +173,6 @@ def test_reindex_missing_and_add_without_views(store, capsys, monkeypatch):
     assert r.code == 2 and "no asset named 'Nope'" in r.err
 
 
-
 def test_query_from_a_stored_video_name_uses_its_masks(tmp_path):
     """`bank search NAME` with a video already in the store: its stored masks crop the frames."""
     from PIL import Image

@@ -12,12 +12,24 @@ from ._common import JsonOpt, console, err_console, print_json, store_root
 def animate(
     target: str = typer.Argument(..., help="Bank asset to animate."),
     sample: int = typer.Option(5, "--sample", "-n", min=1, max=64, help="How many motions to sample."),
-    frames: int = typer.Option(60, "--frames", min=2, max=10000, help="Frames per motion (longer than the prior's window: chained segments)."),
+    frames: int = typer.Option(
+        60,
+        "--frames",
+        min=2,
+        max=10000,
+        help="Frames per motion (longer than the prior's window: chained segments).",
+    ),
     seed: int = typer.Option(0, "--seed", help="Random seed."),
-    prior_name: str = typer.Option(None, "--prior", help="Motion prior (default: the most recently trained)."),
+    prior_name: str = typer.Option(
+        None, "--prior", help="Motion prior (default: the most recently trained)."
+    ),
     out: Path = typer.Option(None, "--out", help="Output folder (default: ./animate-TARGET)."),
-    formats: str = typer.Option("usd,glb", "--formats", help="Comma-separated export formats (any registered exporter)."),
-    preview: bool = typer.Option(True, "--preview/--no-preview", help="Render a preview video and a contact sheet."),
+    formats: str = typer.Option(
+        "usd,glb", "--formats", help="Comma-separated export formats (any registered exporter)."
+    ),
+    preview: bool = typer.Option(
+        True, "--preview/--no-preview", help="Render a preview video and a contact sheet."
+    ),
     size: int = typer.Option(192, "--size", help="Preview image size in pixels."),
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     json_out: bool = JsonOpt,
@@ -46,13 +58,17 @@ def animate(
     for f in fmts:
         spec = registry.exporter_for(f)
         if spec is None:
-            raise MissingDependencyError(f"no exporter for format {f!r}", hint="see `zooctl plugins` for the formats available")
+            raise MissingDependencyError(
+                f"no exporter for format {f!r}", hint="see `zooctl plugins` for the formats available"
+            )
         exporters[f] = spec
     rots = prior.sample(asset, n=sample, frames=frames, seed=seed)  # (n, frames, J, 4)
     t_sample = time.perf_counter() - t0
     fps = float(getattr(getattr(prior, "cfg", None), "fps", 30.0))
     names = [f"sample{i:02d}" for i in range(sample)]
-    animated = dataclasses.replace(asset, clips={n: motion_clip(asset, r, fps, n) for n, r in zip(names, rots, strict=True)})
+    animated = dataclasses.replace(
+        asset, clips={n: motion_clip(asset, r, fps, n) for n, r in zip(names, rots, strict=True)}
+    )
     out = out or Path(f"animate-{target}")
     out.mkdir(parents=True, exist_ok=True)
     files: dict[str, list[str]] = {f: [] for f in fmts}
@@ -64,29 +80,47 @@ def animate(
     t_export = time.perf_counter() - t0
     if preview:
         files.update(_preview(animated, names, out, target, size, fps, device))
-    manifest = {"target": target, "prior": prior_name, "samples": sample, "frames": frames, "fps": fps, "seed": seed,
-                "files": files, "seconds": {"sample": round(t_sample, 3), "sample_and_export": round(t_export, 3),
-                                            "total": round(time.perf_counter() - t0, 3)}}
+    manifest = {
+        "target": target,
+        "prior": prior_name,
+        "samples": sample,
+        "frames": frames,
+        "fps": fps,
+        "seed": seed,
+        "files": files,
+        "seconds": {
+            "sample": round(t_sample, 3),
+            "sample_and_export": round(t_export, 3),
+            "total": round(time.perf_counter() - t0, 3),
+        },
+    }
     write_bytes_atomic(out / "animate.json", (json.dumps(manifest, indent=1) + "\n").encode())
     if json_out:
         print_json(manifest)
     else:
-        console.print(f"{sample} motions of {frames} frames for {target!r} from prior {prior_name!r} in {out}/ "
-                      f"(sampling + export {t_export:.2f} s)", highlight=False)
+        console.print(
+            f"{sample} motions of {frames} frames for {target!r} from prior {prior_name!r} in {out}/ "
+            f"(sampling + export {t_export:.2f} s)",
+            highlight=False,
+        )
         for kind, paths in files.items():
             console.print(f"  {kind}: " + ", ".join(Path(p).name for p in paths), highlight=False)
     if not preview:
         err_console.print("preview skipped (--no-preview)", style="dim")
 
 
-def _preview(asset, clips: list[str], out: Path, target: str, size: int, fps: float, device: str) -> dict[str, list[str]]:
+def _preview(
+    asset, clips: list[str], out: Path, target: str, size: int, fps: float, device: str
+) -> dict[str, list[str]]:
     """A video with every sample side by side, and a contact sheet (one row of frames per sample)."""
     import numpy as np
 
     from ..io.video import write_mp4
     from ..render.preview import contact_sheet, render_asset, save_png
 
-    videos = [render_asset(asset, c, size=size, supersample=1, device=device) for c in clips]  # (T, H, W, 3) each
+    videos = [
+        render_asset(asset, c, size=size, supersample=1, device=device) for c in clips
+    ]  # (T, H, W, 3) each
     cols = min(len(clips), 5)
     grid = [contact_sheet([v[t] for v in videos], labels=clips, columns=cols) for t in range(len(videos[0]))]
     video = write_mp4(out / f"{target}_samples.mp4", np.stack(grid), fps=fps)
@@ -94,5 +128,7 @@ def _preview(asset, clips: list[str], out: Path, target: str, size: int, fps: fl
     picks = np.linspace(0, T - 1, min(T, 6)).round().astype(int)
     tiles = [v[t] for v in videos for t in picks]
     labels = [f"{c} f{t}" for c in clips for t in picks]
-    sheet = save_png(out / f"{target}_contact_sheet.png", contact_sheet(tiles, labels=labels, columns=len(picks)))
+    sheet = save_png(
+        out / f"{target}_contact_sheet.png", contact_sheet(tiles, labels=labels, columns=len(picks))
+    )
     return {"preview": [str(video)], "contact_sheet": [str(sheet)]}

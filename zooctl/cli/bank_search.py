@@ -17,7 +17,8 @@ def _bank():
 
 def search(
     video: str = typer.Argument(
-        ..., help="Video file, folder of frames, DAVIS folder (JPEGImages/ + Annotations/), or a stored video name."
+        ...,
+        help="Video file, folder of frames, DAVIS folder (JPEGImages/ + Annotations/), or a stored video name.",
     ),
     top: int = typer.Option(5, "--top", help="How many assets to list."),
     embedder: list[str] = typer.Option(

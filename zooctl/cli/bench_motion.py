@@ -9,8 +9,12 @@ from ._common import JsonOpt, console, print_json, print_table, store_root
 
 
 def bench_motion(
-    prior_name: str = typer.Option(None, "--prior", help="Prior to evaluate (default: the most recently trained)."),
-    samples: int = typer.Option(32, "--samples", min=2, help="Generated windows per skeleton (at least as many as held-out windows)."),
+    prior_name: str = typer.Option(
+        None, "--prior", help="Prior to evaluate (default: the most recently trained)."
+    ),
+    samples: int = typer.Option(
+        32, "--samples", min=2, help="Generated windows per skeleton (at least as many as held-out windows)."
+    ),
     seed: int = typer.Option(0, "--seed", help="Sampling seed."),
     frames: int = typer.Option(60, "--frames", help="Frames per motion in the sampling timing."),
     repeats: int = typer.Option(3, "--repeats", help="Timed sampling runs (the median is reported)."),
@@ -33,8 +37,10 @@ def bench_motion(
     training = cfg.get("training", {})
     holdout = training.get("holdout") or {}
     if not holdout:
-        raise UsageError(f"motion prior {name!r} was trained on all its clips: nothing held out to evaluate on",
-                         hint="train with --holdout 0.2")
+        raise UsageError(
+            f"motion prior {name!r} was trained on all its clips: nothing held out to evaluate on",
+            hint="train with --holdout 0.2",
+        )
     prior = store.load(name, device=device)
     bank = Bank.open(store_root())
     assets = [bank.get(a) for a in training.get("assets", sorted(holdout))]
@@ -48,17 +54,35 @@ def bench_motion(
         times.append(time.perf_counter() - t)
     from ..render.benchmark import machine
 
-    result.update({"prior": name, "machine": machine(),
-                   "sampling": {"asset": big.name, "joints": big.num_joints, "samples": 5, "frames": frames,
-                                "median_seconds": round(statistics.median(times), 3), "device": device}})
+    result.update(
+        {
+            "prior": name,
+            "machine": machine(),
+            "sampling": {
+                "asset": big.name,
+                "joints": big.num_joints,
+                "samples": 5,
+                "frames": frames,
+                "median_seconds": round(statistics.median(times), 3),
+                "device": device,
+            },
+        }
+    )
     if json_out:
         print_json(result)
         return
-    print_table(TABLE_COLUMNS, format_table(result), title=f"motion prior {name!r}: {len(result['skeletons'])} skeletons, "
-                f"{result['held_out_windows']} held-out windows")
+    print_table(
+        TABLE_COLUMNS,
+        format_table(result),
+        title=f"motion prior {name!r}: {len(result['skeletons'])} skeletons, "
+        f"{result['held_out_windows']} held-out windows",
+    )
     console.print(f"units: {result['units']}", highlight=False, style="dim")
     s = result["sampling"]
-    console.print(f"sampling 5 x {frames} frames for {s['asset']} ({s['joints']} joints): {s['median_seconds']:.3f} s median ({device})", highlight=False)
+    console.print(
+        f"sampling 5 x {frames} frames for {s['asset']} ({s['joints']} joints): {s['median_seconds']:.3f} s median ({device})",
+        highlight=False,
+    )
 
 
 def register(app: typer.Typer) -> None:

@@ -23,20 +23,34 @@ def _split_names(values: list[str] | None) -> list[str]:
 
 @app.command("train")
 def train(
-    assets: list[str] = typer.Option(None, "--assets", "-a", help="Bank assets whose clips to train on (repeatable or comma-separated)."),
+    assets: list[str] = typer.Option(
+        None, "--assets", "-a", help="Bank assets whose clips to train on (repeatable or comma-separated)."
+    ),
     all_assets: bool = typer.Option(False, "--all", help="Train on every bank asset with clips."),
     name: str = typer.Option("ponymation", "--name", help="Name of the trained prior in the store."),
     epochs: int = typer.Option(50, "--epochs", min=1, help="Passes over all training windows."),
-    max_minutes: float = typer.Option(None, "--max-minutes", help="Stop after this many minutes (at the end of a step)."),
+    max_minutes: float = typer.Option(
+        None, "--max-minutes", help="Stop after this many minutes (at the end of a step)."
+    ),
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
-    width: int = typer.Option(256, "--width", help="Transformer width (Ponymation: 256; 64-128 trains much faster on a CPU)."),
+    width: int = typer.Option(
+        256, "--width", help="Transformer width (Ponymation: 256; 64-128 trains much faster on a CPU)."
+    ),
     layers: int = typer.Option(4, "--layers", help="Layers in each of the four transformers."),
     latent: int = typer.Option(None, "--latent", help="Latent size (default: the width)."),
     length: int = typer.Option(10, "--length", help="Frames per training window (sequence length)."),
     batch_size: int = typer.Option(64, "--batch-size", help="Windows per step."),
     lr: float = typer.Option(3e-4, "--lr", help="Peak learning rate (AdamW, warm-up then cosine decay)."),
-    kl_weight: float = typer.Option(1e-3, "--kl-weight", help="Weight of the KL term (Ponymation's best: 1e-3)."),
-    holdout: float = typer.Option(0.0, "--holdout", min=0.0, max=0.9, help="Fraction of each asset's clips held out for `zooctl bench motion`."),
+    kl_weight: float = typer.Option(
+        1e-3, "--kl-weight", help="Weight of the KL term (Ponymation's best: 1e-3)."
+    ),
+    holdout: float = typer.Option(
+        0.0,
+        "--holdout",
+        min=0.0,
+        max=0.9,
+        help="Fraction of each asset's clips held out for `zooctl bench motion`.",
+    ),
     seed: int = typer.Option(0, "--seed", help="Random seed (initialisation, batches, hold-out split)."),
     threads: int = typer.Option(None, "--threads", help="CPU threads for torch (default: torch's choice)."),
     replace: bool = typer.Option(False, "--replace", help="Overwrite a prior of the same name."),
@@ -57,8 +71,10 @@ def train(
         raise store._exists(name)
     wanted = _split_names(assets)
     if all_assets == bool(wanted):
-        raise UsageError("name the assets to train on with --assets, or use --all (not both)",
-                         hint="zooctl motion train --all")
+        raise UsageError(
+            "name the assets to train on with --assets, or use --all (not both)",
+            hint="zooctl motion train --all",
+        )
     bank = Bank.open(store_root())
     names = bank.names() if all_assets else wanted
     loaded = []
@@ -67,9 +83,15 @@ def train(
         if a.clips:
             loaded.append(a)
         elif not all_assets:
-            raise UsageError(f"asset {n!r} has no animation clips to learn from", hint="pick assets with clips (`zooctl bank list`)")
+            raise UsageError(
+                f"asset {n!r} has no animation clips to learn from",
+                hint="pick assets with clips (`zooctl bank list`)",
+            )
     if not loaded:
-        raise UsageError("no bank asset with animation clips to train on", hint="add some: zooctl bank add FILE.glb, or zooctl bank seed")
+        raise UsageError(
+            "no bank asset with animation clips to train on",
+            hint="add some: zooctl bank add FILE.glb, or zooctl bank seed",
+        )
     if threads:
         import torch
 
@@ -84,15 +106,25 @@ def train(
     train_seqs, _, held = split_assets(loaded, holdout, seed)
     prior = PonymationPrior(cfg, device=device)
     data = prior.dataset(train_seqs)
-    opts = TrainOptions(epochs=epochs, batch_size=batch_size, lr=lr, max_minutes=max_minutes, seed=seed, device=device)
+    opts = TrainOptions(
+        epochs=epochs, batch_size=batch_size, lr=lr, max_minutes=max_minutes, seed=seed, device=device
+    )
     err_console.print(
         f"training {name!r}: {len(loaded)} assets, {len(data.sequence_names)} clips, {len(data)} windows of {length} frames, "
         f"width {width}, {layers} layers, {sum(p.numel() for p in prior.model.parameters()) / 1e6:.2f} M parameters, {device}",
         highlight=False,
     )
-    with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} steps"),
-                  TextColumn("loss {task.fields[loss]}"), TimeElapsedColumn(), TimeRemainingColumn(),
-                  console=err_console, transient=False, disable=json_out) as progress:
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total} steps"),
+        TextColumn("loss {task.fields[loss]}"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=err_console,
+        transient=False,
+        disable=json_out,
+    ) as progress:
         task = progress.add_task("training", total=None, loss="-")
 
         def on_step(step: int, total: int, losses: dict[str, float]) -> None:
@@ -136,11 +168,31 @@ def list_(json_out: bool = JsonOpt) -> None:
     table = []
     for c in rows:
         m, t = c.get("model", {}), c.get("training", {})
-        table.append([c["name"], c.get("plugin", "?"), f"{m.get('width', '?')}x{m.get('layers', '?')}",
-                      f"{c.get('parameters', 0) / 1e6:.2f}M", str(len(t.get("skeletons", []))), str(t.get("windows", "?")),
-                      str(t.get("steps", "?")), c.get("created", "")])
-    print_table([("name", "left"), ("plugin", "left"), ("width x layers", "left"), ("params", "right"),
-                 ("skeletons", "right"), ("windows", "right"), ("steps", "right"), ("created", "left")], table)
+        table.append(
+            [
+                c["name"],
+                c.get("plugin", "?"),
+                f"{m.get('width', '?')}x{m.get('layers', '?')}",
+                f"{c.get('parameters', 0) / 1e6:.2f}M",
+                str(len(t.get("skeletons", []))),
+                str(t.get("windows", "?")),
+                str(t.get("steps", "?")),
+                c.get("created", ""),
+            ]
+        )
+    print_table(
+        [
+            ("name", "left"),
+            ("plugin", "left"),
+            ("width x layers", "left"),
+            ("params", "right"),
+            ("skeletons", "right"),
+            ("windows", "right"),
+            ("steps", "right"),
+            ("created", "left"),
+        ],
+        table,
+    )
 
 
 @app.command("show")
@@ -152,7 +204,10 @@ def show(name: str = typer.Argument(..., help="Prior name."), json_out: bool = J
         print_json({"path": str(store.path(name)), **c})
         return
     m, t = c.get("model", {}), c.get("training", {})
-    console.print(f"[bold]{c['name']}[/] ({c.get('plugin')}, {c.get('parameters', 0) / 1e6:.2f} M parameters) at {store.path(name)}", highlight=False)
+    console.print(
+        f"[bold]{c['name']}[/] ({c.get('plugin')}, {c.get('parameters', 0) / 1e6:.2f} M parameters) at {store.path(name)}",
+        highlight=False,
+    )
     console.print("model: " + ", ".join(f"{k}={v}" for k, v in m.items()), highlight=False)
     fl = t.get("final_loss") or {}
     console.print(
@@ -162,7 +217,9 @@ def show(name: str = typer.Argument(..., help="Prior name."), json_out: bool = J
         highlight=False,
     )
     held = t.get("holdout") or {}
-    console.print(f"held out: {sum(len(v) for v in held.values())} clips of {len(held)} assets", highlight=False)
+    console.print(
+        f"held out: {sum(len(v) for v in held.values())} clips of {len(held)} assets", highlight=False
+    )
 
 
 @app.command("rm")

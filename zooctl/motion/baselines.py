@@ -46,8 +46,13 @@ class _PerSkeleton:
             return skeleton.key
         same = [k for k, s in self.skeletons.items() if s.num_joints == skeleton.num_joints]
         if not same:
-            raise InputError(f"the baseline has no training data for a {skeleton.num_joints}-joint skeleton like {skeleton.key!r}")
-        return min(same, key=lambda k: float(np.abs(self.skeletons[k].rest_positions - skeleton.rest_positions).sum()))
+            raise InputError(
+                f"the baseline has no training data for a {skeleton.num_joints}-joint skeleton like {skeleton.key!r}"
+            )
+        return min(
+            same,
+            key=lambda k: float(np.abs(self.skeletons[k].rest_positions - skeleton.rest_positions).sum()),
+        )
 
 
 class RetrievalBaseline(_PerSkeleton):

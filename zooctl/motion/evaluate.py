@@ -20,8 +20,9 @@ from .dataset import MotionSequence, holdout_split, resample, sequences_from_ass
 METHODS = ("ponymation", "pca", "retrieval", "real")
 
 
-def split_assets(assets: Sequence[Any], fraction: float = 0.2, seed: int = 0,
-                 holdout: dict[str, list[str]] | None = None) -> tuple[list[MotionSequence], list[MotionSequence], dict[str, list[str]]]:
+def split_assets(
+    assets: Sequence[Any], fraction: float = 0.2, seed: int = 0, holdout: dict[str, list[str]] | None = None
+) -> tuple[list[MotionSequence], list[MotionSequence], dict[str, list[str]]]:
     """Train and held-out sequences of assets' clips; ``holdout`` (asset -> clips) overrides the
     hashed split of ``fraction`` (`dataset.holdout_split`)."""
     if holdout is None:
@@ -43,8 +44,13 @@ def _windows(seqs: Sequence[MotionSequence], length: int, fps: float) -> dict[st
     return {k: (sk, np.concatenate(ws)) for k, (sk, ws) in out.items()}
 
 
-def evaluate(prior: Any, train: Sequence[MotionSequence], test: Sequence[MotionSequence], samples: int = 32,
-             seed: int = 0) -> dict[str, Any]:
+def evaluate(
+    prior: Any,
+    train: Sequence[MotionSequence],
+    test: Sequence[MotionSequence],
+    samples: int = 32,
+    seed: int = 0,
+) -> dict[str, Any]:
     """Metrics of ``prior`` (a `PonymationPrior`) and of both baselines on the held-out windows."""
     L, fps = prior.cfg.length, prior.cfg.fps
     train_w, test_w = _windows(train, L, fps), _windows(test, L, fps)
@@ -112,5 +118,11 @@ def format_table(result: dict[str, Any]) -> list[list[str]]:
     return rows
 
 
-TABLE_COLUMNS = [("method", "left"), ("recon MPJPE %", "right"), ("MCD %^2", "right"), ("diversity %", "right"),
-                 ("accel %", "right"), ("foot slide %", "right")]
+TABLE_COLUMNS = [
+    ("method", "left"),
+    ("recon MPJPE %", "right"),
+    ("MCD %^2", "right"),
+    ("diversity %", "right"),
+    ("accel %", "right"),
+    ("foot slide %", "right"),
+]

@@ -38,8 +38,14 @@ def kl_loss(mu: torch.Tensor, logvar: torch.Tensor) -> torch.Tensor:
     return (-0.5 * (1 + logvar - mu**2 - logvar.exp())).sum(-1).mean()
 
 
-def vae_losses(pred6d: torch.Tensor, target_mat: torch.Tensor, mu: torch.Tensor, logvar: torch.Tensor,
-               sk: SkeletonBatch, cfg) -> dict[str, torch.Tensor]:
+def vae_losses(
+    pred6d: torch.Tensor,
+    target_mat: torch.Tensor,
+    mu: torch.Tensor,
+    logvar: torch.Tensor,
+    sk: SkeletonBatch,
+    cfg,
+) -> dict[str, torch.Tensor]:
     """Every term and the weighted ``total`` (weights from the `MotionConfig` ``cfg``)."""
     pred_mat = rot6d_to_matrix(pred6d)
     rot = rotation_loss(pred_mat, target_mat, sk.mask)

@@ -45,7 +45,9 @@ class MotionConfig:
 
     def __post_init__(self) -> None:
         if self.width < 8 or self.width % self.heads:
-            raise InputError(f"width must be at least 8 and divisible by heads ({self.heads}), got {self.width}")
+            raise InputError(
+                f"width must be at least 8 and divisible by heads ({self.heads}), got {self.width}"
+            )
         if self.layers < 1 or self.latent < 1 or self.length < 2 or not self.fps > 0:
             raise InputError("layers and latent must be >= 1, length >= 2 frames and fps > 0")
 
@@ -67,14 +69,16 @@ def time_encoding(t: torch.Tensor, dim: int) -> torch.Tensor:
 
 
 def _encoder(cfg: MotionConfig) -> nn.TransformerEncoder:
-    layer = nn.TransformerEncoderLayer(cfg.width, cfg.heads, cfg.width * cfg.ff_mult, cfg.dropout,
-                                       batch_first=True, norm_first=True)
+    layer = nn.TransformerEncoderLayer(
+        cfg.width, cfg.heads, cfg.width * cfg.ff_mult, cfg.dropout, batch_first=True, norm_first=True
+    )
     return nn.TransformerEncoder(layer, cfg.layers, enable_nested_tensor=False)
 
 
 def _decoder(cfg: MotionConfig) -> nn.TransformerDecoder:
-    layer = nn.TransformerDecoderLayer(cfg.width, cfg.heads, cfg.width * cfg.ff_mult, cfg.dropout,
-                                       batch_first=True, norm_first=True)
+    layer = nn.TransformerDecoderLayer(
+        cfg.width, cfg.heads, cfg.width * cfg.ff_mult, cfg.dropout, batch_first=True, norm_first=True
+    )
     return nn.TransformerDecoder(layer, cfg.layers)
 
 
@@ -111,7 +115,9 @@ class MotionVAE(nn.Module):
     def encode(self, rot6d: torch.Tensor, sk: SkeletonBatch) -> tuple[torch.Tensor, torch.Tensor]:
         """rot6d (B, T, J, 6) -> mu, logvar (B, Z)."""
         B, T, J, _ = rot6d.shape
-        tokens = self.rot_in((rot6d - self.identity6d) * self.rot_gain) + self.bone_in(sk.static)[:, None]  # (B, T, J, W)
+        tokens = (
+            self.rot_in((rot6d - self.identity6d) * self.rot_gain) + self.bone_in(sk.static)[:, None]
+        )  # (B, T, J, W)
         tokens = torch.cat([self.frame_token.expand(B, T, 1, -1), tokens], 2).reshape(B * T, J + 1, -1)
         pad = torch.cat([sk.mask.new_zeros(B, 1), ~sk.mask], 1)  # True: ignore
         pad = pad[:, None].expand(B, T, J + 1).reshape(B * T, J + 1)
@@ -125,7 +131,9 @@ class MotionVAE(nn.Module):
     def decode_frames(self, z: torch.Tensor, T: int) -> torch.Tensor:
         """z (B, Z) -> frame features (B, T, W) at timestamps 0..T-1."""
         B = z.shape[0]
-        queries = self.time_in(time_encoding(torch.arange(T, device=z.device), self.cfg.width)).expand(B, T, -1)
+        queries = self.time_in(time_encoding(torch.arange(T, device=z.device), self.cfg.width)).expand(
+            B, T, -1
+        )
         return self.temporal_decoder(queries, self.z_in(z)[:, None])
 
     def decode_bones(self, frames: torch.Tensor, sk: SkeletonBatch) -> torch.Tensor:

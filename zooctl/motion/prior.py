@@ -50,11 +50,17 @@ class PonymationPrior:
         self.history: TrainHistory | None = None
 
     # -- training ---------------------------------------------------------------------------
-    def dataset(self, sequences: Sequence[MotionSequence], speeds: Sequence[float] = (0.8, 1.25)) -> MotionDataset:
+    def dataset(
+        self, sequences: Sequence[MotionSequence], speeds: Sequence[float] = (0.8, 1.25)
+    ) -> MotionDataset:
         return MotionDataset(sequences, length=self.cfg.length, fps=self.cfg.fps, speeds=speeds)
 
-    def fit(self, data: Sequence[MotionSequence] | MotionDataset, options: TrainOptions | None = None,
-            on_step: Callable[[int, int, dict[str, float]], None] | None = None) -> TrainHistory:
+    def fit(
+        self,
+        data: Sequence[MotionSequence] | MotionDataset,
+        options: TrainOptions | None = None,
+        on_step: Callable[[int, int, dict[str, float]], None] | None = None,
+    ) -> TrainHistory:
         """Train on sequences (or a prepared `MotionDataset`); records what it trained on."""
         ds = data if isinstance(data, MotionDataset) else self.dataset(data)
         opts = options or TrainOptions(device=str(self.device))
@@ -93,7 +99,9 @@ class PonymationPrior:
         out.update(extra or {})
         return out
 
-    def save(self, directory: str | Path, name: str | None = None, extra: dict[str, Any] | None = None) -> None:
+    def save(
+        self, directory: str | Path, name: str | None = None, extra: dict[str, Any] | None = None
+    ) -> None:
         """Write ``weights.pt`` and ``config.json`` into ``directory`` (the caller publishes it)."""
         d = Path(directory)
         d.mkdir(parents=True, exist_ok=True)
@@ -109,15 +117,22 @@ class PonymationPrior:
         except (OSError, json.JSONDecodeError) as exc:
             raise StoreError(f"the motion prior at {d} is unreadable: {exc}", hint="train it again") from None
         if cfg.get("schema_version") != SCHEMA_VERSION:
-            raise StoreError(f"motion prior {d.name!r} has schema version {cfg.get('schema_version')}, "
-                             f"this zooctl reads {SCHEMA_VERSION}", hint="train it again")
+            raise StoreError(
+                f"motion prior {d.name!r} has schema version {cfg.get('schema_version')}, "
+                f"this zooctl reads {SCHEMA_VERSION}",
+                hint="train it again",
+            )
         prior = cls(MotionConfig.from_json(cfg.get("model", {})), device=device)
         try:
-            state = torch.load(d / cfg.get("files", {}).get("weights", WEIGHTS), map_location="cpu", weights_only=True)
+            state = torch.load(
+                d / cfg.get("files", {}).get("weights", WEIGHTS), map_location="cpu", weights_only=True
+            )
             prior.model.load_state_dict(state)
         except (OSError, RuntimeError, EOFError, pickle.UnpicklingError) as exc:
             msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            raise StoreError(f"the weights of motion prior {d.name!r} are unreadable: {msg}", hint="train it again") from None
+            raise StoreError(
+                f"the weights of motion prior {d.name!r} are unreadable: {msg}", hint="train it again"
+            ) from None
         prior.model.to(prior.device).eval()
         prior.training = cfg.get("training", {})
         return prior
@@ -139,8 +154,9 @@ class PonymationPrior:
         pred, _, _ = self.model(x, sk, sample=False)
         return self._to_quat(pred)
 
-    def sample_delta(self, skeleton: Skeleton, n: int, frames: int, seed: int = 0,
-                     transition_steps: int = 30) -> np.ndarray:
+    def sample_delta(
+        self, skeleton: Skeleton, n: int, frames: int, seed: int = 0, transition_steps: int = 30
+    ) -> np.ndarray:
         """(n, frames, J, 4) rotations relative to rest, chained with optimised transitions."""
         if n < 1 or frames < 1:
             raise InputError(f"need at least one sample of one frame, got n={n}, frames={frames}")
@@ -149,20 +165,25 @@ class PonymationPrior:
         K = 1 if frames <= L else int(np.ceil((frames + L - 2) / (2 * L - 2)))
         z_content = torch.randn(n * K, Z, generator=gen).to(self.device)
         with torch.no_grad():
-            content = self.model.decode(z_content, self._skeletons(skeleton, n * K), L).reshape(n, K, L, -1, 6)
+            content = self.model.decode(z_content, self._skeletons(skeleton, n * K), L).reshape(
+                n, K, L, -1, 6
+            )
         if K == 1:
             return self._to_quat(content[:, 0, :frames])
         z_trans = torch.randn(n * (K - 1), Z, generator=gen).to(self.device)
         z_trans = self._optimise_transitions(z_trans, content, skeleton, transition_steps)
         with torch.no_grad():
-            trans = self.model.decode(z_trans, self._skeletons(skeleton, n * (K - 1)), L).reshape(n, K - 1, L, -1, 6)
+            trans = self.model.decode(z_trans, self._skeletons(skeleton, n * (K - 1)), L).reshape(
+                n, K - 1, L, -1, 6
+            )
         parts = [content[:, 0]]
         for k in range(K - 1):
             parts += [trans[:, k, 1 : L - 1], content[:, k + 1]]
         return self._to_quat(torch.cat(parts, 1)[:, :frames])
 
-    def _optimise_transitions(self, z: torch.Tensor, content: torch.Tensor, skeleton: Skeleton,
-                              steps: int) -> torch.Tensor:
+    def _optimise_transitions(
+        self, z: torch.Tensor, content: torch.Tensor, skeleton: Skeleton, steps: int
+    ) -> torch.Tensor:
         """Optimise transition latents z (n*(K-1), Z) against content (n, K, L, J, 6)."""
         from ..rig.rotations import rot6d_to_matrix
 
@@ -190,7 +211,9 @@ class PonymationPrior:
                 vel_err2 = ((pos[:, 3] - pos[:, 2]) - (target_pos[:, 3] - target_pos[:, 2])) ** 2
                 rot_err = (rot[:, [0, 3]] - target_rot[:, [1, 2]]) ** 2
                 loss = (
-                    (pose_err * mask).sum() + ((vel_err + vel_err2) * mask[:, 0]).sum() + 0.1 * (rot_err * mask[..., None]).sum()
+                    (pose_err * mask).sum()
+                    + ((vel_err + vel_err2) * mask[:, 0]).sum()
+                    + 0.1 * (rot_err * mask[..., None]).sum()
                 ) / mask.sum() + 1e-3 * (z**2).mean()
                 opt.zero_grad()
                 loss.backward()
@@ -217,4 +240,10 @@ def motion_clip(asset: Any, rotations: np.ndarray, fps: float, name: str) -> Cli
     translation and scale (root motion is not modelled)."""
     t, _, s = decompose_trs(asset.rest_local)
     T = len(rotations)
-    return Clip(name, float(fps), np.asarray(rotations, dtype=np.float64), np.repeat(t[None], T, 0), np.repeat(s[None], T, 0))
+    return Clip(
+        name,
+        float(fps),
+        np.asarray(rotations, dtype=np.float64),
+        np.repeat(t[None], T, 0),
+        np.repeat(s[None], T, 0),
+    )

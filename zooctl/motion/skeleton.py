@@ -53,9 +53,14 @@ class Skeleton:
         J = len(self.joint_names)
         self.parents = np.asarray(self.parents, dtype=np.int64)
         if J == 0 or self.parents.shape != (J,) or any(not (-1 <= p < j) for j, p in enumerate(self.parents)):
-            raise InputError(f"skeleton {self.key!r}: parents must be (J,) topologically sorted (parents[j] < j, roots -1)")
-        for arr, n, w in ((self.rest_translations, "rest translations", 3), (self.rest_rotations, "rest rotations", 4),
-                          (self.rest_scales, "rest scales", 3)):
+            raise InputError(
+                f"skeleton {self.key!r}: parents must be (J,) topologically sorted (parents[j] < j, roots -1)"
+            )
+        for arr, n, w in (
+            (self.rest_translations, "rest translations", 3),
+            (self.rest_rotations, "rest rotations", 4),
+            (self.rest_scales, "rest scales", 3),
+        ):
             if np.shape(arr) != (J, w) or not np.all(np.isfinite(arr)):
                 raise InputError(f"skeleton {self.key!r}: {n} must be finite ({J}, {w})")
         local = compose_trs(self.rest_translations, self.rest_rotations, self.rest_scales)
@@ -93,7 +98,14 @@ class Skeleton:
         offset = np.where(self.parents[:, None] >= 0, pos - pos[np.maximum(self.parents, 0)], 0.0)
         leaf = np.ones(J)
         leaf[self.parents[self.parents >= 0]] = 0.0
-        feats = [pos, offset, leaf[:, None], sinusoid(np.arange(J)), sinusoid(self.depth()), sinusoid(self.parents + 1)]
+        feats = [
+            pos,
+            offset,
+            leaf[:, None],
+            sinusoid(np.arange(J)),
+            sinusoid(self.depth()),
+            sinusoid(self.parents + 1),
+        ]
         return np.concatenate(feats, -1).astype(np.float32)
 
     def feet(self, height_fraction: float = 0.08) -> np.ndarray:
@@ -115,8 +127,9 @@ class Skeleton:
         return cls(asset.name, list(asset.joint_names), np.asarray(asset.parents), t, q, s)
 
     @classmethod
-    def from_joint_positions(cls, key: str, parents: np.ndarray, positions: np.ndarray,
-                             joint_names: list[str] | None = None) -> Skeleton:
+    def from_joint_positions(
+        cls, key: str, parents: np.ndarray, positions: np.ndarray, joint_names: list[str] | None = None
+    ) -> Skeleton:
         """A skeleton given only rest joint positions (J, 3) in model space (a fitted animal):
         identity rest rotations and unit scales, each bone's translation the offset from its parent."""
         parents = np.asarray(parents, dtype=np.int64)
@@ -125,7 +138,9 @@ class Skeleton:
         if pos.shape != (J, 3):
             raise InputError(f"rest joint positions must be ({J}, 3) for {J} parents, got {pos.shape}")
         if any(not (-1 <= p < j) for j, p in enumerate(parents)):
-            raise InputError(f"skeleton {key!r}: parents must be topologically sorted (parents[j] < j, roots -1)")
+            raise InputError(
+                f"skeleton {key!r}: parents must be topologically sorted (parents[j] < j, roots -1)"
+            )
         t = np.where(parents[:, None] >= 0, pos - pos[np.maximum(parents, 0)], pos)
         q = np.zeros((J, 4))
         q[:, 0] = 1.0
@@ -187,7 +202,9 @@ class SkeletonBatch:
         out = object.__new__(SkeletonBatch)
         out.skeletons = [self.skeletons[i] for i in ids]
         J = int(self._arrays["count"][ids].max())
-        out._arrays = {k: (v[ids] if k in ("count", "center") else v[ids, :J]) for k, v in self._arrays.items()}
+        out._arrays = {
+            k: (v[ids] if k in ("count", "center") else v[ids, :J]) for k, v in self._arrays.items()
+        }
         out.device = self.device
         out._to_tensors()
         return out

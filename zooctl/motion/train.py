@@ -46,12 +46,19 @@ class TrainHistory:
             "steps": self.steps,
             "seconds": round(self.seconds, 2),
             "stopped_early": self.stopped_early,
-            "final": {k: (getattr(self, k)[-1] if getattr(self, k) else None) for k in ("total", "rotation", "joints", "kl")},
+            "final": {
+                k: (getattr(self, k)[-1] if getattr(self, k) else None)
+                for k in ("total", "rotation", "joints", "kl")
+            },
         }
 
 
-def train_vae(model: MotionVAE, data: MotionDataset, opts: TrainOptions,
-              on_step: Callable[[int, int, dict[str, float]], None] | None = None) -> TrainHistory:
+def train_vae(
+    model: MotionVAE,
+    data: MotionDataset,
+    opts: TrainOptions,
+    on_step: Callable[[int, int, dict[str, float]], None] | None = None,
+) -> TrainHistory:
     """Train ``model`` on ``data`` in place. ``on_step(step, total_steps, losses)`` reports progress."""
     torch.manual_seed(opts.seed)
     rng = np.random.default_rng(opts.seed)
@@ -69,7 +76,9 @@ def train_vae(model: MotionVAE, data: MotionDataset, opts: TrainOptions,
         return opts.lr * (0.1 + 0.9 * 0.5 * (1 + math.cos(math.pi * p)))
 
     with torch.no_grad():
-        dev6d = np.concatenate([(w - np.array([1.0, 0, 0, 0, 1, 0], np.float32)).ravel() for w in data._rot6d])
+        dev6d = np.concatenate(
+            [(w - np.array([1.0, 0, 0, 0, 1, 0], np.float32)).ravel() for w in data._rot6d]
+        )
         model.rot_gain.fill_(float(1.0 / max(np.sqrt(np.mean(dev6d**2)), 1e-3)))
     hist = TrainHistory()
     start = time.perf_counter()
@@ -87,7 +96,9 @@ def train_vae(model: MotionVAE, data: MotionDataset, opts: TrainOptions,
             if not math.isfinite(vals["total"]):
                 from ..errors import ZooctlError
 
-                raise ZooctlError("training diverged (loss is not finite)", hint="lower --lr or use a smaller model")
+                raise ZooctlError(
+                    "training diverged (loss is not finite)", hint="lower --lr or use a smaller model"
+                )
             for k, v in vals.items():
                 getattr(hist, k).append(v)
             hist.steps += 1

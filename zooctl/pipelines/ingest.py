@@ -81,7 +81,10 @@ def add_files(
                 try:
                     r.summary = {**r.summary, "views": index_asset(bank, asset)}
                 except ZooctlError as exc:
-                    raise type(exc)(f"{asset_name} was added, but its retrieval views failed: {exc.message}", hint=f"fix that, then run `zooctl bank reindex {asset_name}`") from None
+                    raise type(exc)(
+                        f"{asset_name} was added, but its retrieval views failed: {exc.message}",
+                        hint=f"fix that, then run `zooctl bank reindex {asset_name}`",
+                    ) from None
         except ZooctlError as exc:
             r.error = exc
         results.append(r)
