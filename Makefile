@@ -29,8 +29,11 @@ demo: $(STAMP)
 test: $(TEST_STAMP)
 	$(BIN)/python -m pytest -q -p no:cacheprovider -n 2 --dist loadfile --durations=15
 
+# The quick benchmarks; bench/{video,retrieval,fit,motion,embed}.py are longer runs (see BENCHMARKS.md).
 bench: $(STAMP)
 	$(BIN)/python bench/bank.py
+	$(BIN)/python bench/render.py --threads 1
+	$(BIN)/python bench/export.py
 
 lint: $(STAMP)
 	$(BIN)/ruff check zooctl tests bench plugins
