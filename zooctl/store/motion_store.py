@@ -42,7 +42,9 @@ class MotionStore:
     def names(self) -> list[str]:
         if not self.dir.is_dir():
             return []
-        return sorted(p.name for p in self.dir.iterdir() if not p.name.startswith(".") and (p / CONFIG).is_file())
+        return sorted(
+            p.name for p in self.dir.iterdir() if not p.name.startswith(".") and (p / CONFIG).is_file()
+        )
 
     def config(self, name: str) -> dict[str, Any]:
         p = self.path(name) / CONFIG
@@ -51,7 +53,9 @@ class MotionStore:
         except FileNotFoundError:
             raise self._not_found(name) from None
         except (OSError, json.JSONDecodeError) as exc:
-            raise StoreError(f"the config of motion prior {name!r} is unreadable: {exc}", hint="train it again") from None
+            raise StoreError(
+                f"the config of motion prior {name!r} is unreadable: {exc}", hint="train it again"
+            ) from None
 
     def list(self) -> list[dict[str, Any]]:
         out = []
@@ -66,7 +70,9 @@ class MotionStore:
         """The most recently written prior (the default of `zooctl animate`)."""
         names = self.names()
         if not names:
-            raise NotFoundError(f"no motion prior in the store at {self.root}", hint="train one: zooctl motion train --all")
+            raise NotFoundError(
+                f"no motion prior in the store at {self.root}", hint="train one: zooctl motion train --all"
+            )
         return max(names, key=lambda n: (self.path(n) / CONFIG).stat().st_mtime_ns)
 
     def load(self, name: str, device: str = "cpu") -> Any:
@@ -143,4 +149,6 @@ class MotionStore:
         return NotFoundError(f"no motion prior named {name!r} in the store at {self.root}", hint=hint)
 
     def _exists(self, name: str) -> AlreadyExistsError:
-        return AlreadyExistsError(f"a motion prior named {name!r} already exists", hint="use --replace or another --name")
+        return AlreadyExistsError(
+            f"a motion prior named {name!r} already exists", hint="use --replace or another --name"
+        )
