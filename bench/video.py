@@ -16,8 +16,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import statistics
 import sys
 import tempfile
@@ -34,16 +32,9 @@ SEQUENCES = ("blackswan", "dog", "cows")
 
 def machine() -> str:
     import cv2
+    from _util import machine as base_machine
 
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{os.cpu_count()} cores ({cpu}), OpenCV {cv2.__version__} with {cv2.getNumThreads()} threads"
+    return f"{base_machine()}, OpenCV {cv2.__version__} with {cv2.getNumThreads()} threads"
 
 
 def load_truth(seq: str, frames_shape) -> np.ndarray:
