@@ -49,3 +49,13 @@ def run_inprocess(capsys: pytest.CaptureFixture, *args: str) -> Result:
     code = run(list(args))
     cap = capsys.readouterr()
     return Result(code, cap.out, cap.err)
+
+
+def pip(*args: str) -> None:
+    """Run pip in this venv, as a user installing a plugin package would."""
+    subprocess.run(
+        [sys.executable, "-m", "pip", "-q", "--disable-pip-version-check", *args],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )

@@ -3,13 +3,11 @@ are reported and skipped, misspelt hooks, ZOOCTL_LOAD_PLUGINS, and attribution i
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import textwrap
 from pathlib import Path
 
 import pytest
-from cli_helpers import REPO, zooctl
+from cli_helpers import REPO, pip, zooctl
 
 from zooctl.components import ImporterSpec
 from zooctl.errors import PluginError
@@ -18,21 +16,12 @@ from zooctl.plugins import PluginManager, hookimpl
 EXAMPLE = REPO / "plugins" / "zooctl-example"
 
 
-def _pip(*args: str) -> None:
-    subprocess.run(
-        [sys.executable, "-m", "pip", "-q", "--disable-pip-version-check", *args],
-        check=True,
-        capture_output=True,
-        timeout=300,
-    )
-
-
 @pytest.fixture(scope="module")
 def example_installed():
     """pip-install the example plugin into this venv, exactly as a user would; remove it after."""
-    _pip("install", "--no-deps", "--no-build-isolation", str(EXAMPLE))
+    pip("install", "--no-deps", "--no-build-isolation", str(EXAMPLE))
     yield
-    _pip("uninstall", "-y", "zooctl-example")
+    pip("uninstall", "-y", "zooctl-example")
 
 
 def test_builtins_are_registered_through_entry_points():
@@ -90,7 +79,7 @@ def _install_broken(tmp_path, module_src: str, dist: str) -> Path:
         )
     )
     target = tmp_path / "site"
-    _pip("install", "--no-deps", "--no-build-isolation", "--target", str(target), str(pkg))
+    pip("install", "--no-deps", "--no-build-isolation", "--target", str(target), str(pkg))
     return target
 
 

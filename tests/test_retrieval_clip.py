@@ -9,25 +9,16 @@ import sys
 import textwrap
 
 import pytest
-from cli_helpers import REPO, zooctl
+from cli_helpers import REPO, pip, zooctl
 
 CLIP_PLUGIN = REPO / "plugins" / "zooctl-clip"
 
 
-def _pip(*args: str) -> None:
-    subprocess.run(
-        [sys.executable, "-m", "pip", "-q", "--disable-pip-version-check", *args],
-        check=True,
-        capture_output=True,
-        timeout=300,
-    )
-
-
 @pytest.fixture(scope="module")
 def clip_installed():
-    _pip("install", "--no-deps", "--no-build-isolation", str(CLIP_PLUGIN))
+    pip("install", "--no-deps", "--no-build-isolation", str(CLIP_PLUGIN))
     yield
-    _pip("uninstall", "-y", "zooctl-clip")
+    pip("uninstall", "-y", "zooctl-clip")
 
 
 @pytest.fixture(scope="module")
