@@ -44,6 +44,18 @@ def store(tmp_path, monkeypatch) -> Path:
     return root
 
 
+@pytest.fixture
+def one_thread():
+    """One torch thread for tests of optimisation loops of many small ops: two threads thrash
+    OpenMP on a busy 2-core machine. Use with ``pytestmark = pytest.mark.usefixtures("one_thread")``."""
+    import torch
+
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
 @pytest.fixture(autouse=True)
 def _quiet_env(monkeypatch):
     monkeypatch.delenv("ZOOCTL_DEBUG", raising=False)

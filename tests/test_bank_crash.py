@@ -45,7 +45,8 @@ def test_sigkill_at_random_moments_never_loses_or_half_writes(tmp_path):
     confirmed: dict[str, str] = {}
     kills = 0
     for round_ in range(24):
-        proc = _writer(tmp_path, f"r{round_ % 3}_", 40)
+        # Far more adds than fit in 1.5 s (an idle machine does ~40 a second): every round is killed.
+        proc = _writer(tmp_path, f"r{round_ % 3}_", 100_000)
         time.sleep(float(rng.uniform(0.4, 1.5)))  # import time is ~0.5 s: some kills land mid-write
         proc.send_signal(signal.SIGKILL)
         out, _ = proc.communicate(timeout=60)

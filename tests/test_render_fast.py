@@ -8,14 +8,7 @@ from zooctl.render.fast import SplatSilhouette, subdivision_barycentrics
 from zooctl.render.raster import rasterize
 from zooctl.rig.synthetic import uv_sphere
 
-
-@pytest.fixture(autouse=True)
-def _one_thread():
-    """Optimisation loops of many small ops: one thread avoids OpenMP thrashing on a busy 2-core box."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_thread")  # see conftest
 
 
 def test_barycentric_samples_are_on_the_triangle():

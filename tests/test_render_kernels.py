@@ -21,17 +21,12 @@ from zooctl.render.soft import SoftSilhouette, _SoftSilhouetteKernel
 from zooctl.render.windows import face_windows, project_faces
 from zooctl.rig.synthetic import uv_sphere
 
-pytestmark = pytest.mark.skipif(
-    not _kernels.available(), reason=f"renderer kernels did not build: {_kernels.error()}"
-)
-
-
-@pytest.fixture(autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = [
+    pytest.mark.usefixtures("one_thread"),
+    pytest.mark.skipif(
+        not _kernels.available(), reason=f"renderer kernels did not build: {_kernels.error()}"
+    ),
+]
 
 
 def _scene(dtype, faces=500, size=(40, 48), batch=2):

@@ -10,14 +10,7 @@ from zooctl.rig.model import ArticulatedModel
 from zooctl.rig.rotations import axis_angle_to_quat
 from zooctl.rig.synthetic import tube_asset
 
-
-@pytest.fixture(autouse=True)
-def _one_thread():
-    """Optimisation loops of many small ops: one thread avoids OpenMP thrashing on a busy 2-core box."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_thread")  # see conftest
 
 
 def test_recovers_a_bent_joint_from_masks_over_frames():
