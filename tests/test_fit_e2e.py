@@ -61,19 +61,23 @@ def fitted(animal_video, tmp_path_factory):
 
     from zooctl.cli.main import run
 
-    old = os.environ.get("ZOOCTL_STORE")
+    old, cwd = os.environ.get("ZOOCTL_STORE"), os.getcwd()
     os.environ["ZOOCTL_STORE"] = str(store)
+    os.chdir(store.parent)  # outputs go to ./fits/NAME by default
     try:
         code = run(
             ["fit", str(folder), "--template", "quadruped", "--config", str(cfg), "--name", "quad", "--json"]
         )
     finally:
+        os.chdir(cwd)
         if old is None:
             os.environ.pop("ZOOCTL_STORE", None)
         else:
             os.environ["ZOOCTL_STORE"] = old
     assert code == 0
-    return store, json.loads((store / "fits" / "quad" / "record.json").read_text())
+    rec = json.loads((store / "fits" / "quad" / "record.json").read_text())
+    assert Path(rec["out"]) == (store.parent / "fits" / "quad").resolve()
+    return store, rec
 
 
 def test_fit_record_and_quality(fitted):

@@ -64,3 +64,22 @@ def test_stretch_and_lbs_gradcheck():
     assert torch.autograd.gradcheck(
         lambda p: endpoint_weights(p[:, None, :], heads[bones], tails[bones]), (pts,)
     )
+
+
+def test_lbs_dense_and_gathered_paths_agree(monkeypatch):
+    """Skeletons up to DENSE_MAX_JOINTS blend through dense weights; bigger ones gather: same result."""
+    from zooctl.rig import skinning
+
+    g = torch.Generator().manual_seed(3)
+    B, V, J, K = 2, 50, 9, 3
+    points = torch.randn(V, 3, generator=g, dtype=torch.float64)
+    mats = torch.randn(B, J, 4, 4, generator=g, dtype=torch.float64)
+    bones = torch.stack([torch.randperm(J, generator=g)[:K] for _ in range(V)])
+    w = torch.softmax(torch.randn(V, K, generator=g, dtype=torch.float64), -1)
+    st = torch.randn(B, J, 3, generator=g, dtype=torch.float64)
+    e = torch.rand(V, K, generator=g, dtype=torch.float64)
+    dense = linear_blend_skinning(points, mats, bones, w, st, e)
+    monkeypatch.setattr(skinning, "DENSE_MAX_JOINTS", 0)
+    gathered = linear_blend_skinning(points, mats, bones, w, st, e)
+    assert dense.shape == (B, V, 3)
+    torch.testing.assert_close(dense, gathered)

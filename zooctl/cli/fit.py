@@ -59,7 +59,7 @@ def fit(
         "--box",
         help="x,y,w,h around the animal in the first frame (original pixels): seeds --masks auto.",
     ),
-    out: Path = typer.Option(None, "--out", help="Output folder (default: the fit's folder in the store)."),
+    out: Path = typer.Option(None, "--out", help="Output folder (default: fits/NAME in the current folder)."),
     name: str = typer.Option(None, "--name", help="Fit name (default: the video's name)."),
     preset_name: str = typer.Option("fast", "--preset", help="fast or quality."),
     iters: int = typer.Option(None, "--iters", help="Stage 2 iterations (overrides the preset)."),
@@ -106,6 +106,7 @@ def fit(
             reporter=rep,
             resume=resume,
             box=parse_box(box) if box else None,
+            out_root=Path("fits"),
         )
     if json_out:
         print_json(rec)

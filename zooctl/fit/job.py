@@ -170,8 +170,12 @@ def fit_job(
     bank: Any = None,
     outputs: tuple[str, ...] = ("usd", "glb", "overlay", "loss"),
     box: tuple[float, float, float, float] | None = None,
+    out_root: Path | None = None,
 ) -> dict[str, Any]:
-    """Fit a video and write its outputs and store record; returns the record (``fit.json``)."""
+    """Fit a video and write its outputs and store record; returns the record (``fit.json``).
+
+    Outputs go to ``out``, else ``out_root/<name>`` (the CLI's ``fits/<name>``), else the fit's
+    folder in the store."""
     from ..store.bank import Bank
     from .template import choose_template
 
@@ -200,7 +204,11 @@ def fit_job(
     t_ret = time.perf_counter() - t_ret
     if resume and state is not None:
         candidates = fits.get(name).get("retrieval", [])
-    out_dir = Path(out) if out is not None else fits.path(name)
+    if out is not None:
+        out_dir = Path(out)
+    else:
+        out_dir = Path(out_root) / name if out_root is not None else fits.path(name)
+    out_dir = out_dir.resolve()  # the record names its files by absolute paths
     out_dir.mkdir(parents=True, exist_ok=True)
     record: dict[str, Any] = {
         "status": "running",

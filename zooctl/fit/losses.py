@@ -81,9 +81,23 @@ def contour_loss(
     d_out = F.grid_sample(targets.outside_dt[frames], grid, align_corners=False, padding_mode="border")[
         :, 0, 0
     ]
-    outside = (d_out**2).mean(1)
+    # Beyond the fit image the distance transform is clamped at its border (no gradient there), so
+    # add how far a vertex lies outside it: parts sticking out of the crop are pulled back in.
+    beyond = (
+        (-xy[..., 0]).clamp_min(0)
+        + (xy[..., 0] - w).clamp_min(0)
+        + (-xy[..., 1]).clamp_min(0)
+        + (xy[..., 1] - h).clamp_min(0)
+    ) / max(h, w)
+    outside = ((d_out + beyond) ** 2).mean(1)
     pts = targets.samples[frames]  # (B, S, 2)
-    near = torch.cdist(pts, xy).min(-1).values / max(h, w)  # (B, S)
+    # The nearest vertex of each sample without autograd (the backward of a full cdist costs
+    # more than the rest of a fit step), then the distance to it with autograd.
+    with torch.no_grad():
+        # |x|^2 - 2 p.x ranks vertices like the distance (|p|^2 is constant per sample), 2x cdist's speed
+        nearest = (xy.square().sum(-1)[:, None] - 2.0 * torch.bmm(pts, xy.transpose(1, 2))).argmin(-1)
+    closest = xy.gather(1, nearest[..., None].expand(-1, -1, 2))  # (B, S, 2)
+    near = (pts - closest).square().sum(-1).add(1e-12).sqrt() / max(h, w)  # (B, S)
     ok = targets.sample_ok[frames].to(near.dtype)
     cover = ((near**2) * ok).sum(1) / ok.sum(1).clamp_min(1.0)
     per = outside + cover

@@ -214,6 +214,7 @@ def _run_stage(
     st = stage_config(cfg, stage)
     runner = StageRunner(scene, targets, cfg, stage)
     opt = make_optimizer(scene, cfg, stage, learn_focal)
+    base_lr = [g["lr"] for g in opt.param_groups]
     if opt_state is not None:
         opt.load_state_dict(opt_state)
     key = f"stage{stage}"
@@ -241,6 +242,9 @@ def _run_stage(
         for _ in range(first):
             runner.window()
         for it in range(first, st.iters):
+            factor = lr_factor(it, st.iters, st.lr_final)
+            for g, lr in zip(opt.param_groups, base_lr, strict=True):
+                g["lr"] = lr * factor
             terms = runner.step(opt)
             result.history[key].append(terms)
             rep.step(terms)
@@ -251,6 +255,13 @@ def _run_stage(
             checkpoint(state(len(result.history[key])))
         raise
     result.timings[key] = result.timings.get(key, 0.0) + time.perf_counter() - t
+
+
+def lr_factor(it: int, iters: int, final: float) -> float:
+    """Cosine decay of the learning rates from 1 at step 0 to ``final`` at the last step."""
+    if final >= 1.0 or iters <= 1:
+        return 1.0
+    return final + (1.0 - final) * 0.5 * (1.0 + np.cos(np.pi * it / (iters - 1)))
 
 
 @torch.no_grad()

@@ -84,19 +84,32 @@ class StageRunner:
         self.gen = np.random.default_rng([cfg.seed, stage])
         present = targets.masks.present.cpu().numpy()
         self.present_idx = np.nonzero(present)[0]
+        self._queue: list[int] = []
 
     def window(self) -> Tensor:
-        """Stage 1: up to ``batch`` frames spread over the video (random offset). Stage 2: a
-        contiguous window of ``batch`` frames around a random frame whose mask is non-empty."""
+        """Stage 1: up to ``batch`` frames spread over the video (random offset). Stage 2: the next
+        contiguous window of ``batch`` frames of this epoch (see `_epoch_windows`)."""
         T = self.scene.num_frames
         B = min(self.st.batch, T)
         if self.stage == 1:
             offset = self.gen.uniform(0, T / B)
             idx = np.unique(np.minimum((offset + np.arange(B) * T / B).astype(int), T - 1))
             return torch.as_tensor(idx, device=self.scene.rotations.device)
-        centre = int(self.gen.choice(self.present_idx))
-        start = int(np.clip(centre - B // 2, 0, T - B))
+        if not self._queue:
+            self._queue = self._epoch_windows(T, B)
+        start = self._queue.pop()
         return torch.arange(start, start + B, device=self.scene.rotations.device)
+
+    def _epoch_windows(self, T: int, B: int) -> list[int]:
+        """Window starts that tile the video once from a random offset, in random order, so every
+        frame (the first and last ones too) gets the same number of updates; windows without any
+        non-empty mask are left out."""
+        offset = int(self.gen.integers(B)) if T > B else 0
+        starts = sorted({int(np.clip(s, 0, T - B)) for s in range(offset - B, T, B) if s + B > 0})
+        present = np.zeros(T, bool)
+        present[self.present_idx] = True
+        starts = [s for s in starts if present[s : s + B].any()] or [0]
+        return [starts[i] for i in self.gen.permutation(len(starts))]
 
     def loss(self, frames: Tensor) -> tuple[Tensor, dict[str, float]]:
         scene, w, ab = self.scene, self.cfg.weights, self.cfg.ablation

@@ -31,6 +31,7 @@ import torch
 from torch import nn
 
 Tensor = torch.Tensor
+DENSE_MAX_JOINTS = 256  # up to here skinning blends through dense (V, J) weights (see below)
 
 
 def bone_segments(
@@ -119,12 +120,24 @@ def linear_blend_skinning(
     ``e_k(p)`` of each candidate, both optional. Returns (..., V, 3).
     """
     A = mats[..., :3, :]  # (..., J, 3, 4): affine part only
-    blended = torch.einsum("...vk,...vkij->...vij", weights, A[..., bones, :, :])  # (..., V, 3, 4)
+    J = mats.shape[-3]
+    if J <= DENSE_MAX_JOINTS:
+        # Scatter the K candidates into dense (V, J) weights and blend with one matmul: ~4x faster
+        # forward + backward than gathering (V, K, 3, 4) matrices (whose backward is a scatter-add).
+        idx = bones.expand(weights.shape)
+        dense = weights.new_zeros(weights.shape[:-1] + (J,)).scatter_add(-1, idx, weights)
+        blended = (dense @ A.flatten(-2)).unflatten(-1, (3, 4))  # (..., V, 3, 4)
+    else:
+        blended = torch.einsum("...vk,...vkij->...vij", weights, A[..., bones, :, :])
     out = (blended[..., :3] @ points[..., None]).squeeze(-1) + blended[..., 3]
     if stretch is not None:
         moved = (A[..., :3] @ stretch[..., None]).squeeze(-1)  # (..., J, 3): L_k s_k
         we = weights * endpoint
-        out = out + torch.einsum("...vk,...vkc->...vc", we, moved[..., bones, :])
+        if J <= DENSE_MAX_JOINTS:
+            dense_e = we.new_zeros(we.shape[:-1] + (J,)).scatter_add(-1, bones.expand(we.shape), we)
+            out = out + dense_e @ moved
+        else:
+            out = out + torch.einsum("...vk,...vkc->...vc", we, moved[..., bones, :])
     return out
 
 

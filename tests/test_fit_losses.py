@@ -1,0 +1,60 @@
+"""The fit's loss terms and step schedule: contour term beyond the crop, epoch windows, lr decay."""
+
+import numpy as np
+import pytest
+import torch
+
+from zooctl.fit.losses import MaskTargets, contour_loss
+from zooctl.fit.run import lr_factor
+
+
+def _square_targets(T: int = 1, h: int = 32, w: int = 32) -> MaskTargets:
+    cov = np.zeros((T, h, w), np.float32)
+    cov[:, 8:24, 8:24] = 1.0
+    return MaskTargets.build(cov, num_samples=64)
+
+
+def test_contour_pulls_vertices_back_from_beyond_the_image():
+    """A vertex outside the fit image (where the distance transform is clamped) still gets a
+    gradient towards the mask, and a farther one costs more."""
+    mt = _square_targets()
+    frames = torch.zeros(1, dtype=torch.long)
+    weight = torch.ones(1)
+    inside = torch.tensor([[[16.0, 16.0]] * 8])
+    losses = []
+    for x in (40.0, 60.0):
+        xy = inside.clone()
+        xy[0, 0] = torch.tensor([x, 16.0])
+        xy.requires_grad_(True)
+        loss = contour_loss(xy, frames, mt, weight)
+        loss.backward()
+        assert xy.grad[0, 0, 0] > 0  # descending the gradient moves it left, back into the image
+        losses.append(loss.item())
+    assert losses[1] > losses[0]
+
+
+def test_stage2_windows_cover_every_frame_each_epoch():
+    from zooctl.fit.stages import StageRunner
+
+    T, B = 23, 5
+    present = np.ones(T, bool)
+    present[10:15] = False  # one window's worth of empty masks
+    runner = StageRunner.__new__(StageRunner)
+    runner.gen = np.random.default_rng(0)
+    runner.present_idx = np.nonzero(present)[0]
+    for _ in range(5):
+        starts = runner._epoch_windows(T, B)
+        seen = np.zeros(T, int)
+        for s in starts:
+            assert 0 <= s <= T - B
+            seen[s : s + B] += 1
+        assert (seen[present] >= 1).all()
+        assert all(present[s : s + B].any() for s in starts)
+
+
+@pytest.mark.parametrize("final", [0.05, 0.5])
+def test_lr_factor_decays_from_one_to_final(final):
+    f = [lr_factor(i, 50, final) for i in range(50)]
+    assert f[0] == pytest.approx(1.0) and f[-1] == pytest.approx(final)
+    assert all(a >= b for a, b in zip(f, f[1:]))
+    assert lr_factor(3, 50, 1.0) == 1.0
