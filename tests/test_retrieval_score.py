@@ -105,3 +105,10 @@ def test_leave_one_out_benchmark_on_procedural_animals(tmp_path):
     fish_rows = [row for row in r["rows"] if row["plan"] == "fish"]
     assert r["top1_plan_answerable"] == sum(row["top1_plan"] for row in fish_rows) / 2
     assert all(len(row) == len(COLUMNS) for row in summary_rows(report))
+    # queries: only the named assets are queried; the others are bank content (answerable now
+    # counts the whole bank: a second spider makes the spider query answerable)
+    more = [*assets, build_animal("spider", name="Spid2", seed=1)]
+    sub = loo_benchmark(more, tmp_path / "q", ["silhouette"], n_views=6, size=48, frames=3, queries=["Spid"])
+    assert sub["assets"] == 4 and sub["queries"] == 1
+    (row,) = sub["results"][0]["rows"]
+    assert row["query"] == "Spid" and row["answerable"]

@@ -175,22 +175,11 @@ def test_reindex_missing_and_add_without_views(store, capsys, monkeypatch):
 
 def test_query_from_a_stored_video_name_uses_its_masks(tmp_path):
     """`bank search NAME` with a video already in the store: its stored masks crop the frames."""
-    from PIL import Image
-    from video_helpers import moving_object_video
+    from video_helpers import stored_masked_video
 
     from zooctl.retrieval.query import load_query
-    from zooctl.store.videos import VideoStore
-    from zooctl.video.ingest import AddOptions, add_video
 
-    frames, masks = moving_object_video(t=6, h=96, w=128)
-    folder = tmp_path / "seq"
-    (folder / "JPEGImages").mkdir(parents=True)
-    (folder / "Annotations").mkdir()
-    for i, (f, m) in enumerate(zip(frames, masks)):
-        Image.fromarray(f).save(folder / "JPEGImages" / f"{i:05d}.png")
-        Image.fromarray(m.astype(np.uint8) * 255).save(folder / "Annotations" / f"{i:05d}.png")
-    root = tmp_path / "store"
-    add_video(VideoStore.open(root), folder, AddOptions(name="seq"))
+    root, folder = stored_masked_video(tmp_path)
     stored = load_query("seq", k=4, size=64, store_root=root)
     direct = load_query(folder, k=4, size=64)
     assert stored.source == "stored video seq" and stored.masks is not None

@@ -41,3 +41,23 @@ def moving_object_video(
 def iou(a: np.ndarray, b: np.ndarray) -> float:
     u = np.logical_or(a, b).sum()
     return 1.0 if u == 0 else float(np.logical_and(a, b).sum() / u)
+
+
+def stored_masked_video(tmp_path, name: str = "seq"):
+    """A DAVIS-style folder of a 6-frame masked video at ``tmp_path/name`` and a store at
+    ``tmp_path/store`` holding it under ``name``: (store root, folder)."""
+    from PIL import Image
+
+    from zooctl.store.videos import VideoStore
+    from zooctl.video.ingest import AddOptions, add_video
+
+    frames, masks = moving_object_video(t=6, h=96, w=128)
+    folder = tmp_path / name
+    (folder / "JPEGImages").mkdir(parents=True)
+    (folder / "Annotations").mkdir()
+    for i, (f, m) in enumerate(zip(frames, masks)):
+        Image.fromarray(f).save(folder / "JPEGImages" / f"{i:05d}.png")
+        Image.fromarray(m.astype(np.uint8) * 255).save(folder / "Annotations" / f"{i:05d}.png")
+    root = tmp_path / "store"
+    add_video(VideoStore.open(root), folder, AddOptions(name=name))
+    return root, folder

@@ -37,21 +37,23 @@ def search(
     json_out: bool = JsonOpt,
 ) -> None:
     """Rank the bank's assets by how much their rendered views look like the animal in VIDEO."""
+    from ..errors import UsageError
     from ..retrieval.index import enabled_embedders
-    from ..retrieval.query import load_query
-    from ..retrieval.search import search as run_search
+    from ..retrieval.search import query_embeddings, search_embedded
 
+    if top < 1:  # before the slow part
+        raise UsageError(f"--top {top} must be at least 1")
     bank = _bank()
-    query = load_query(video, k=frames, masks_dir=masks, store_root=store_root())
-    res = run_search(
-        bank,
-        query,
+    query, q, notes = query_embeddings(
+        video,
         list(embedder) if embedder else enabled_embedders(),
-        top=top,
+        k=frames,
+        masks_dir=masks,
+        store_root=store_root(),
         device=device,
-        aggregation=aggregation,
-        fusion=fusion,
+        need_images=gallery is not None,
     )
+    res = search_embedded(bank, query, q, notes, top=top, aggregation=aggregation, fusion=fusion)
     if gallery is not None:
         from ..retrieval.gallery import save_gallery
 

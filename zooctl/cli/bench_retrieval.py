@@ -16,6 +16,11 @@ def retrieval(
     starter: bool = typer.Option(
         False, "--starter", help="Use the procedural starter bank instead of model files."
     ),
+    with_starter: bool = typer.Option(
+        False,
+        "--with-starter",
+        help="Also put the procedural starter animals in the bank (queries stay the model files).",
+    ),
     embedder: list[str] = typer.Option(
         None, "--embedder", help="Embedders (repeatable; default: effnet and silhouette)."
     ),
@@ -45,6 +50,12 @@ def retrieval(
         items = [load_gltf(f, f.stem) for f in files]
     if limit:
         items = items[:limit]
+    queries = None
+    if with_starter and not starter:
+        from ..procedural import starter_assets
+
+        queries = [a.name for a in items]
+        items = items + starter_assets()
     if len(items) < 2:
         raise InputError("leave-one-out needs at least 2 assets")
     with tempfile.TemporaryDirectory(prefix="zooctl-bench-retrieval-") as tmp:
@@ -55,6 +66,7 @@ def retrieval(
             n_views=views,
             frames=frames,
             device=device,
+            queries=queries,
             progress=None
             if json_out
             else (lambda msg, i, n: err_console.print(f"[{i}/{n}] {msg}", highlight=False)),
@@ -65,7 +77,7 @@ def retrieval(
     print_table(
         COLUMNS,
         summary_rows(report),
-        title=f"leave-one-out over {report['assets']} assets ({views} views, {frames} query frames)",
+        title=f"leave-one-out: {report['queries']} queries, bank of {report['assets']} assets ({views} views, {frames} query frames)",
     )
 
 

@@ -32,8 +32,12 @@ def loo_benchmark(
     seed: int = 0,
     device: str = "cpu",
     progress=None,
+    queries: list[str] | None = None,
 ) -> dict[str, Any]:
-    """Leave-one-out retrieval over ``assets`` in a new bank at ``root``. See the module docstring."""
+    """Leave-one-out retrieval over ``assets`` in a new bank at ``root``. See the module docstring.
+
+    ``queries``: names of the assets to query (default: all); the rest are only bank content.
+    Query i of ``queries`` is rendered with the same seed whatever else the bank holds."""
     from ..store.bank import Bank
 
     bank = Bank(root)
@@ -46,7 +50,9 @@ def loo_benchmark(
         if progress:
             progress(f"indexed {a.name} ({index_s[-1]:.2f} s)", i + 1, len(assets))
     q_emb: dict[str, dict[str, np.ndarray]] = {}
-    for i, a in enumerate(assets):
+    names = [a.name for a in assets] if queries is None else list(queries)
+    by_name = {a.name: a for a in assets}
+    for i, a in enumerate(by_name[n] for n in names):
         q = render_query_video(a, n_frames=frames, size=size, seed=1000 + seed * 7919 + i, device=device)
         q_emb[a.name] = {e: embed_inputs(cached_embedder(e, device), q.images, q.masks) for e in embedders}
     results = []
@@ -54,10 +60,11 @@ def loo_benchmark(
     for es in sets:
         for agg in AGGREGATIONS:
             for fusion in FUSIONS if len(es) > 1 else ("zsum",):
-                r = leave_one_out(bank, assets, q_emb, es, aggregation=agg, fusion=fusion)
+                r = leave_one_out(bank, assets, q_emb, es, aggregation=agg, fusion=fusion, queries=set(names))
                 results.append(r.to_json())
     return {
         "assets": len(assets),
+        "queries": len(names),
         "views": n_views,
         "size": size,
         "frames": frames,

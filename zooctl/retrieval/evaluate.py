@@ -129,10 +129,12 @@ def leave_one_out(
     aggregation: str = "nearest",
     fusion: str = "zsum",
     k: int = 5,
+    queries: set[str] | None = None,
 ) -> LooResult:
     """Score each asset's query against the bank minus that asset.
 
-    ``query_embeddings[name][embedder]`` holds the (K, D) query embeddings of each asset.
+    ``query_embeddings[name][embedder]`` holds the (K, D) query embeddings of each asset;
+    ``queries``: the assets to query (default: all; the others only sit in the bank).
     """
     from .search import score_bank
 
@@ -140,7 +142,7 @@ def leave_one_out(
     skeleton = {a.name: tuple(a.joint_names) for a in assets}
     rows = []
     for a in assets:
-        if plans[a.name] is None:
+        if plans[a.name] is None or (queries is not None and a.name not in queries):
             continue
         q = {e: query_embeddings[a.name][e] for e in embedders}
         res = score_bank(bank, q, aggregation=aggregation, fusion=fusion, k=k, exclude={a.name})

@@ -84,6 +84,21 @@ def crops_from_frames(
     return np.stack(out), None, chosen
 
 
+def stored_query(videos, name: str, k: int, size: int) -> QueryFrames:
+    """K crops of a stored video, decoding only the K sampled frames (frames with a mask first).
+    ``frames`` are indices into the stored video."""
+
+    def pick(boxes: np.ndarray) -> np.ndarray:  # boxes (T, 4); width 0: empty mask
+        usable = np.flatnonzero(boxes[:, 2] > 0)
+        return usable[sample_indices(len(usable), k)] if len(usable) else sample_indices(len(boxes), k)
+
+    idx, frames, masks = videos.read_some(name, pick)
+    has_masks = len(idx) > 0 and bool(masks.reshape(len(masks), -1).any(1).all())
+    images, crop_masks, chosen = crops_from_frames(frames, masks if has_masks else None, k, size)
+    notes = [] if has_masks else ["the stored video has no masks: frames are centre-cropped"]
+    return QueryFrames(images, crop_masks, idx[chosen], f"stored video {name}", notes)
+
+
 def load_query(
     source: str | Path,
     k: int = DEFAULT_QUERY_FRAMES,
@@ -106,12 +121,7 @@ def load_query(
 
         videos = VideoStore(store_root)
         if videos.exists(str(source)):
-            rec = videos.get(str(source), what=("frames", "masks"))
-            has = rec.masks.reshape(len(rec.masks), -1).any(1)
-            frames, masks = (rec.frames[has], rec.masks[has]) if has.any() else (rec.frames, None)
-            images, crop_masks, chosen = crops_from_frames(frames, masks, k, size)
-            notes = [] if masks is not None else ["the stored video has no masks: frames are centre-cropped"]
-            return QueryFrames(images, crop_masks, chosen, f"stored video {source}", notes)
+            return stored_query(videos, str(source), k, size)
     if not path.exists():
         raise NotFoundError(
             f"{source} is not a file or folder",

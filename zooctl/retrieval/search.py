@@ -4,18 +4,22 @@ Per embedder: embed the K query crops, take the bank's pack (A, Vmax, D), score 
 (`zooctl.retrieval.score`), then fuse embedders. Banks larger than ``shortlist`` assets are scored
 in two stages: every asset by its *mean* view embedding (one (K, D) x (D, A) product per embedder,
 fused), then the best ``shortlist`` exactly. With ``shortlist`` >= the bank size the result is exact.
+Scoring is numpy only (one BLAS product per embedder and stage): a search whose query embeddings
+are cached (`query_embeddings`, stored videos) never imports torch.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..errors import UsageError
+from . import query_cache
 from .index import cached_embedder, current_pack, embed_inputs
-from .query import QueryFrames
+from .query import DEFAULT_QUERY_FRAMES, QueryFrames, load_query, stored_query
 from .score import aggregate, best_views, fuse
 
 DEFAULT_TOP = 5
@@ -78,6 +82,70 @@ def embed_query(
     return out, notes
 
 
+def _stored_video(source: Any, masks_dir: Any, store_root: Any):
+    """The `VideoStore` holding ``source`` when it names a stored video (and no file), else None."""
+    if store_root is None or masks_dir is not None or Path(str(source)).expanduser().exists():
+        return None
+    from ..store.videos import VideoStore
+
+    videos = VideoStore(store_root)
+    return videos if videos.exists(str(source)) else None
+
+
+def query_embeddings(
+    source: Any,
+    embedders: list[str],
+    k: int = DEFAULT_QUERY_FRAMES,
+    size: int = 224,
+    masks_dir: Any = None,
+    store_root: Any = None,
+    device: str = "cpu",
+    need_images: bool = False,
+) -> tuple[QueryFrames, dict[str, np.ndarray], list[str]]:
+    """Load and embed a query (see `load_query` for ``source``): (query, {embedder: (K, D)}, notes).
+
+    A stored video's embeddings are cached beside it (`zooctl.retrieval.query_cache`): a repeat
+    search decodes nothing and builds no embedder; its query then has no pixels (``images`` is
+    (0, S, S, 3)) unless ``need_images``.
+    """
+    if k < 1:
+        raise UsageError(f"--frames {k} must be at least 1")
+    videos = _stored_video(source, masks_dir, store_root)
+    if videos is None:
+        query = load_query(source, k=k, size=size, masks_dir=masks_dir, store_root=store_root)
+        emb, notes = embed_query(query, embedders, device)
+        return query, emb, notes
+    name = str(source)
+    identity = query_cache.video_identity(videos, name)
+    hit = query_cache.read_cache(videos, name, k, size)
+    cached = {e: hit.emb[e] for e in embedders if e in hit.emb} if hit is not None else {}
+    todo = [e for e in embedders if e not in cached]
+    notes: list[str] = []
+    if hit is not None and not hit.has_masks:  # mask embedders cannot use this video: no frames needed
+        for e in list(todo):
+            if getattr(cached_embedder(e, device), "input_kind", "rgb") == "mask":
+                notes.append(f"{e}: skipped, the query has no masks")
+                todo.remove(e)
+    if hit is not None and not todo and not need_images:
+        masks = np.zeros((0, size, size), bool) if hit.has_masks else None
+        query = QueryFrames(np.zeros((0, size, size, 3), np.uint8), masks, hit.frames, f"stored video {name}")
+        query.notes = list(hit.notes)
+        return query, cached, notes
+    query = stored_query(videos, name, k, size)
+    known = hit.emb if hit is not None else {}
+    if hit is not None and not np.array_equal(hit.frames, query.frames):  # never mix two samplings
+        known, cached, todo, notes = {}, {}, list(embedders), []
+    new, new_notes = embed_query(query, todo, device)
+    if new:
+        entry = query_cache.CachedQuery(query.frames, query.masks is not None, query.notes, {**known, **new})
+        query_cache.write_cache(videos, name, k, size, entry, identity)
+    return (
+        query,
+        {e: cached[e] if e in cached else new[e] for e in embedders if e in cached or e in new},
+        (notes + new_notes),
+    )
+
+
 def load_packs(bank, embedders: list[str]) -> tuple[dict[str, Any], list[str]]:
     """The current pack of each embedder (one read of the bank index) and notes on missing views."""
     entries = bank.list()
@@ -111,8 +179,6 @@ def score_packs(
     weights: dict[str, float] | None = None,
 ) -> SearchResult:
     """Rank the assets every pack holds (minus ``exclude``) for the query embeddings {embedder: (K, D)}."""
-    import torch
-
     first = packs[next(iter(query_emb))]
     common = set(first.names)
     for p in packs.values():
@@ -132,7 +198,7 @@ def score_packs(
             coarse[e] = -sims.mean(0)[rows]
         top = np.argpartition(fuse(coarse, fusion, weights), shortlist - 1)[:shortlist]
         cand = sorted(cand[i] for i in top)
-    # Stage 2: exact scores of the candidates (torch: fast float16 -> float32 and batched matmul).
+    # Stage 2: exact scores of the candidates: one (A*V, D) x (D, Q) float32 product per embedder.
     per_e: dict[str, np.ndarray] = {}
     views_best: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for e, p in packs.items():
@@ -146,15 +212,12 @@ def score_packs(
             order = np.argsort(rows)
             emb = np.empty((len(rows), *p.emb.shape[1:]), np.float16)
             emb[order] = p.emb[rows[order]]
-        v = torch.from_numpy(
-            np.require(emb, requirements=["C", "W"])
-        ).float()  # (A, V, D); W: torch wants writable
-        q = torch.from_numpy(np.ascontiguousarray(query_emb[e], dtype=np.float32))  # (Q, D)
-        sim = (
-            (v.reshape(-1, v.shape[-1]) @ q.T).reshape(v.shape[0], v.shape[1], -1).transpose(1, 2)
-        )  # (A, Q, V)
-        valid = torch.arange(v.shape[1])[None, :] < torch.from_numpy(p.counts[rows])[:, None]
-        d = torch.where(valid[:, None, :], 1 - sim, torch.tensor(float("inf"))).numpy()
+        A, V, D = emb.shape
+        q = np.ascontiguousarray(query_emb[e], dtype=np.float32)  # (Q, D)
+        sim = (emb.reshape(A * V, D).astype(np.float32) @ q.T).reshape(A, V, -1)  # (A, V, Q)
+        d = 1.0 - sim.transpose(0, 2, 1)  # (A, Q, V)
+        valid = np.arange(V)[None, :] < p.counts[rows][:, None]  # (A, V): padding rows are inf
+        d = np.where(valid[:, None, :], d, np.float32(np.inf))
         per_e[e] = aggregate(d, aggregation, k)
         views_best[e] = best_views(d)
     total = fuse(per_e, fusion, weights)
@@ -195,9 +258,21 @@ def search(
     **options: Any,
 ) -> SearchResult:
     """Embed ``query`` and rank the bank; keeps the ``top`` best matches."""
+    q, notes = embed_query(query, embedders, device)
+    return search_embedded(bank, query, q, notes, top, **options)
+
+
+def search_embedded(
+    bank,
+    query: QueryFrames,
+    q: dict[str, np.ndarray],
+    notes: list[str],
+    top: int = DEFAULT_TOP,
+    **options: Any,
+) -> SearchResult:
+    """Rank the bank for query embeddings {embedder: (K, D)}; keeps the ``top`` best matches."""
     if top < 1:
         raise UsageError(f"--top {top} must be at least 1")
-    q, notes = embed_query(query, embedders, device)
     res = score_bank(bank, q, **options)
     res.matches = res.matches[:top]
     res.notes = query.notes + notes + res.notes

@@ -21,7 +21,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import torch
 
 from .crop import square_crop
 
@@ -133,6 +132,8 @@ def shade_frames(
     size R x R; lights (N, 3) world directions; ambient, gain (N,); backgrounds: N (R, R, 3) linear.
     Returns RGB (N, R, R, 3) uint8 (display gamma) and silhouettes (N, R, R) bool.
     """
+    import torch  # here, not at module level: `bank search` imports this module and rarely renders
+
     from ..render.preview import rasterize, vertex_normals
 
     dev = torch.device(device)

@@ -5,6 +5,7 @@ Layout under the store root (JSON Schemas: ``schemas/video_index.schema.json`` a
 
     videos/index.json      {"schema_version": 1, "videos": {name: summary}}  - what `video list` reads
     videos/<name>.h5       frames, masks, boxes, forward/backward flow, occlusion masks, source metadata
+    videos/<name>.cache/   derived data (retrieval query embeddings), removed with the video
 
 Same rules as the bank: the HDF5 file is written to a temporary beside its final path outside the
 lock (the slow part), then under the store's writers' lock the name is checked again, the file is
@@ -15,6 +16,7 @@ leaves the store as it was (at worst an unindexed temporary that `cleanup` remov
 from __future__ import annotations
 
 import json
+import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -271,6 +273,32 @@ class VideoStore:
     def path(self, name: str) -> Path:
         return self.dir / f"{name}.h5"
 
+    def cache_dir(self, name: str) -> Path:
+        """Derived data of one video (retrieval's query embeddings): dropped with the video."""
+        return self.dir / f"{name}.cache"
+
+    def read_some(self, name: str, pick: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Read only the frames ``pick(boxes (T, 4) x, y, w, h; zeros: empty mask) -> indices`` chooses.
+
+        Returns the sorted indices (K,), frames (K, H, W, 3) uint8 and masks (K, H, W) bool.
+        Frames are stored one per chunk, so this decodes K frames, not T.
+        """
+        import h5py
+
+        self.summary(name)
+        try:
+            with h5py.File(self.path(name), "r") as f:
+                idx = np.unique(np.asarray(pick(f["boxes"][()]), np.int64))
+                if len(idx) == 0:
+                    _, h, w, _ = f["frames"].shape
+                    return idx, np.zeros((0, h, w, 3), np.uint8), np.zeros((0, h, w), bool)
+                return idx, f["frames"][idx], f["masks"][idx].astype(bool)
+        except (OSError, KeyError) as exc:
+            raise StoreError(
+                f"the video file {self.path(name)} is unreadable: {exc}",
+                hint="remove it with `zooctl video rm` and add it again",
+            ) from None
+
     def get(self, name: str, what: tuple[str, ...] = ("frames", "masks", "flow")) -> VideoRecord:
         """Load a stored video (only the parts in ``what``). Raises `NotFoundError` for an unknown name."""
         self.summary(name)
@@ -312,6 +340,7 @@ class VideoStore:
                 if not replace and name in index["videos"]:
                     raise self.exists_error(name)
                 publish(tmp, final)
+                shutil.rmtree(self.cache_dir(name), ignore_errors=True)
                 index["videos"][name] = summary
                 write_json_atomic(self.index_path, index)
         finally:
@@ -326,6 +355,7 @@ class VideoStore:
             del index["videos"][name]
             write_json_atomic(self.index_path, index)  # the video is gone once the index says so
             self.path(name).unlink(missing_ok=True)
+            shutil.rmtree(self.cache_dir(name), ignore_errors=True)
 
     def cleanup(self) -> dict[str, int]:
         """Remove what killed writers left: temporaries and files the index does not name."""
@@ -338,4 +368,7 @@ class VideoStore:
                     if p.stem not in index["videos"]:
                         p.unlink(missing_ok=True)
                         orphans += 1
+                for p in self.dir.glob("*.cache"):
+                    if p.is_dir() and p.name[: -len(".cache")] not in index["videos"]:
+                        shutil.rmtree(p, ignore_errors=True)
         return {"temporaries": temps, "orphans": orphans}

@@ -249,7 +249,7 @@ def read_pack(root: Path, embedder: str) -> Pack | None:
         if meta.get("schema_version") != SCHEMA_VERSION:
             return None
         emb = np.load(d / meta["files"]["emb"], mmap_mode="r")
-        mean = np.load(d / meta["files"]["mean"])
+        mean = np.load(d / meta["files"]["mean"], mmap_mode="r")
     except (OSError, ValueError, KeyError):
         return None
     if emb.shape[0] != len(meta["names"]) or mean.shape[0] != len(meta["names"]):
