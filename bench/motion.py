@@ -4,6 +4,10 @@ asset's clips held out, then report held-out metrics against the baselines, and 
 
     .venv/bin/python bench/motion.py [--width 256 --layers 4] [--minutes 20] [--epochs 50]
                                      [--device cpu] [--threads 2] [--out bench/out/motion.json]
+                                     [--save DIR | --load DIR] [--free-bits 0.5] [--lr 3e-4]
+
+Sampling is timed twice: with the benchmarked prior and with a default-size (256 x 4) model, whose
+speed does not depend on its weights. ``--load DIR`` evaluates a prior saved with ``--save DIR``.
 
 Everything runs through the library (the same code as `zooctl motion train` / `zooctl bench
 motion` / `zooctl animate`), with the assets imported straight from the shared folder.
@@ -38,11 +42,19 @@ def main() -> None:
     ap.add_argument("--layers", type=int, default=4)
     ap.add_argument("--epochs", type=int, default=50)
     ap.add_argument("--minutes", type=float, default=20.0, help="training time budget")
+    ap.add_argument("--latent", type=int, default=None, help="latent size (default: the width)")
+    ap.add_argument("--free-bits", type=float, default=MotionConfig.free_bits)
+    ap.add_argument("--kl-weight", type=float, default=MotionConfig.kl_weight)
+    ap.add_argument("--recon-warmup", type=float, default=TrainOptions.recon_warmup)
+    ap.add_argument("--kl-anneal", type=float, default=TrainOptions.kl_anneal)
+    ap.add_argument("--lr", type=float, default=TrainOptions.lr)
     ap.add_argument("--batch-size", type=int, default=64)
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--samples", type=int, default=32)
     ap.add_argument("--out", type=Path, default=Path("bench/out/motion.json"))
+    ap.add_argument("--save", type=Path, default=None, help="also save the trained prior in this folder")
+    ap.add_argument("--load", type=Path, default=None, help="evaluate a prior saved with --save, no training")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     files = sorted((SHARED / "assets" / "quaternius").glob("*/*.glb"))
@@ -50,7 +62,13 @@ def main() -> None:
         sys.exit(f"bench/motion.py needs the shared assets at {SHARED / 'assets'}")
     assets = [load_gltf(f, sanitize_name(f.stem)) for f in files]
     train, test, held = split_assets(assets, 0.2, seed=0)
-    cfg = MotionConfig(width=args.width, layers=args.layers, latent=args.width)
+    cfg = MotionConfig(
+        width=args.width,
+        layers=args.layers,
+        latent=args.latent or args.width,
+        free_bits=args.free_bits,
+        kl_weight=args.kl_weight,
+    )
     prior = PonymationPrior(cfg, device=args.device)
     data = prior.dataset(train)
     print(
@@ -58,41 +76,21 @@ def main() -> None:
         f"model {args.width}x{args.layers}, {sum(p.numel() for p in prior.model.parameters()) / 1e6:.2f} M parameters",
         flush=True,
     )
-    last = [time.perf_counter()]
-
-    def on_step(step: int, total: int, losses: dict[str, float]) -> None:
-        if time.perf_counter() - last[0] > 30:
-            last[0] = time.perf_counter()
-            print(f"  step {step}/{total} loss {losses['total']:.4f}", flush=True)
-
-    opts = TrainOptions(
-        epochs=args.epochs, batch_size=args.batch_size, max_minutes=args.minutes, device=args.device
-    )
-    hist = prior.fit(data, opts, on_step)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.with_name("motion_loss.png").write_bytes(loss_curve_png(hist))
-    print(f"trained {hist.steps} steps ({hist.epochs} epochs) in {hist.seconds:.0f} s", flush=True)
+    if args.load:
+        prior = PonymationPrior.load(args.load, device=args.device)
+        cfg = prior.cfg
+    else:
+        train_prior(prior, data, args)
+    if args.save:
+        prior.save(args.save, "bench-motion")
     prior.device = torch.device("cpu")
     prior.model.to("cpu")
     result = evaluate(prior, train, test, samples=args.samples)
     # Sampling + export timing on the largest skeleton, CPU.
     big = max(assets, key=lambda a: a.num_joints)
-    reg = get_registry()
-    usd, glb = reg.exporter_for("usd"), reg.exporter_for("glb")
-    tmp = Path(tempfile.mkdtemp(prefix="zooctl-bench-motion-"))
-    times, sample_only = [], []
-    for r in range(5):
-        t = time.perf_counter()
-        rots = prior.sample(big, n=5, frames=60, seed=r)
-        sample_only.append(time.perf_counter() - t)
-        names = [f"s{i}" for i in range(5)]
-        animated = dataclasses.replace(
-            big, clips={n: motion_clip(big, q, 30.0, n) for n, q in zip(names, rots, strict=True)}
-        )
-        for n in names:
-            usd.save(animated, tmp / f"{n}.usd", clips=[n])
-            glb.save(animated, tmp / f"{n}.glb", clips=[n])
-        times.append(time.perf_counter() - t)
+    timing = time_sampling(prior, big)
+    # The issue's goal is stated for the default size: time it too (speed does not depend on weights).
+    default = time_sampling(PonymationPrior(MotionConfig()), big)
     out = {
         "machine": machine(),
         "torch_threads": torch.get_num_threads(),
@@ -105,25 +103,80 @@ def main() -> None:
         },
         "evaluation": {k: v for k, v in result.items() if k != "per_skeleton"},
         "per_skeleton": result["per_skeleton"],
-        "sampling": {
-            "asset": big.name,
-            "joints": big.num_joints,
-            "samples": 5,
-            "frames": 60,
-            "median_sample_s": round(statistics.median(sample_only), 3),
-            "median_sample_and_export_s": round(statistics.median(times), 3),
-        },
+        "sampling": timing,
+        "sampling_default_size": default,
     }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(out, indent=1) + "\n")
     widths = [max(len(c[0]), 12) for c in TABLE_COLUMNS]
     print(" | ".join(c[0].ljust(w) for c, w in zip(TABLE_COLUMNS, widths, strict=True)))
     for row in format_table(result):
         print(" | ".join(x.ljust(w) for x, w in zip(row, widths, strict=True)))
-    s = out["sampling"]
-    print(
-        f"sampling 5x60 frames, {s['joints']} joints: {s['median_sample_s']} s; with USD+GLB export: "
-        f"{s['median_sample_and_export_s']} s (median of 5); results in {args.out}"
+    for label, s in (("trained", timing), ("default size", default)):
+        print(
+            f"sampling 5x60 frames, {s['joints']} joints, {label} model ({s['model']}): {s['median_sample_s']} s; "
+            f"with USD+GLB export: {s['median_sample_and_export_s']} s (median of {s['repeats']})"
+        )
+    print(f"results in {args.out}")
+
+
+def train_prior(prior: PonymationPrior, data, args) -> None:
+    """Train with the command line's options; writes the loss curve beside ``--out``."""
+    last = [time.perf_counter()]
+
+    def on_step(step: int, total: int, losses: dict[str, float]) -> None:
+        if time.perf_counter() - last[0] > 30 or step == 1:
+            last[0] = time.perf_counter()
+            print(
+                f"  step {step}/{total} loss {losses['total']:.4f} rot {losses['rotation']:.4f} "
+                f"joints {losses['joints']:.5f} KL {losses['kl']:.1f} active {losses['active']:.0f}",
+                flush=True,
+            )
+
+    opts = TrainOptions(
+        epochs=args.epochs,
+        batch_size=args.batch_size,
+        lr=args.lr,
+        max_minutes=args.minutes,
+        recon_warmup=args.recon_warmup,
+        kl_anneal=args.kl_anneal,
+        device=args.device,
     )
+    hist = prior.fit(data, opts, on_step)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.with_name("motion_loss.png").write_bytes(loss_curve_png(hist))
+    print(f"trained {hist.steps} steps ({hist.epochs} epochs) in {hist.seconds:.0f} s", flush=True)
+
+
+def time_sampling(prior: PonymationPrior, big, repeats: int = 5) -> dict:
+    """Median time to sample 5 motions of 60 frames for ``big`` and export each as USD + GLB."""
+    reg = get_registry()
+    usd, glb = reg.exporter_for("usd"), reg.exporter_for("glb")
+    tmp = Path(tempfile.mkdtemp(prefix="zooctl-bench-motion-"))
+    prior.sample(big, n=1, frames=12, seed=0)  # first-call set-up (allocator, kernels) is not sampling
+    times, sample_only = [], []
+    for r in range(repeats):
+        t = time.perf_counter()
+        rots = prior.sample(big, n=5, frames=60, seed=r)
+        sample_only.append(time.perf_counter() - t)
+        names = [f"s{i}" for i in range(5)]
+        animated = dataclasses.replace(
+            big, clips={n: motion_clip(big, q, 30.0, n) for n, q in zip(names, rots, strict=True)}
+        )
+        for n in names:
+            usd.save(animated, tmp / f"{n}.usd", clips=[n])
+            glb.save(animated, tmp / f"{n}.glb", clips=[n])
+        times.append(time.perf_counter() - t)
+    return {
+        "asset": big.name,
+        "joints": big.num_joints,
+        "model": f"{prior.cfg.width}x{prior.cfg.layers}",
+        "samples": 5,
+        "frames": 60,
+        "repeats": repeats,
+        "median_sample_s": round(statistics.median(sample_only), 3),
+        "median_sample_and_export_s": round(statistics.median(times), 3),
+    }
 
 
 if __name__ == "__main__":

@@ -20,6 +20,12 @@ def animate(
         help="Frames per motion (longer than the prior's window: chained segments).",
     ),
     seed: int = typer.Option(0, "--seed", help="Random seed."),
+    temperature: float = typer.Option(
+        1.0,
+        "--temperature",
+        min=0.0,
+        help="Scale of the latent's standard deviation: lower is closer to typical motion, higher more varied.",
+    ),
     prior_name: str = typer.Option(
         None, "--prior", help="Motion prior (default: the most recently trained)."
     ),
@@ -62,7 +68,8 @@ def animate(
                 f"no exporter for format {f!r}", hint="see `zooctl plugins` for the formats available"
             )
         exporters[f] = spec
-    rots = prior.sample(asset, n=sample, frames=frames, seed=seed)  # (n, frames, J, 4)
+    options = {"temperature": temperature} if temperature != 1.0 else {}  # not every prior plugin has it
+    rots = prior.sample(asset, n=sample, frames=frames, seed=seed, **options)  # (n, frames, J, 4)
     t_sample = time.perf_counter() - t0
     fps = float(getattr(getattr(prior, "cfg", None), "fps", 30.0))
     names = [f"sample{i:02d}" for i in range(sample)]
@@ -87,6 +94,7 @@ def animate(
         "frames": frames,
         "fps": fps,
         "seed": seed,
+        "temperature": temperature,
         "files": files,
         "seconds": {
             "sample": round(t_sample, 3),

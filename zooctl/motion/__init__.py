@@ -3,8 +3,8 @@
 - `skeleton`: `Skeleton`, the skeleton description a motion model sees (rest pose, tree, scale).
 - `dataset`: motion sequences from bank clips (and, later, fits), resampled, cut into windows.
 - `model`: `MotionVAE`, the spatio-temporal transformer VAE over padded bone tokens.
-- `losses`: rotation, posed-joint (through `zooctl.rig` forward kinematics) and KL terms.
-- `train`: the training loop (rich progress, loss history, loss-curve PNG).
+- `losses`: rotation, posed-joint (through `zooctl.rig` forward kinematics) and KL (free bits) terms.
+- `train`: the training loop (time budget, reconstruction warm-up then KL annealing, loss-curve PNG).
 - `prior`: `PonymationPrior`, the object the ``ponymation`` motion-prior plugin returns
   (``fit``, ``save``, ``sample``), with chained sampling and optimised transition latents.
 - `baselines`: nearest-clip retrieval and a per-skeleton Gaussian/PCA prior.

@@ -1,5 +1,12 @@
-"""Training loop of the motion VAE: AdamW, warm-up, gradient clipping, a rich progress bar, a loss
-history and its curve as a PNG (drawn with PIL: matplotlib is not a dependency)."""
+"""Training loop of the motion VAE: AdamW, warm-up, gradient clipping, a loss history and its curve
+as a PNG (drawn with PIL: matplotlib is not a dependency).
+
+Schedules follow the run's *progress*, the larger of steps done / planned steps and time spent /
+``max_minutes``, so a run stopped by its time budget still decays its learning rate and finishes its
+KL annealing: reconstruction only for the first ``recon_warmup`` of the run (the decoder learns to
+use z before the KL pulls the posterior to the prior), then the KL weight ramps up linearly over
+``kl_anneal``.
+"""
 
 from __future__ import annotations
 
@@ -23,6 +30,8 @@ class TrainOptions:
     lr: float = 3e-4
     warmup_steps: int = 100
     max_minutes: float | None = None  # stop at the end of the step that passes this budget
+    recon_warmup: float = 0.1  # fraction of the run without KL
+    kl_anneal: float = 0.2  # fraction of the run over which the KL weight ramps up to its value
     seed: int = 0
     device: str = "cpu"
 
@@ -35,6 +44,7 @@ class TrainHistory:
     rotation: list[float] = field(default_factory=list)
     joints: list[float] = field(default_factory=list)
     kl: list[float] = field(default_factory=list)
+    active: list[float] = field(default_factory=list)
     epochs: int = 0
     steps: int = 0
     seconds: float = 0.0
@@ -48,7 +58,7 @@ class TrainHistory:
             "stopped_early": self.stopped_early,
             "final": {
                 k: (getattr(self, k)[-1] if getattr(self, k) else None)
-                for k in ("total", "rotation", "joints", "kl")
+                for k in ("total", "rotation", "joints", "kl", "active")
             },
         }
 
@@ -69,11 +79,21 @@ def train_vae(
     total_steps = max(1, steps_per_epoch * opts.epochs)
     warm = max(1, min(opts.warmup_steps, total_steps // 10))
 
-    def lr_at(step: int) -> float:  # linear warm-up, then cosine decay to 10 %
+    budget = None if opts.max_minutes is None else 60.0 * opts.max_minutes
+
+    def progress(step: int, elapsed: float) -> float:
+        p = step / total_steps
+        return min(1.0, max(p, elapsed / budget) if budget else p)
+
+    def lr_at(step: int, p: float) -> float:  # linear warm-up, then cosine decay to 10 %
         if step < warm:
             return opts.lr * (step + 1) / warm
-        p = min(1.0, (step - warm) / max(1, total_steps - warm))
         return opts.lr * (0.1 + 0.9 * 0.5 * (1 + math.cos(math.pi * p)))
+
+    def kl_scale(p: float) -> float:
+        if p < opts.recon_warmup:
+            return 0.0
+        return min(1.0, (p - opts.recon_warmup) / opts.kl_anneal) if opts.kl_anneal > 0 else 1.0
 
     with torch.no_grad():
         dev6d = np.concatenate(
@@ -84,10 +104,11 @@ def train_vae(
     start = time.perf_counter()
     for epoch in range(opts.epochs):
         for batch in data.batches(opts.batch_size, rng, dev):
+            p = progress(hist.steps, time.perf_counter() - start)
             for g in opt.param_groups:
-                g["lr"] = lr_at(hist.steps)
+                g["lr"] = lr_at(hist.steps, p)
             pred, mu, logvar = model(batch.rot6d, batch.skeletons)
-            losses = vae_losses(pred, batch.rotmat, mu, logvar, batch.skeletons, model.cfg)
+            losses = vae_losses(pred, batch.rotmat, mu, logvar, batch.skeletons, model.cfg, kl_scale(p))
             opt.zero_grad(set_to_none=True)
             losses["total"].backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
@@ -104,7 +125,7 @@ def train_vae(
             hist.steps += 1
             if on_step is not None:
                 on_step(hist.steps, total_steps, vals)
-            if opts.max_minutes is not None and time.perf_counter() - start > 60 * opts.max_minutes:
+            if budget is not None and time.perf_counter() - start > budget:
                 hist.stopped_early = True
                 break
         hist.epochs = epoch + 1
