@@ -17,6 +17,12 @@ def test_help_and_version():
     assert "Usage: zooctl" in bare.out + bare.err and "Traceback" not in bare.err
 
 
+def test_argument_help_is_shown(capsys):
+    """Arguments are documented in --help (click 8.5 erased typer's argument help: pinned < 8.5)."""
+    r = run_inprocess(capsys, "fit", "--help")
+    assert r.code == 0 and "Video file, image or DAVIS folder" in r.out
+
+
 def test_usage_errors_exit_2_without_traceback(tmp_path):
     r = zooctl("bank", "frobnicate", store=tmp_path)
     assert r.code == 2 and "No such command" in r.err and "Traceback" not in r.err
