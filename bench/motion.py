@@ -52,6 +52,7 @@ def main() -> None:
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--samples", type=int, default=32)
+    ap.add_argument("--temperature", type=float, default=1.0, help="scale of the prior's sigma when sampling")
     ap.add_argument("--out", type=Path, default=Path("bench/out/motion.json"))
     ap.add_argument("--save", type=Path, default=None, help="also save the trained prior in this folder")
     ap.add_argument("--load", type=Path, default=None, help="evaluate a prior saved with --save, no training")
@@ -85,7 +86,7 @@ def main() -> None:
         prior.save(args.save, "bench-motion")
     prior.device = torch.device("cpu")
     prior.model.to("cpu")
-    result = evaluate(prior, train, test, samples=args.samples)
+    result = evaluate(prior, train, test, samples=args.samples, temperature=args.temperature)
     # Sampling + export timing on the largest skeleton, CPU.
     big = max(assets, key=lambda a: a.num_joints)
     timing = time_sampling(prior, big)

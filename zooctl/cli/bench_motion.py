@@ -16,6 +16,9 @@ def bench_motion(
         32, "--samples", min=2, help="Generated windows per skeleton (at least as many as held-out windows)."
     ),
     seed: int = typer.Option(0, "--seed", help="Sampling seed."),
+    temperature: float = typer.Option(
+        1.0, "--temperature", min=0.0, help="Scale of the prior's standard deviation when sampling."
+    ),
     frames: int = typer.Option(60, "--frames", help="Frames per motion in the sampling timing."),
     repeats: int = typer.Option(3, "--repeats", help="Timed sampling runs (the median is reported)."),
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
@@ -45,7 +48,7 @@ def bench_motion(
     bank = Bank.open(store_root())
     assets = [bank.get(a) for a in training.get("assets", sorted(holdout))]
     train, test, _ = split_assets(assets, holdout=holdout)
-    result = evaluate(prior, train, test, samples=samples, seed=seed)
+    result = evaluate(prior, train, test, samples=samples, seed=seed, temperature=temperature)
     big = max(assets, key=lambda a: a.num_joints)
     times = []
     for r in range(max(1, repeats)):
@@ -57,6 +60,7 @@ def bench_motion(
     result.update(
         {
             "prior": name,
+            "temperature": temperature,
             "machine": machine(),
             "sampling": {
                 "asset": big.name,

@@ -50,8 +50,10 @@ def evaluate(
     test: Sequence[MotionSequence],
     samples: int = 32,
     seed: int = 0,
+    temperature: float = 1.0,
 ) -> dict[str, Any]:
-    """Metrics of ``prior`` (a `PonymationPrior`) and of both baselines on the held-out windows."""
+    """Metrics of ``prior`` (a `PonymationPrior`, sampled at ``temperature``) and of both baselines
+    on the held-out windows."""
     L, fps = prior.cfg.length, prior.cfg.fps
     train_w, test_w = _windows(train, L, fps), _windows(test, L, fps)
     retrieval, pca = RetrievalBaseline(), PCABaseline()
@@ -64,7 +66,7 @@ def evaluate(
             continue  # baselines need training windows of the same skeleton
         n = max(samples, len(real))
         gen = {
-            "ponymation": prior.sample_delta(sk, n, L, seed=seed),
+            "ponymation": prior.sample_delta(sk, n, L, seed=seed, temperature=temperature),
             "pca": pca.sample(sk, n, seed=seed),
             "retrieval": retrieval.sample(sk, n, seed=seed),
             "real": real,
