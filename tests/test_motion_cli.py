@@ -166,7 +166,64 @@ def test_bad_requests_are_one_line_errors(seeded_store, capsys, monkeypatch, tmp
     r = run_inprocess(capsys, "animate", "snake", "--out", str(tmp_path / "x"))
     assert r.code == 2 and "no motion prior" in r.err and "zooctl motion train" in r.err
     r = run_inprocess(capsys, "animate", "dragon")
-    assert r.code == 2 and "no asset named 'dragon'" in r.err
+    assert r.code == 2 and "'dragon' is neither a bank asset nor a fit" in r.err
+    r = run_inprocess(capsys, "animate")
+    assert r.code == 2 and "either TARGET" in r.err and "Traceback" not in r.err
+    r = run_inprocess(capsys, "animate", "snake", "--image", str(tmp_path / "a.png"))
+    assert r.code == 2 and "either TARGET" in r.err
+    r = run_inprocess(capsys, "animate", "snake", "--masks", "auto")
+    assert r.code == 2 and "only apply with --image" in r.err
+    r = run_inprocess(capsys, "animate", "--image", str(tmp_path / "missing.png"))
+    assert r.code == 2 and "not an image file" in r.err
+
+
+def test_animate_a_photo_then_its_fit(seeded_store, capsys, monkeypatch, tmp_path):
+    """`animate --image`: a single-photo fit, then samples on the fitted character; the fit is then
+    a TARGET by name (`fit:NAME`)."""
+    from PIL import Image
+
+    from zooctl.benchdata.make import make_video
+    from zooctl.store.bank import Bank
+    from zooctl.store.fits import FitStore
+
+    monkeypatch.setenv("ZOOCTL_STORE", str(seeded_store))
+    r = run_inprocess(capsys, "motion", "train", "--assets", "quadruped", "--name", "photo-prior", *TINY)
+    assert r.code == 0, r.err
+    quad = Bank(seeded_store).get("quadruped")
+    with np.load(make_video(quad, tmp_path / "v", frames=1, size=64, seed=5) / "video.npz") as z:
+        frame, mask = z["frames"][0], z["masks"][0]
+    photo = tmp_path / "cat.png"
+    Image.fromarray(frame).save(photo)
+    (tmp_path / "cat_mask").mkdir()
+    Image.fromarray(mask.astype(np.uint8) * 255).save(tmp_path / "cat_mask" / "cat.png")
+    small = tmp_path / "small.json"
+    small.write_text(json.dumps({"stage1": {"iters": 3, "batch": 1}, "stage2": {"iters": 3, "batch": 1}}))
+    args = ["--sample", "2", "--frames", "12", "--prior", "photo-prior", "--no-preview", "--json"]
+    r = run_inprocess(
+        capsys,
+        "animate",
+        "--image",
+        str(photo),
+        "--masks",
+        str(tmp_path / "cat_mask"),
+        "--template",
+        "quadruped",
+        "--fit-config",
+        str(small),
+        "--out",
+        str(tmp_path / "a1"),
+        *args,
+    )
+    assert r.code == 0, r.err
+    manifest = r.json()
+    assert manifest["target"] == "cat" and len(manifest["files"]["usd"]) == 2
+    fitted = FitStore(seeded_store).character("cat")
+    assert fitted.num_joints == quad.num_joints
+    assert all(Path(p).stat().st_size > 0 for p in manifest["files"]["glb"])
+    r = run_inprocess(capsys, "animate", "fit:cat", "--out", str(tmp_path / "a2"), *args)
+    assert r.code == 0, r.err
+    assert Path(r.json()["files"]["usd"][1]).name == "cat_sample01.usd"
+    assert run_inprocess(capsys, "motion", "rm", "photo-prior").code == 0
 
 
 def test_bench_needs_held_out_clips(seeded_store, capsys, monkeypatch):

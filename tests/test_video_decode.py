@@ -60,6 +60,18 @@ def test_image_folder_natural_order_and_window(tmp_path):
     assert np.array_equal(dv.frames[0], frames[5])
 
 
+def test_one_image_is_a_one_frame_video(tmp_path):
+    frames, _ = moving_object_video(t=3, h=48, w=64)
+    for i, f in enumerate(frames):  # siblings in the same folder are not frames of the photo
+        Image.fromarray(f).save(tmp_path / f"f{i}.png")
+    dv = decode(tmp_path / "f1.png")
+    assert dv.kind == "images" and dv.frames.shape == (1, 48, 64, 3) and dv.source_indices.tolist() == [0]
+    assert np.array_equal(dv.frames[0], frames[1]) and dv.image_files == [tmp_path / "f1.png"]
+    (tmp_path / "bad.jpg").write_bytes(b"not a jpeg")
+    with pytest.raises(InputError, match="not a readable image"):
+        decode(tmp_path / "bad.jpg")
+
+
 @pytest.mark.parametrize(
     "make, message",
     [

@@ -1,4 +1,5 @@
-"""`zooctl animate TARGET --sample N`: sample motions for a bank asset and export them."""
+"""`zooctl animate TARGET --sample N` / `zooctl animate --image photo.jpg`: sample motions for a
+character and export them (logic in `zooctl.pipelines.animate`)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,21 @@ from ._common import JsonOpt, console, err_console, print_json, store_root
 
 
 def animate(
-    target: str = typer.Argument(..., help="Bank asset to animate."),
+    target: str = typer.Argument(
+        None, help="Bank asset or fit to animate (`fit:NAME` when a bank asset has the same name)."
+    ),
+    image: Path = typer.Option(
+        None, "--image", help="Animate a photo instead: fit it first (single-image CASA fit), then sample."
+    ),
+    masks: str = typer.Option(
+        None, "--masks", help="With --image: folder holding the photo's mask (an image, white = animal)."
+    ),
+    template: str = typer.Option(
+        None, "--template", help="With --image: bank asset to fit (default: template retrieval)."
+    ),
+    fit_config: Path = typer.Option(
+        None, "--fit-config", help="With --image: JSON fit config applied on top of the fast preset."
+    ),
     sample: int = typer.Option(5, "--sample", "-n", min=1, max=64, help="How many motions to sample."),
     frames: int = typer.Option(
         60,
@@ -40,103 +55,51 @@ def animate(
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     json_out: bool = JsonOpt,
 ) -> None:
-    """Sample motions from a trained prior for an asset; write USD + GLB per motion, a preview
-    video and a contact sheet."""
-    import dataclasses
-    import json
-    import time
+    """Sample motions from a trained prior for a bank asset, a fit or a photo; write USD + GLB per
+    motion, a preview video and a contact sheet."""
+    from ..errors import UsageError
+    from ..pipelines.animate import AnimateOptions, fit_image, resolve_target, sample_and_export
 
-    from ..errors import MissingDependencyError
-    from ..motion.prior import motion_clip
-    from ..plugins import get_registry
-    from ..store.bank import Bank
-    from ..store.fs import write_bytes_atomic
-    from ..store.motion_store import MotionStore
-
-    t0 = time.perf_counter()
-    asset = Bank.open(store_root()).get(target)
-    store = MotionStore.open(store_root())
-    prior_name = prior_name or store.latest()
-    prior = store.load(prior_name, device=device)
-    fmts = [f.strip().lower() for f in formats.split(",") if f.strip()]
-    registry = get_registry()
-    exporters = {}
-    for f in fmts:
-        spec = registry.exporter_for(f)
-        if spec is None:
-            raise MissingDependencyError(
-                f"no exporter for format {f!r}", hint="see `zooctl plugins` for the formats available"
-            )
-        exporters[f] = spec
-    options = {"temperature": temperature} if temperature != 1.0 else {}  # not every prior plugin has it
-    rots = prior.sample(asset, n=sample, frames=frames, seed=seed, **options)  # (n, frames, J, 4)
-    t_sample = time.perf_counter() - t0
-    fps = float(getattr(getattr(prior, "cfg", None), "fps", 30.0))
-    names = [f"sample{i:02d}" for i in range(sample)]
-    animated = dataclasses.replace(
-        asset, clips={n: motion_clip(asset, r, fps, n) for n, r in zip(names, rots, strict=True)}
+    if (target is None) == (image is None):
+        raise UsageError(
+            "give either TARGET (a bank asset or a fit) or --image PHOTO",
+            hint="e.g. `zooctl animate quadruped --sample 5` or `zooctl animate --image cat.jpg --masks cat_mask/`",
+        )
+    if image is None and (masks is not None or template is not None or fit_config is not None):
+        raise UsageError("--masks, --template and --fit-config only apply with --image")
+    opts = AnimateOptions(
+        sample=sample,
+        frames=frames,
+        seed=seed,
+        temperature=temperature,
+        prior=prior_name,
+        formats=tuple(f.strip().lower() for f in formats.split(",") if f.strip()),
+        preview=preview,
+        size=size,
+        device=device,
     )
-    out = out or Path(f"animate-{target}")
-    out.mkdir(parents=True, exist_ok=True)
-    files: dict[str, list[str]] = {f: [] for f in fmts}
-    for n in names:
-        for f, spec in exporters.items():
-            path = out / f"{target}_{n}.{f}"
-            spec.save(animated, path, clips=[n])
-            files[f].append(str(path))
-    t_export = time.perf_counter() - t0
-    if preview:
-        files.update(_preview(animated, names, out, target, size, fps, device))
-    manifest = {
-        "target": target,
-        "prior": prior_name,
-        "samples": sample,
-        "frames": frames,
-        "fps": fps,
-        "seed": seed,
-        "temperature": temperature,
-        "files": files,
-        "seconds": {
-            "sample": round(t_sample, 3),
-            "sample_and_export": round(t_export, 3),
-            "total": round(time.perf_counter() - t0, 3),
-        },
-    }
-    write_bytes_atomic(out / "animate.json", (json.dumps(manifest, indent=1) + "\n").encode())
+    if image is not None:
+        from .fit import RichReporter
+
+        with RichReporter() as rep:
+            asset, label = fit_image(
+                image, store_root(), masks, template, fit_config, device=device, reporter=rep
+            )
+        err_console.print(f"fitted the photo as {label!r} (`zooctl fits show {label}`)", highlight=False)
+    else:
+        asset, _ = resolve_target(store_root(), target)
+        label = target.removeprefix("fit:")
+    manifest = sample_and_export(asset, label, out or Path(f"animate-{label}"), opts, store_root())
     if json_out:
         print_json(manifest)
-    else:
-        console.print(
-            f"{sample} motions of {frames} frames for {target!r} from prior {prior_name!r} in {out}/ "
-            f"(sampling + export {t_export:.2f} s)",
-            highlight=False,
-        )
-        for kind, paths in files.items():
-            console.print(f"  {kind}: " + ", ".join(Path(p).name for p in paths), highlight=False)
+        return
+    t = manifest["seconds"]["sample_and_export"]
+    console.print(
+        f"{sample} motions of {frames} frames for {label!r} from prior {manifest['prior']!r} in "
+        f"{out or Path(f'animate-{label}')}/ (sampling + export {t:.2f} s)",
+        highlight=False,
+    )
+    for kind, paths in manifest["files"].items():
+        console.print(f"  {kind}: " + ", ".join(Path(p).name for p in paths), highlight=False)
     if not preview:
         err_console.print("preview skipped (--no-preview)", style="dim")
-
-
-def _preview(
-    asset, clips: list[str], out: Path, target: str, size: int, fps: float, device: str
-) -> dict[str, list[str]]:
-    """A video with every sample side by side, and a contact sheet (one row of frames per sample)."""
-    import numpy as np
-
-    from ..io.video import write_mp4
-    from ..render.preview import contact_sheet, render_asset, save_png
-
-    videos = [
-        render_asset(asset, c, size=size, supersample=1, device=device) for c in clips
-    ]  # (T, H, W, 3) each
-    cols = min(len(clips), 5)
-    grid = [contact_sheet([v[t] for v in videos], labels=clips, columns=cols) for t in range(len(videos[0]))]
-    video = write_mp4(out / f"{target}_samples.mp4", np.stack(grid), fps=fps)
-    T = len(videos[0])
-    picks = np.linspace(0, T - 1, min(T, 6)).round().astype(int)
-    tiles = [v[t] for v in videos for t in picks]
-    labels = [f"{c} f{t}" for c in clips for t in picks]
-    sheet = save_png(
-        out / f"{target}_contact_sheet.png", contact_sheet(tiles, labels=labels, columns=len(picks))
-    )
-    return {"preview": [str(video)], "contact_sheet": [str(sheet)]}

@@ -81,7 +81,8 @@ def decode(
     max_size: int | None = DEFAULT_MAX_SIZE,
     progress: ProgressFn | None = None,
 ) -> DecodedVideo:
-    """Decode ``path`` (video file, image folder, or folder with ``JPEGImages/``).
+    """Decode ``path`` (video file, image folder, folder with ``JPEGImages/``, or one image: a
+    one-frame video).
 
     ``fps`` resamples a video file; for a folder it declares the images' rate (default 30).
     ``start``/``end`` are seconds; ``max_frames`` keeps the first N after those; ``max_size`` bounds
@@ -101,12 +102,12 @@ def decode(
         raise UsageError(f"--end {end} is not after --start {start}", hint="give a window with end > start")
     if max_frames is not None and max_frames < 1:
         raise UsageError(f"--max-frames {max_frames} must be at least 1")
-    if path.is_dir():
+    if path.is_dir() or path.suffix.lower() in IMAGE_SUFFIXES:
         return _decode_folder(path, fps, start, end, max_frames, max_size, progress)
     if path.suffix.lower() not in VIDEO_SUFFIXES:
         raise InputError(
             f"{path.name}: not a video file zooctl reads ({path.suffix or 'no suffix'})",
-            hint=f"use one of {' '.join(VIDEO_SUFFIXES)}, or a folder of images",
+            hint=f"use one of {' '.join(VIDEO_SUFFIXES)}, an image, or a folder of images",
         )
     return _decode_file(path, fps, start, end, max_frames, max_size, progress)
 
@@ -118,11 +119,15 @@ def _decode_folder(folder, fps, start, end, max_frames, max_size, progress) -> D
     from PIL import Image
 
     kind, annotations, img_dir = "images", None, folder
-    if (folder / "JPEGImages").is_dir():
-        kind, img_dir = "davis", folder / "JPEGImages"
-        ann = folder / "Annotations"
-        annotations = ann if ann.is_dir() and image_files(ann) else None
-    files = image_files(img_dir)
+    if folder.is_file():  # one photo: the folder of that one image
+        img_dir = folder.parent
+        files = [folder]
+    else:
+        if (folder / "JPEGImages").is_dir():
+            kind, img_dir = "davis", folder / "JPEGImages"
+            ann = folder / "Annotations"
+            annotations = ann if ann.is_dir() and image_files(ann) else None
+        files = image_files(img_dir)
     if not files:
         raise InputError(
             f"{img_dir} holds no images",

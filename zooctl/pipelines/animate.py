@@ -1,0 +1,166 @@
+"""`zooctl animate`: sample motions from a stored prior for a character and export them.
+
+The character is a bank asset, a finished fit (its fitted character, from the fit store), or a
+single photo that is fitted first (`fit_image`: CASA on one frame, then sampled like any fit).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import MissingDependencyError, NotFoundError, UsageError
+
+FIT_PREFIX = "fit:"
+
+
+@dataclass
+class AnimateOptions:
+    sample: int = 5
+    frames: int = 60
+    seed: int = 0
+    temperature: float = 1.0
+    prior: str | None = None  # default: the most recently trained
+    formats: tuple[str, ...] = ("usd", "glb")
+    preview: bool = True
+    size: int = 192
+    device: str = "cpu"
+
+
+def resolve_target(store_root: Path, target: str) -> tuple[Any, str]:
+    """(character, kind) for a bank asset name, ``fit:NAME``, or a fit name no bank asset has."""
+    from ..store.bank import Bank
+    from ..store.fits import FitStore
+
+    fits = FitStore(store_root)
+    if target.startswith(FIT_PREFIX):
+        return fits.character(target[len(FIT_PREFIX) :]), "fit"
+    bank = Bank.open(store_root)
+    if target in bank.names():
+        return bank.get(target), "asset"
+    if fits.exists(target):
+        return fits.character(target), "fit"
+    raise NotFoundError(
+        f"{target!r} is neither a bank asset nor a fit",
+        hint="see `zooctl bank list` and `zooctl fits list`, or animate a photo with --image",
+    )
+
+
+def fit_image(
+    image: Path,
+    store_root: Path,
+    masks: str | None = None,
+    template: str | None = None,
+    config: Path | None = None,
+    device: str = "cpu",
+    reporter: Any = None,
+) -> tuple[Any, str]:
+    """Fit one photo (CASA on a single frame; the fast preset, with ``config``, a JSON file, on
+    top) and return (fitted character, fit name)."""
+    from ..fit.config import load_config
+    from ..fit.job import fit_job
+    from ..store.fits import FitStore
+    from ..video.decode import IMAGE_SUFFIXES
+
+    image = Path(image).expanduser()
+    if not image.is_file() or image.suffix.lower() not in IMAGE_SUFFIXES:
+        raise UsageError(
+            f"--image {image}: not an image file",
+            hint=f"give a photo ({', '.join(sorted(IMAGE_SUFFIXES))}) and its mask with --masks DIR",
+        )
+    cfg = load_config(config, "fast")
+    cfg.device = device
+    rec = fit_job(
+        str(image), store_root, cfg, template=template, masks=masks, reporter=reporter, outputs=("loss",)
+    )
+    return FitStore(store_root).character(rec["name"]), rec["name"]
+
+
+def sample_and_export(
+    asset: Any, label: str, out: Path, opts: AnimateOptions, store_root: Path
+) -> dict[str, Any]:
+    """Sample ``opts.sample`` motions for ``asset``, write one file per motion and format, the
+    preview video and contact sheet, and ``animate.json``; returns that manifest."""
+    from ..motion.prior import motion_clip
+    from ..plugins import get_registry
+    from ..store.fs import write_bytes_atomic
+    from ..store.motion_store import MotionStore
+
+    t0 = time.perf_counter()
+    store = MotionStore.open(store_root)
+    prior_name = opts.prior or store.latest()
+    prior = store.load(prior_name, device=opts.device)
+    registry = get_registry()
+    exporters = {}
+    for f in opts.formats:
+        spec = registry.exporter_for(f)
+        if spec is None:
+            raise MissingDependencyError(
+                f"no exporter for format {f!r}", hint="see `zooctl plugins` for the formats available"
+            )
+        exporters[f] = spec
+    # Not every prior plugin takes a temperature: pass it only when asked for.
+    options = {"temperature": opts.temperature} if opts.temperature != 1.0 else {}
+    rots = prior.sample(asset, n=opts.sample, frames=opts.frames, seed=opts.seed, **options)  # (n, T, J, 4)
+    t_sample = time.perf_counter() - t0
+    fps = float(getattr(getattr(prior, "cfg", None), "fps", 30.0))
+    names = [f"sample{i:02d}" for i in range(opts.sample)]
+    animated = dataclasses.replace(
+        asset, clips={n: motion_clip(asset, r, fps, n) for n, r in zip(names, rots, strict=True)}
+    )
+    out.mkdir(parents=True, exist_ok=True)
+    files: dict[str, list[str]] = {f: [] for f in opts.formats}
+    for n in names:
+        for f, spec in exporters.items():
+            path = out / f"{label}_{n}.{f}"
+            spec.save(animated, path, clips=[n])
+            files[f].append(str(path))
+    t_export = time.perf_counter() - t0
+    if opts.preview:
+        files.update(_preview(animated, names, out, label, opts.size, fps, opts.device))
+    manifest = {
+        "target": label,
+        "prior": prior_name,
+        "samples": opts.sample,
+        "frames": opts.frames,
+        "fps": fps,
+        "seed": opts.seed,
+        "temperature": opts.temperature,
+        "files": files,
+        "seconds": {
+            "sample": round(t_sample, 3),
+            "sample_and_export": round(t_export, 3),
+            "total": round(time.perf_counter() - t0, 3),
+        },
+    }
+    write_bytes_atomic(out / "animate.json", (json.dumps(manifest, indent=1) + "\n").encode())
+    return manifest
+
+
+def _preview(
+    asset, clips: list[str], out: Path, label: str, size: int, fps: float, device: str
+) -> dict[str, list[str]]:
+    """A video with every sample side by side, and a contact sheet (one row of frames per sample)."""
+    from ..io.video import write_mp4
+    from ..render.preview import contact_sheet, render_asset, save_png
+
+    videos = [
+        render_asset(asset, c, size=size, supersample=1, device=device) for c in clips
+    ]  # (T, H, W, 3) each
+    cols = min(len(clips), 5)
+    grid = [contact_sheet([v[t] for v in videos], labels=clips, columns=cols) for t in range(len(videos[0]))]
+    video = write_mp4(out / f"{label}_samples.mp4", np.stack(grid), fps=fps)
+    T = len(videos[0])
+    picks = np.linspace(0, T - 1, min(T, 6)).round().astype(int)
+    tiles = [v[t] for v in videos for t in picks]
+    labels = [f"{c} f{t}" for c in clips for t in picks]
+    sheet = save_png(
+        out / f"{label}_contact_sheet.png", contact_sheet(tiles, labels=labels, columns=len(picks))
+    )
+    return {"preview": [str(video)], "contact_sheet": [str(sheet)]}
