@@ -186,3 +186,14 @@ def test_query_from_a_stored_video_name_uses_its_masks(tmp_path):
     np.testing.assert_array_equal(stored.images, direct.images)
     with pytest.raises(NotFoundError):
         load_query("not-a-video", k=4, store_root=root)
+
+
+def test_seeded_starter_animals_get_views(store, capsys):
+    """`bank seed` renders retrieval views like `bank add`, so a seeded bank can be searched."""
+    from zooctl.store.bank import Bank
+
+    assert run_inprocess(capsys, "bank", "seed", "--plan", "fish", "--no-variants", "--views").code == 0
+    assert run_inprocess(capsys, "bank", "seed", "--plan", "snake", "--no-variants", "--no-views").code == 0
+    bank = Bank(store)
+    assert bank.summary("fish")["views"]["count"] > 0
+    assert "views" not in bank.summary("snake")

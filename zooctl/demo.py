@@ -22,7 +22,7 @@ def main(argv: list[str] | None = None) -> int:
     from .fit.config import preset
     from .fit.job import fit_job
     from .paths import default_store
-    from .procedural import seed_bank
+    from .pipelines.ingest import seed_starter
     from .store.bank import Bank
 
     ap = argparse.ArgumentParser(prog="python -m zooctl.demo", description=__doc__.splitlines()[0])
@@ -40,7 +40,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         store = default_store()
         bank = Bank.open(store)
-        added = seed_bank(bank)
+        added = seed_starter(bank)
         con.print(f"starter bank at {store}/bank: {len(bank)} assets ({len(added)} added)")
         animal = bank.get(args.animal)
         video_dir = make_video(animal, args.out / "video", frames=args.frames, size=args.size, seed=args.seed)

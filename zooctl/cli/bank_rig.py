@@ -132,14 +132,26 @@ def seed(
         False, "--no-variants", help="One animal per plan, without the proportion variants."
     ),
     replace: bool = typer.Option(False, "--replace", help="Overwrite starter animals already in the bank."),
+    views: bool = typer.Option(
+        None,
+        "--views/--no-views",
+        help="Render and embed retrieval views of the added animals (default: on; ZOOCTL_VIEWS=0 turns "
+        "the default off).",
+        show_default=False,
+    ),
     json_out: bool = JsonOpt,
 ) -> None:
     """Add the procedural starter animals (rigged, skinned, animated; generated, nothing downloaded)."""
-    from ..procedural import seed_bank
+    from ..pipelines.ingest import seed_starter
 
     bank = _bank()
-    added = seed_bank(
-        bank, seed=seed_value, plans=list(plan) if plan else None, variants=not no_variants, replace=replace
+    added = seed_starter(
+        bank,
+        seed=seed_value,
+        plans=list(plan) if plan else None,
+        variants=not no_variants,
+        replace=replace,
+        views=views,
     )
     if json_out:
         print_json({"added": added, "bank_size": len(bank.names())})

@@ -54,10 +54,7 @@ def add_files(
     ``views`` renders and embeds each added asset's retrieval views (`zooctl.retrieval.index`);
     default: on, unless the environment sets ZOOCTL_VIEWS=0.
     """
-    if views is None:
-        import os
-
-        views = os.environ.get("ZOOCTL_VIEWS", "1") != "0"
+    views = _views_default() if views is None else views
     if name is not None and len(paths) > 1:
         raise UsageError("--name needs exactly one PATH", hint="add the files one at a time, or drop --name")
     if name is not None:
@@ -76,16 +73,46 @@ def add_files(
                 asset.meta["license"] = license
             r.summary = bank.add(asset, replace=replace)
             if views:
-                from ..retrieval.index import index_asset
-
-                try:
-                    r.summary = {**r.summary, "views": index_asset(bank, asset)}
-                except ZooctlError as exc:
-                    raise type(exc)(
-                        f"{asset_name} was added, but its retrieval views failed: {exc.message}",
-                        hint=f"fix that, then run `zooctl bank reindex {asset_name}`",
-                    ) from None
+                r.summary = {**r.summary, "views": _index_views(bank, asset)}
         except ZooctlError as exc:
             r.error = exc
         results.append(r)
     return results
+
+
+def seed_starter(
+    bank: Bank,
+    seed: int = 0,
+    plans: list[str] | None = None,
+    variants: bool = True,
+    replace: bool = False,
+    views: bool | None = None,
+) -> list[str]:
+    """Add the procedural starter animals (`zooctl.procedural.seed_bank`) and, like `add_files`,
+    render their retrieval views, so `bank search` and `fit` retrieval work on a seeded bank.
+    Returns the names added."""
+    from ..procedural import seed_bank
+
+    views = _views_default() if views is None else views
+    added = seed_bank(bank, seed=seed, plans=plans, variants=variants, replace=replace)
+    for n in added if views else []:
+        _index_views(bank, bank.get(n))
+    return added
+
+
+def _views_default() -> bool:
+    import os
+
+    return os.environ.get("ZOOCTL_VIEWS", "1") != "0"
+
+
+def _index_views(bank: Bank, asset) -> dict:
+    from ..retrieval.index import index_asset
+
+    try:
+        return index_asset(bank, asset)
+    except ZooctlError as exc:
+        raise type(exc)(
+            f"{asset.name} was added, but its retrieval views failed: {exc.message}",
+            hint=f"fix that, then run `zooctl bank reindex {asset.name}`",
+        ) from None
