@@ -197,3 +197,18 @@ def test_seeded_starter_animals_get_views(store, capsys):
     bank = Bank(store)
     assert bank.summary("fish")["views"]["count"] > 0
     assert "views" not in bank.summary("snake")
+
+
+def test_seed_starter_reports_view_progress(store):
+    from zooctl.pipelines.ingest import seed_starter
+    from zooctl.store.bank import Bank
+
+    calls = []
+    added = seed_starter(
+        Bank(store), plans=["fish"], variants=False, views=True, progress=lambda *a: calls.append(a)
+    )
+    assert added == ["fish"] and calls == [("views", 1, 1)]
+    assert (
+        seed_starter(Bank(store), plans=["fish"], variants=False, progress=lambda *a: calls.append(a)) == []
+    )
+    assert len(calls) == 1  # nothing added, nothing reported

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -70,3 +72,37 @@ def print_table(columns: list[tuple[str, str]], rows: list[list[str]], title: st
     console.print("  ".join("-" * w for w in widths), style="dim", highlight=False, markup=False)
     console.file.write("\n".join(fmt(r) for r in rows) + ("\n" if rows else ""))
     console.file.flush()
+
+
+@contextlib.contextmanager
+def stage_progress(enabled: bool) -> Iterator[object]:
+    """A rich progress display with one bar per stage; yields the ``(stage, done, total)`` callback."""
+    if not enabled:
+        yield None
+        return
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    with Progress(
+        TextColumn("{task.description:>8}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=err_console,
+        transient=False,
+    ) as prog:
+        tasks: dict[str, object] = {}
+
+        def update(stage: str, done: int, total: int | None) -> None:
+            if stage not in tasks:
+                tasks[stage] = prog.add_task(stage, total=total)
+            prog.update(tasks[stage], completed=done, total=total)
+
+        yield update

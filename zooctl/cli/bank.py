@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from ._common import JsonOpt, console, err_console, print_json, print_table, store_root
+from ._common import JsonOpt, console, err_console, print_json, print_table, stage_progress, store_root
 
 app = typer.Typer(
     help="Manage the bank of rigged, animated assets (templates for fitting).", no_args_is_help=True
@@ -45,7 +45,17 @@ def add(
     from ..errors import UsageError
     from ..pipelines.ingest import add_files
 
-    results = add_files(_bank(), paths, name=name, tags=tag, license=license, replace=replace, views=views)
+    with stage_progress(not json_out and len(paths) > 1) as progress:
+        results = add_files(
+            _bank(),
+            paths,
+            name=name,
+            tags=tag,
+            license=license,
+            replace=replace,
+            views=views,
+            progress=progress,
+        )
     failed = [r for r in results if r.error is not None]
     if json_out:
         print_json(

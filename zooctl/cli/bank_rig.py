@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from ._common import JsonOpt, console, print_json, store_root
+from ._common import JsonOpt, console, print_json, stage_progress, store_root
 
 FORMAT_SUFFIX = {"usd": ".usd", "usda": ".usda", "usdc": ".usdc", "usdz": ".usdz", "glb": ".glb"}
 
@@ -145,14 +145,16 @@ def seed(
     from ..pipelines.ingest import seed_starter
 
     bank = _bank()
-    added = seed_starter(
-        bank,
-        seed=seed_value,
-        plans=list(plan) if plan else None,
-        variants=not no_variants,
-        replace=replace,
-        views=views,
-    )
+    with stage_progress(not json_out) as progress:
+        added = seed_starter(
+            bank,
+            seed=seed_value,
+            plans=list(plan) if plan else None,
+            variants=not no_variants,
+            replace=replace,
+            views=views,
+            progress=progress,
+        )
     if json_out:
         print_json({"added": added, "bank_size": len(bank.names())})
     else:

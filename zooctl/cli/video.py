@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import contextlib
-from collections.abc import Iterator
 from pathlib import Path
 
 import typer
 
-from ._common import JsonOpt, console, err_console, print_json, print_table, store_root
+from ._common import JsonOpt, console, print_json, print_table, stage_progress, store_root
 
 app = typer.Typer(
     help="Turn videos into frames, masks and optical flow, stored once for every fit.", no_args_is_help=True
@@ -41,40 +39,6 @@ def _parse_options(items: list[str] | None, flag: str) -> dict[str, object]:
             v = value.lower() == "true"
         out[key.strip()] = v
     return out
-
-
-@contextlib.contextmanager
-def _progress(enabled: bool) -> Iterator[object]:
-    """A rich progress display with one bar per stage; yields the ``(stage, done, total)`` callback."""
-    if not enabled:
-        yield None
-        return
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
-    with Progress(
-        TextColumn("{task.description:>8}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        TimeRemainingColumn(),
-        console=err_console,
-        transient=False,
-    ) as prog:
-        tasks: dict[str, object] = {}
-
-        def update(stage: str, done: int, total: int | None) -> None:
-            if stage not in tasks:
-                tasks[stage] = prog.add_task(stage, total=total)
-            prog.update(tasks[stage], completed=done, total=total)
-
-        yield update
 
 
 @app.command("add")
@@ -143,7 +107,7 @@ def add(
         flow_options=flow_opts,
         replace=replace,
     )
-    with _progress(not quiet and not json_out) as progress:
+    with stage_progress(not quiet and not json_out) as progress:
         summary = add_video(_store(), path, opts, progress=progress)
     if json_out:
         print_json(summary)
@@ -201,7 +165,7 @@ def show(
     rec = store.get(name, what=("masks", "flow") + (("frames",) if preview else ()))
     info = {**store.summary(name), **video_stats(rec)}
     if preview:
-        with _progress(not json_out) as progress:
+        with stage_progress(not json_out) as progress:
             from ..video.preview import write_preview
 
             write_preview(

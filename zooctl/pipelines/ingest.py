@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -48,11 +49,13 @@ def add_files(
     license: str | None = None,
     replace: bool = False,
     views: bool | None = None,
+    progress: Callable[[str, int, int], None] | None = None,
 ) -> list[AddResult]:
     """Import and store each path; one bad file does not stop the others (its result holds the error).
 
     ``views`` renders and embeds each added asset's retrieval views (`zooctl.retrieval.index`);
-    default: on, unless the environment sets ZOOCTL_VIEWS=0.
+    default: on, unless the environment sets ZOOCTL_VIEWS=0. ``progress(stage, done, total)`` is
+    called after each file.
     """
     views = _views_default() if views is None else views
     if name is not None and len(paths) > 1:
@@ -77,6 +80,8 @@ def add_files(
         except ZooctlError as exc:
             r.error = exc
         results.append(r)
+        if progress is not None:
+            progress("adding", len(results), len(paths))
     return results
 
 
@@ -87,6 +92,7 @@ def seed_starter(
     variants: bool = True,
     replace: bool = False,
     views: bool | None = None,
+    progress: Callable[[str, int, int], None] | None = None,
 ) -> list[str]:
     """Add the procedural starter animals (`zooctl.procedural.seed_bank`) and, like `add_files`,
     render their retrieval views, so `bank search` and `fit` retrieval work on a seeded bank.
@@ -95,8 +101,10 @@ def seed_starter(
 
     views = _views_default() if views is None else views
     added = seed_bank(bank, seed=seed, plans=plans, variants=variants, replace=replace)
-    for n in added if views else []:
+    for i, n in enumerate(added if views else []):
         _index_views(bank, bank.get(n))
+        if progress is not None:
+            progress("views", i + 1, len(added))
     return added
 
 
