@@ -52,7 +52,12 @@ def main() -> None:
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--samples", type=int, default=32)
-    ap.add_argument("--temperature", type=float, default=1.0, help="scale of the prior's sigma when sampling")
+    ap.add_argument(
+        "--temperature",
+        type=float,
+        default=None,
+        help="scale of the prior's sigma (default: its calibrated one)",
+    )
     ap.add_argument("--out", type=Path, default=Path("bench/out/motion.json"))
     ap.add_argument("--save", type=Path, default=None, help="also save the trained prior in this folder")
     ap.add_argument("--load", type=Path, default=None, help="evaluate a prior saved with --save, no training")
@@ -102,6 +107,7 @@ def main() -> None:
             "sequences": len(prior.training["sequences"]),
             "held_out_clips": sum(len(v) for v in held.values()),
         },
+        "temperature": args.temperature if args.temperature is not None else prior.sample_temperature,
         "evaluation": {k: v for k, v in result.items() if k != "per_skeleton"},
         "per_skeleton": result["per_skeleton"],
         "sampling": timing,

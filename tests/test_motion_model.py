@@ -184,3 +184,24 @@ def test_temperature_scales_the_spread_of_samples(animals):
     assert spread[0] < spread[1]
     with pytest.raises(InputError, match="temperature"):
         prior.sample_delta(sk, 1, 8, temperature=-1.0)
+
+
+def test_calibrated_temperature_matches_the_training_diversity(animals):
+    from zooctl.motion.calibrate import calibrate_temperature
+
+    quad, _ = animals
+    prior = PonymationPrior(MotionConfig(**TINY))
+    torch.manual_seed(4)
+    _randomise_output(prior.model)
+    data = prior.dataset(sequences_from_asset(quad), speeds=())  # one skeleton: its ratio decides
+    cal = calibrate_temperature(prior, data, grid=(0.25, 1.0, 4.0), samples=6, windows=12)
+    real, div = cal["real_diversity"], {float(t): d for t, d in cal["diversity"].items()}
+    assert real > 0 and div[0.25] < div[1.0] < div[4.0]  # wider latent, more varied motion
+    assert cal["temperature"] == min(div, key=lambda t: abs(np.log(div[t] / real)))
+    # Training stores the calibrated temperature; sampling uses it unless told otherwise.
+    prior.fit(data, TrainOptions(epochs=1, batch_size=16, lr=3e-3, warmup_steps=1))
+    t = prior.training["sample_temperature"]
+    assert t == prior.training["calibration"]["temperature"] == prior.sample_temperature
+    sk = Skeleton.from_asset(quad)
+    a = prior.sample_delta(sk, 3, 8, seed=2, transition_steps=1)
+    assert np.allclose(a, prior.sample_delta(sk, 3, 8, seed=2, transition_steps=1, temperature=t))

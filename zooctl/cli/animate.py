@@ -36,10 +36,12 @@ def animate(
     ),
     seed: int = typer.Option(0, "--seed", help="Random seed."),
     temperature: float = typer.Option(
-        1.0,
+        None,
         "--temperature",
         min=0.0,
-        help="Scale of the latent's standard deviation: lower is closer to typical motion, higher more varied.",
+        help="Scale of the latent's standard deviation: lower is closer to typical motion, higher more "
+        "varied. Default: the prior's, calibrated at training to match its clips' diversity.",
+        show_default=False,
     ),
     prior_name: str = typer.Option(
         None, "--prior", help="Motion prior (default: the most recently trained)."

@@ -17,7 +17,11 @@ def bench_motion(
     ),
     seed: int = typer.Option(0, "--seed", help="Sampling seed."),
     temperature: float = typer.Option(
-        1.0, "--temperature", min=0.0, help="Scale of the prior's standard deviation when sampling."
+        None,
+        "--temperature",
+        min=0.0,
+        help="Scale of the prior's standard deviation when sampling (default: the prior's calibrated one).",
+        show_default=False,
     ),
     frames: int = typer.Option(60, "--frames", help="Frames per motion in the sampling timing."),
     repeats: int = typer.Option(3, "--repeats", help="Timed sampling runs (the median is reported)."),
@@ -60,7 +64,7 @@ def bench_motion(
     result.update(
         {
             "prior": name,
-            "temperature": temperature,
+            "temperature": temperature if temperature is not None else prior.sample_temperature,
             "machine": machine(),
             "sampling": {
                 "asset": big.name,

@@ -50,9 +50,9 @@ def evaluate(
     test: Sequence[MotionSequence],
     samples: int = 32,
     seed: int = 0,
-    temperature: float = 1.0,
+    temperature: float | None = None,
 ) -> dict[str, Any]:
-    """Metrics of ``prior`` (a `PonymationPrior`, sampled at ``temperature``) and of both baselines
+    """Metrics of ``prior`` (a `PonymationPrior`, sampled at ``temperature``, default its calibrated one) and of both baselines
     on the held-out windows."""
     L, fps = prior.cfg.length, prior.cfg.fps
     train_w, test_w = _windows(train, L, fps), _windows(test, L, fps)

@@ -27,6 +27,7 @@ import torch
 from ..asset import Clip
 from ..errors import InputError, StoreError
 from ..geometry import decompose_trs, matrix_to_quat
+from .calibrate import calibrate_temperature
 from .dataset import MotionDataset, MotionSequence, quat_mul
 from .model import MotionConfig, MotionVAE
 from .skeleton import Skeleton, SkeletonBatch
@@ -87,7 +88,15 @@ class PonymationPrior:
                 "final_loss": self.history.to_json()["final"],
             }
         )
+        cal = calibrate_temperature(self, ds)
+        self.training["sample_temperature"] = cal["temperature"]
+        self.training["calibration"] = cal
         return self.history
+
+    @property
+    def sample_temperature(self) -> float:
+        """Default sampling temperature: calibrated at training (`zooctl.motion.calibrate`), 1.0 for older priors."""
+        return float(self.training.get("sample_temperature", 1.0))
 
     # -- persistence --------------------------------------------------------------------------
     def config_json(self, name: str, extra: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -166,12 +175,14 @@ class PonymationPrior:
         frames: int,
         seed: int = 0,
         transition_steps: int = 20,
-        temperature: float = 1.0,
+        temperature: float | None = None,
     ) -> np.ndarray:
         """(n, frames, J, 4) rotations relative to rest, chained with optimised transitions.
 
-        ``temperature`` scales the prior's standard deviation (z ~ N(0, temperature^2 I)).
+        ``temperature`` scales the prior's standard deviation (z ~ N(0, temperature^2 I)); default:
+        the prior's calibrated `sample_temperature`.
         """
+        temperature = self.sample_temperature if temperature is None else temperature
         if n < 1 or frames < 1:
             raise InputError(f"need at least one sample of one frame, got n={n}, frames={frames}")
         if not temperature >= 0:

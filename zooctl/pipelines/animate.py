@@ -25,7 +25,7 @@ class AnimateOptions:
     sample: int = 5
     frames: int = 60
     seed: int = 0
-    temperature: float = 1.0
+    temperature: float | None = None  # default: the prior's calibrated temperature
     prior: str | None = None  # default: the most recently trained
     formats: tuple[str, ...] = ("usd", "glb")
     preview: bool = True
@@ -106,7 +106,7 @@ def sample_and_export(
             )
         exporters[f] = spec
     # Not every prior plugin takes a temperature: pass it only when asked for.
-    options = {"temperature": opts.temperature} if opts.temperature != 1.0 else {}
+    options = {"temperature": opts.temperature} if opts.temperature is not None else {}
     rots = prior.sample(asset, n=opts.sample, frames=opts.frames, seed=opts.seed, **options)  # (n, T, J, 4)
     t_sample = time.perf_counter() - t0
     fps = float(getattr(getattr(prior, "cfg", None), "fps", 30.0))
@@ -131,7 +131,9 @@ def sample_and_export(
         "frames": opts.frames,
         "fps": fps,
         "seed": opts.seed,
-        "temperature": opts.temperature,
+        "temperature": opts.temperature
+        if opts.temperature is not None
+        else getattr(prior, "sample_temperature", None),
         "files": files,
         "seconds": {
             "sample": round(t_sample, 3),
