@@ -168,7 +168,8 @@ def train(
         console.print(
             f"trained motion prior {name!r}: {hist.steps} steps in {hist.seconds:.0f} s"
             f"{' (stopped at --max-minutes)' if hist.stopped_early else ''}, final loss {fl['total']:.4f} "
-            f"(rotation {fl['rotation']:.4f}, joints {fl['joints']:.5f}, KL {fl['kl']:.2f}); loss curve: {path / 'loss.png'}",
+            f"(rotation {fl['rotation']:.4f}, joints {fl['joints']:.5f}, KL {fl['kl']:.2f}); sampling temperature "
+            f"{prior.sample_temperature:g} (calibrated to the clips' diversity); loss curve: {path / 'loss.png'}",
             highlight=False,
         )
 
@@ -195,6 +196,7 @@ def list_(json_out: bool = JsonOpt) -> None:
                 str(len(t.get("skeletons", []))),
                 str(t.get("windows", "?")),
                 str(t.get("steps", "?")),
+                f"{t.get('sample_temperature', 1.0):g}",
                 c.get("created", ""),
             ]
         )
@@ -207,6 +209,7 @@ def list_(json_out: bool = JsonOpt) -> None:
             ("skeletons", "right"),
             ("windows", "right"),
             ("steps", "right"),
+            ("temperature", "right"),
             ("created", "left"),
         ],
         table,
