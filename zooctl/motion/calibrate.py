@@ -1,12 +1,13 @@
 """Sampling temperature calibrated on the training windows.
 
-The trained VAE decodes z ~ N(0, I) into motions less varied than the data (measured below), and
+The trained VAE decodes z ~ N(0, I) into motions less varied than the data, and
 scaling the prior's standard deviation by a temperature widens them without leaving the data:
 `calibrate_temperature` picks, from a grid, the temperature whose samples are as diverse as the
 training windows themselves (mean pairwise joint-position distance, `metrics.diversity`), per
-skeleton and then averaged in log ratio. On the 28 shared assets a fixed sweep gave diversity
-2.84 / 4.37 / 5.79 / 6.95 / 7.82 at temperatures 1 / 1.5 / 2 / 2.5 / 3 against 7.91 for real
-held-out clips (BENCHMARKS.md), all with lower motion Chamfer distance than the PCA baseline.
+skeleton and then averaged in log ratio. On the 28 shared assets (BENCHMARKS.md) a 64 x 2 prior
+decodes z ~ N(0, I) into samples about half as diverse as its training windows; its calibrated
+temperature was 3.5, and its motion Chamfer distance to held-out clips moved little between
+temperatures 3.5 and 7 (126.5 to 128.5).
 """
 
 from __future__ import annotations
