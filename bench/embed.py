@@ -1,4 +1,5 @@
-"""Embedder throughput (images per second) on CPU with 1 and 2 torch threads, and on CUDA when present.
+"""Embedder throughput (images per second) on CPU with 1 and 2 torch threads, and on CUDA when present;
+for effnet also its numpy backend (what a search uses; BLAS threads as OMP_NUM_THREADS sets them).
 
 .venv/bin/python bench/embed.py [--embedder effnet] [--batch 16] [--size 224] [--out bench/out/embed.json]
 """
@@ -38,10 +39,13 @@ def main() -> None:
     }
     devices = [("cpu", 1), ("cpu", 2)] + ([("cuda", 0)] if torch.cuda.is_available() else [])
     for name in args.embedder or ["effnet", "silhouette"]:
-        for device, threads in devices:
+        variants = [(d, t, {}) for d, t in devices]
+        if name == "effnet":
+            variants = [(d, t, {"backend": "torch"}) for d, t in devices] + [("cpu", 0, {"backend": "numpy"})]
+        for device, threads, options in variants:
             if threads:
                 torch.set_num_threads(threads)
-            emb = get_embedder(name, device=device)
+            emb = get_embedder(name, device=device, **options)
             x = masks if getattr(emb, "input_kind", "rgb") == "mask" else images
             emb.embed_batch(x)  # warm-up
             s = median_time(lambda: emb.embed_batch(x), args.repeat)  # noqa: B023
@@ -49,10 +53,12 @@ def main() -> None:
                 "embedder": name,
                 "device": device,
                 "threads": threads or None,
+                "backend": getattr(emb, "backend", None),
                 "images_per_s": args.batch / s,
             }
             report["results"].append(row)
-            print(f"{name:12s} {device:5s} threads={threads or '-'}  {row['images_per_s']:.1f} images/s")
+            label = f"{name}/{row['backend']}" if row["backend"] else name
+            print(f"{label:14s} {device:5s} threads={threads or '-'}  {row['images_per_s']:.1f} images/s")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(report, indent=1))
     print(f"machine: {report['machine']}\nwrote {args.out}")

@@ -1,5 +1,6 @@
 """The effnet embedder: the shipped ImageNet weights load strictly into our EfficientNet-Lite0 and
-classify real photos (DAVIS frames cropped by their masks) correctly; embeddings are unit-norm."""
+classify real photos (DAVIS frames cropped by their masks) correctly; embeddings are unit-norm. The
+numpy backend reads the same weights without torch and computes the same features."""
 
 from __future__ import annotations
 
@@ -15,11 +16,12 @@ pytest.importorskip(
 )
 
 
-@pytest.fixture(scope="module")
-def effnet():
-    from zooctl.embed.effnet import EffnetEmbedder
+@pytest.fixture(scope="module", params=["torch", "numpy"])
+def effnet(request):
+    """Every behavioural test runs on both backends (torch, and the numpy one searches use)."""
+    from zooctl.embed.effnet_embedder import EffnetEmbedder
 
-    return EffnetEmbedder()
+    return EffnetEmbedder(backend=request.param)
 
 
 def _davis_crop(seq: str, frame: int = 10) -> np.ndarray:
@@ -36,7 +38,8 @@ def _davis_crop(seq: str, frame: int = 10) -> np.ndarray:
 def test_state_dict_loads_strictly_into_our_model():
     import torch
 
-    from zooctl.embed.effnet import EfficientNetLite0, weights_path
+    from zooctl.embed.effnet import EfficientNetLite0
+    from zooctl.embed.effnet_arch import weights_path
 
     state = torch.load(weights_path(), map_location="cpu", weights_only=True)
     model = EfficientNetLite0()
@@ -90,3 +93,74 @@ def test_registered_as_builtin_plugin():
     reg = get_registry()
     assert {"effnet", "silhouette"} <= set(reg.names("embedder"))
     assert reg.owner[("embedder", "effnet")] == "embed"
+
+
+def test_torch_free_reader_matches_torch_load(tmp_path):
+    import torch
+
+    from zooctl.embed.effnet_arch import weights_path
+    from zooctl.embed.state_dict import load_state_dict
+
+    ref = torch.load(weights_path(), map_location="cpu", weights_only=True)
+    torch.save({k: v[..., :2] if v.ndim else v for k, v in ref.items()}, tmp_path / "zip.pt")  # zip format
+    for path, want in ((weights_path(), ref), (tmp_path / "zip.pt", torch.load(tmp_path / "zip.pt"))):
+        got = load_state_dict(path)  # the shipped file is torch's legacy stream format
+        assert list(got) == list(want)
+        for k, v in want.items():
+            assert got[k].dtype == v.numpy().dtype and np.array_equal(got[k], v.numpy()), k
+
+
+def test_torch_free_reader_refuses_other_files(tmp_path):
+    import pickle
+
+    import torch
+
+    from zooctl.embed.state_dict import load_state_dict
+
+    (tmp_path / "junk.pt").write_bytes(b"not weights at all")
+    torch.save(torch.nn.Linear(2, 2), tmp_path / "module.pt")  # a pickled module, not a state dict
+    (tmp_path / "evil.pt").write_bytes(pickle.dumps(print))
+    for name in ("junk.pt", "module.pt", "evil.pt"):
+        with pytest.raises(InputError):
+            load_state_dict(tmp_path / name)
+
+
+@needs_shared_videos
+def test_numpy_backend_matches_torch():
+    from zooctl.embed.effnet_embedder import EffnetEmbedder
+
+    crops = np.stack([_davis_crop("blackswan"), _davis_crop("cows"), _davis_crop("dog")])
+    odd_size = np.random.default_rng(1).integers(0, 256, (2, 150, 170, 3), dtype=np.uint8)  # resized first
+    t, n = EffnetEmbedder(backend="torch"), EffnetEmbedder(backend="numpy")
+    for batch in (crops, odd_size):
+        np.testing.assert_allclose(t.embed_batch(batch), n.embed_batch(batch), atol=2e-5)
+
+
+def test_search_process_embeds_without_importing_torch():
+    """A fresh process (what `zooctl bank search` is) gets the numpy backend and never loads torch."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, numpy as np\n"
+        "from zooctl.embed.base import get_embedder\n"
+        "e = get_embedder('effnet')\n"
+        "v = e.embed_batch(np.full((2, 64, 64, 3), 128, np.uint8))\n"
+        "assert v.shape == (2, 1280), v.shape\n"
+        "print(e.backend, 'torch' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["numpy", "False"]
+
+
+def test_backend_choice():
+    from zooctl.embed.effnet_embedder import choose_backend
+    from zooctl.errors import UsageError
+
+    assert choose_backend("auto", "cpu") == "torch"  # torch is imported in this test process
+    assert choose_backend("auto", "cuda") == "torch"
+    assert choose_backend("numpy", "cpu") == "numpy"
+    with pytest.raises(UsageError, match="CPU only"):
+        choose_backend("numpy", "cuda")
+    with pytest.raises(UsageError, match="unknown effnet backend"):
+        choose_backend("tensorflow", "cpu")

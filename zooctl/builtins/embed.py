@@ -9,7 +9,7 @@ from ..plugins import hookimpl
 
 
 def _effnet(device: str = "cpu", **options: Any) -> Any:
-    from ..embed.effnet import EffnetEmbedder
+    from ..embed.effnet_embedder import EffnetEmbedder
 
     return EffnetEmbedder(device=device, **options)
 

