@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import itertools
 import statistics
 import time
 from pathlib import Path
@@ -56,7 +57,8 @@ def loo_benchmark(
         q = render_query_video(a, n_frames=frames, size=size, seed=1000 + seed * 7919 + i, device=device)
         q_emb[a.name] = {e: embed_inputs(cached_embedder(e, device), q.images, q.masks) for e in embedders}
     results = []
-    sets = [[e] for e in embedders] + ([list(embedders)] if len(embedders) > 1 else [])
+    # Every embedder alone and every combination of them (7 sets for 3 embedders).
+    sets = [list(c) for k in range(1, len(embedders) + 1) for c in itertools.combinations(embedders, k)]
     for es in sets:
         for agg in AGGREGATIONS:
             for fusion in FUSIONS if len(es) > 1 else ("zsum",):
