@@ -212,3 +212,31 @@ def test_seed_starter_reports_view_progress(store):
         seed_starter(Bank(store), plans=["fish"], variants=False, progress=lambda *a: calls.append(a)) == []
     )
     assert len(calls) == 1  # nothing added, nothing reported
+
+
+def test_rm_and_clean_leave_no_view_files_behind(store, capsys, tmp_path):
+    """`bank rm` deletes the asset's view sidecar; `bank clean` deletes sidecars of assets the index
+    does not hold and pack files no pack names, and keeps everything search needs."""
+    from video_helpers import stored_masked_video
+
+    args = ("--embedder", "silhouette", "--views", "3", "--size", "48")
+    for plan in ("snake", "fish"):
+        assert run_inprocess(capsys, "bank", "seed", "--plan", plan, "--no-variants", "--no-views").code == 0
+        assert run_inprocess(capsys, "bank", "reindex", plan, *args).code == 0
+    _, folder = stored_masked_video(tmp_path / "query")  # a masked DAVIS-style folder to search with
+    search = ("bank", "search", str(folder), "--embedder", "silhouette", "--frames", "2", "--json")
+    assert {m["name"] for m in run_inprocess(capsys, *search).json()["matches"]} == {"snake", "fish"}
+    views = store / "bank" / "views"
+    assert (views / "snake.h5").is_file()
+    r = run_inprocess(capsys, "bank", "rm", "snake")
+    assert r.code == 0, r.err
+    assert not (views / "snake.h5").exists()
+    # what a crashed writer or an older `bank rm` could leave behind
+    (views / "ghost.h5").write_bytes((views / "fish.h5").read_bytes())
+    (views / "pack-silhouette-0123456789ab.npy").write_bytes(b"stale")
+    r = run_inprocess(capsys, "bank", "clean", "--json")
+    assert r.code == 0, r.err
+    assert r.json()["orphans"] == 2
+    assert not (views / "ghost.h5").exists() and not (views / "pack-silhouette-0123456789ab.npy").exists()
+    assert (views / "fish.h5").is_file()
+    assert [m["name"] for m in run_inprocess(capsys, *search).json()["matches"]] == ["fish"]

@@ -159,7 +159,9 @@ class Bank:
                 raise self._not_found(name, index["assets"])
             del index["assets"][name]
             write_json_atomic(self.index_path, index)  # the asset is gone once the index says so
-            for p in (self.asset_path(name), self.card_path(name)):
+            from .views_h5 import views_path
+
+            for p in (self.asset_path(name), self.card_path(name), views_path(self.root, name)):
                 p.unlink(missing_ok=True)
 
     def update_summary(self, name: str, **fields: Any) -> None:
@@ -172,11 +174,20 @@ class Bank:
             write_json_atomic(self.index_path, index)
 
     def cleanup(self) -> dict[str, int]:
-        """Remove what killed writers left: temporaries of dead processes and unindexed files."""
+        """Remove what killed writers left: temporaries of dead processes and unindexed files
+        (asset files, and retrieval-view sidecars and pack files that nothing refers to)."""
+        from .views_h5 import unreferenced_files
+
+        views = self.dir / "views"
         with store_lock(self.root):
-            temps = remove_stale_temps(self.assets_dir) + remove_stale_temps(self.dir)
+            temps = (
+                remove_stale_temps(self.assets_dir) + remove_stale_temps(self.dir) + remove_stale_temps(views)
+            )
             index = self._read_index()
             orphans = 0
+            for p in unreferenced_files(self.root, set(index["assets"])):
+                p.unlink(missing_ok=True)
+                orphans += 1
             if self.assets_dir.is_dir():
                 for p in self.assets_dir.iterdir():
                     if (

@@ -54,6 +54,30 @@ def views_path(root: Path, name: str) -> Path:
     return views_dir(root) / f"{name}.h5"
 
 
+def unreferenced_files(root: Path, names: set[str]) -> list[Path]:
+    """Files under ``bank/views/`` nothing refers to: sidecars of assets not in ``names`` (the bank
+    index) and pack data files that no pack JSON names. Call under the store lock; temporaries are
+    `fs.remove_stale_temps`'s business."""
+    d = views_dir(root)
+    if not d.is_dir():
+        return []
+    named: set[str] = set()
+    for meta_p in d.glob("pack-*.json"):
+        try:
+            named.update(json.loads(meta_p.read_text()).get("files", {}).values())
+        except (OSError, ValueError, AttributeError):
+            pass  # an unreadable pack is a cache: its data files go, and search rebuilds it
+    out = []
+    for p in sorted(d.iterdir()):
+        if p.name.startswith(".") or not p.is_file():
+            continue
+        if (p.suffix == ".h5" and p.stem not in names) or (
+            p.name.startswith("pack-") and p.suffix == ".npy" and p.name not in named
+        ):
+            out.append(p)
+    return out
+
+
 def summary_digest(summary: dict[str, Any]) -> str:
     """A digest of an asset's index entry without its ``views``: changes when the asset is re-added."""
     s = {k: v for k, v in summary.items() if k != "views"}
