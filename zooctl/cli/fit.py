@@ -63,6 +63,11 @@ def fit(
     name: str = typer.Option(None, "--name", help="Fit name (default: the video's name)."),
     preset_name: str = typer.Option("fast", "--preset", help="fast or quality."),
     iters: int = typer.Option(None, "--iters", help="Stage 2 iterations (overrides the preset)."),
+    candidates: int = typer.Option(
+        None,
+        "--candidates",
+        help="Retrieved templates to try with a short fit each; the best is fitted in full (default 3; 1: the top result).",
+    ),
     device: str = typer.Option(None, "--device", help="cpu or cuda."),
     focal: float = typer.Option(
         None, "--focal", help="Focal length in pixels of the input frames (default: estimated)."
@@ -85,6 +90,8 @@ def fit(
     cfg = load_config(config, preset_name)
     if iters is not None:
         cfg.stage2.iters = iters
+    if candidates is not None:
+        cfg.trials.candidates = candidates
     if device is not None:
         cfg.device = device
     if focal is not None:

@@ -64,6 +64,16 @@ class LossWeights:
 
 
 @dataclass
+class TemplateTrials:
+    """Retrieval's best candidates each get a short fit, and the template whose fitted silhouettes
+    match the video best is fitted in full: a check of the embedding ranking by the fit itself
+    (it corrects retrievals like Dolphin -> Stegosaurus). Only when the template was retrieved."""
+
+    candidates: int = 3  # 1: fit the top retrieval result directly
+    iters: int = 200  # stage-2 iterations of each trial fit (stage 1 and the camera search as set)
+
+
+@dataclass
 class Ablation:
     """Switches for CASA's ablations (tables 2-5)."""
 
@@ -103,6 +113,7 @@ class FitConfig:
     )
     weights: LossWeights = field(default_factory=LossWeights)
     ablation: Ablation = field(default_factory=Ablation)
+    trials: TemplateTrials = field(default_factory=TemplateTrials)
     schema_version: int = CONFIG_VERSION
 
     # -- serialisation ------------------------------------------------------------------------
@@ -138,6 +149,10 @@ class FitConfig:
             raise UsageError(f"--focal {self.camera.focal} must be positive (pixels)")
         if self.max_frames is not None and self.max_frames < 1:
             raise UsageError("max_frames must be at least 1")
+        if self.trials.candidates < 1 or self.trials.iters < 0:
+            raise UsageError(
+                "trials: candidates >= 1 and iters >= 0 are required", hint="e.g. --candidates 3"
+            )
         return self
 
 

@@ -177,7 +177,7 @@ def fit_job(
     Outputs go to ``out``, else ``out_root/<name>`` (the CLI's ``fits/<name>``), else the fit's
     folder in the store."""
     from ..store.bank import Bank
-    from .template import choose_template
+    from .template import choose_template, try_candidates
 
     fits = FitStore(store_root)
     bank = bank if bank is not None else Bank.open(store_root)
@@ -202,8 +202,13 @@ def fit_job(
         bank, template, video.frames, video.masks, exclude=exclude, device=cfg.device
     )
     t_ret = time.perf_counter() - t_ret
+    t_trials = None
     if resume and state is not None:
-        candidates = fits.get(name).get("retrieval", [])
+        candidates = fits.get(name).get("retrieval", [])  # (the template is the one chosen then)
+    elif candidates and cfg.trials.candidates > 1 and cfg.ablation.optimise:
+        t_trials = time.perf_counter()
+        asset, candidates = try_candidates(bank, video, candidates, cfg, reporter)
+        t_trials = time.perf_counter() - t_trials
     if out is not None:
         out_dir = Path(out)
     else:
@@ -243,6 +248,8 @@ def fit_job(
         fits.save_record(name, record)
         raise
     result.timings["retrieval"] = t_ret
+    if t_trials is not None:
+        result.timings["template_trials"] = t_trials
     record.update(write_outputs(result, name, out_dir, fits, outputs, reporter))
     record["timings"]["total_wall"] = time.perf_counter() - t_start
     record["status"] = "done"

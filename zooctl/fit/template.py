@@ -2,6 +2,9 @@
 
 Retrieval is `zooctl.retrieval` (CASA's embedding search over rendered views of every bank asset):
 the masked crops of a few frames are embedded with the enabled embedders and the bank ranked.
+`try_candidates` then gives the best few a short fit each and keeps the one whose silhouettes fit
+the video best (``FitConfig.trials``): the embeddings rank body plans right about 7 times in 10
+(BENCHMARKS.md, Retrieval), the fit's own mask IoU is a direct check.
 """
 
 from __future__ import annotations
@@ -64,3 +67,36 @@ def choose_template(
         )
     cands = retrieve(bank, frames, masks, exclude=exclude, device=device)
     return bank.get(cands[0]["name"]), cands
+
+
+def try_candidates(
+    bank: Any,
+    video: Any,
+    candidates: list[dict[str, Any]],
+    cfg: Any,
+    reporter: Any = None,
+) -> tuple[RiggedAsset, list[dict[str, Any]]]:
+    """Short-fit the first ``cfg.trials.candidates`` retrieval candidates; (best template, the
+    candidates with ``trial_iou`` added to those tried). Ties keep the retrieval order."""
+    import copy
+
+    from .run import fit_video
+
+    tried = candidates[: cfg.trials.candidates]
+    if len(tried) < 2:
+        return bank.get(candidates[0]["name"]), candidates
+    short = copy.deepcopy(cfg)
+    short.trials.candidates = 1
+    short.stage2.iters = cfg.trials.iters
+    best, best_iou = None, -1.0
+    for i, cand in enumerate(tried):
+        if reporter is not None:
+            reporter.message(f"trial fit {i + 1}/{len(tried)}: template {cand['name']}")
+        asset = bank.get(cand["name"])
+        iou = float(np.mean(fit_video(video, asset, short, reporter).iou))
+        cand["trial_iou"] = round(iou, 4)
+        if iou > best_iou:
+            best, best_iou = asset, iou
+    if reporter is not None:
+        reporter.message(f"template {best.name}: trial mask IoU {best_iou:.3f}")
+    return best, candidates
