@@ -176,9 +176,9 @@ class Bank:
     def cleanup(self) -> dict[str, int]:
         """Remove what killed writers left: temporaries of dead processes and unindexed files
         (asset files, and retrieval-view sidecars and pack files that nothing refers to)."""
-        from .views_h5 import unreferenced_files
+        from .views_h5 import unreferenced_files, views_dir
 
-        views = self.dir / "views"
+        views = views_dir(self.root)
         with store_lock(self.root):
             temps = (
                 remove_stale_temps(self.assets_dir) + remove_stale_temps(self.dir) + remove_stale_temps(views)
