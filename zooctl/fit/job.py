@@ -205,7 +205,7 @@ def fit_job(
     t_trials = None
     if resume and state is not None:
         candidates = fits.get(name).get("retrieval", [])  # (the template is the one chosen then)
-    elif candidates and cfg.trials.candidates > 1 and cfg.ablation.optimise:
+    elif len(candidates) > 1 and cfg.trials.candidates > 1 and cfg.ablation.optimise:
         t_trials = time.perf_counter()
         asset, candidates = try_candidates(bank, video, candidates, cfg, reporter)
         t_trials = time.perf_counter() - t_trials
