@@ -1,6 +1,7 @@
 """Child process for the crash tests: adds synthetic assets to a bank in a loop.
 
-Prints ``ADDED <name> <checksum>`` (flushed) after each `Bank.add` returns, so the parent knows
+Prints ``READY`` once imported (so the parent times its kill from there, whatever the machine's
+load) and ``ADDED <name> <checksum>`` (flushed) after each `Bank.add` returns, so the parent knows
 which adds completed before it SIGKILLs this process.
 """
 
@@ -46,6 +47,7 @@ def checksum(asset: RiggedAsset) -> str:
 def main() -> None:
     root, prefix, count = Path(sys.argv[1]), sys.argv[2], int(sys.argv[3])
     bank = Bank(root)
+    print("READY", flush=True)
     for i in range(count):
         a = synthetic(
             f"{prefix}{i:03d}", seed=zlib.crc32(prefix.encode()) % 1000 + i

@@ -43,15 +43,19 @@ def test_two_processes_adding_different_assets_both_land(tmp_path):
 def test_sigkill_at_random_moments_never_loses_or_half_writes(tmp_path):
     rng = np.random.default_rng(7)
     confirmed: dict[str, str] = {}
-    kills = 0
+    kills = adds = 0
     for round_ in range(24):
-        # Far more adds than fit in 1.5 s (an idle machine does ~40 a second): every round is killed.
+        # Far more adds than fit in a second (an idle machine does ~40 a second): every round is
+        # killed, at a random moment after the writer's imports (slow on a loaded machine).
         proc = _writer(tmp_path, f"r{round_ % 3}_", 100_000)
-        time.sleep(float(rng.uniform(0.4, 1.5)))  # import time is ~0.5 s: some kills land mid-write
+        assert proc.stdout.readline().strip() == "READY", proc.stderr.read()
+        time.sleep(float(rng.uniform(0.0, 1.0)))
         proc.send_signal(signal.SIGKILL)
         out, _ = proc.communicate(timeout=60)
         kills += proc.returncode == -signal.SIGKILL
-        confirmed.update(_added(out))
+        done = _added(out)
+        adds += len(done)
+        confirmed.update(done)
         bank = Bank(tmp_path)  # the bank always opens
         listed = bank.names()
         for name in confirmed:
@@ -62,7 +66,7 @@ def test_sigkill_at_random_moments_never_loses_or_half_writes(tmp_path):
             if name in confirmed:
                 assert checksum(asset) == confirmed[name]
     assert kills >= 20
-    assert len(confirmed) > 10
+    assert adds > 10 and len(confirmed) >= 3  # names repeat across rounds (replace=True)
     report = Bank(tmp_path).cleanup()
     assert not list((tmp_path / "bank" / "assets").glob(".*.tmp"))
     assert report["temporaries"] >= 0
