@@ -71,3 +71,23 @@ def test_bench_run_table(tmp_path, store):
     assert row["template"] == "tube2" and 0 <= row["mask_iou"] <= 1 and row["miou"] is not None
     table = markdown_table(res)
     assert "| full | 1 |" in table and "no-flow" in table
+
+
+def test_reanimation_uses_the_scale_of_the_frame_it_starts_from(tmp_path):
+    """Re-animation poses the last frame's fit: a fit whose depth drifts on the other frames (a
+    monocular fit is only known up to a scale per frame) must not move its scale."""
+    import torch
+
+    from zooctl.fit.config import FitConfig
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.run import fit_video
+    from zooctl.metrics import evaluate_fit
+
+    asset = tube_asset(bones=3, name="tube")
+    video = load_fit_video(make_video(asset, tmp_path / "v", frames=4, size=32, seed=0))
+    res = fit_video(video, asset, FitConfig.from_dict(json.loads(json.dumps(TINY))))
+    before = evaluate_fit(res, frames=4)
+    with torch.no_grad():
+        res.scene.root_translation[:-1] *= 2.0  # every frame but the last twice as far
+    after = evaluate_fit(res, frames=4)
+    assert after["reanimation"] == before["reanimation"]

@@ -3,8 +3,8 @@
 Both shapes are compared in their own camera's frame (the fit's camera, the benchmark's camera of
 that frame), so the image alignment is common. A monocular fit is only known up to a scale along
 the camera rays, so the prediction is scaled about the camera centre by the factor that maximises
-the voxel IoU (CASA's line search); every 3D metric uses that scale. Lengths are divided by the
-longest side of the ground truth's bounding box.
+the voxel IoU (CASA's line search), per evaluated frame; every 3D metric of a frame uses its scale.
+Lengths are divided by the longest side of the ground truth's bounding box.
 
 - ``miou``: IoU of 32^3 voxelisations (surface samples, interiors filled), after the line search;
 - ``mcham``: symmetric Chamfer distance (mean L2, both directions averaged) of surface samples;
@@ -14,7 +14,7 @@ longest side of the ground truth's bounding box.
   1 - IoU; the mean IoU of the matched sets (unmatched ground-truth joints count 0);
 - ``reanimation``: joint rotations (and root) of the fitted model, from its last frame, optimised
   by Chamfer distance to match the held-out novel ground-truth pose (``gt_novel_vertices``, seen by
-  the last frame's camera); the final ``mcham`` to it;
+  the last frame's camera); the final ``mcham`` to it, at the last frame's line-search scale;
 - ``mask_iou``: 2D IoU of the fitted silhouettes with the masks (computed by the fit itself).
 """
 
@@ -154,7 +154,9 @@ def evaluate_fit(result, frames: int = 4, reanimate_iters: int = 40) -> dict[str
         out["joint"].append(chamfer(pj_all[i][p_skinning] * s, gj[g_skinning]) / norm)
         out["skinning"].append(skinning_iou(gv, gdense, pv_all[i] * s, pdense))
     res = {k: float(np.mean(v)) for k, v in out.items() if k != "scale"}
-    res["reanimation"] = reanimation(result, float(np.median(out["scale"])), reanimate_iters)
+    # The last frame's own scale (``sel`` always ends with it): re-animation starts from that
+    # frame, and a fit whose depth drifts over the video needs another scale on other frames.
+    res["reanimation"] = reanimation(result, float(out["scale"][-1]), reanimate_iters)
     res["frames_evaluated"] = [int(t) for t in sel]
     return res
 
