@@ -80,7 +80,7 @@ def speed(args) -> None:
         times.sort()
         print(
             f"| {machine()} | zooctl fit (Fox video {args.frames}x{args.size}px, template Wolf 3,994 vertices, --preset {args.preset}, {args.device}) | "
-            f"median {times[len(times) // 2]:.1f} s of {args.repeat} | mask IoU {rec['metrics']['mask_iou']:.3f}, mIoU {rec['metrics'].get('miou')} |"
+            f"median {times[len(times) // 2]:.1f} s of {args.repeat} ({', '.join(f'{x:.1f}' for x in times)}) | mask IoU {rec['metrics']['mask_iou']:.3f}, mIoU {rec['metrics'].get('miou')} |"
         )
         print(json.dumps(rec["timings"]))
 
@@ -116,7 +116,7 @@ def davis(args) -> None:
     from zooctl.fit.config import preset
     from zooctl.fit.job import load_source
     from zooctl.fit.run import fit_video, input_mask_iou
-    from zooctl.fit.template import choose_template
+    from zooctl.fit.template import select_template
     from zooctl.store.bank import Bank
 
     store = Path(args.store) if args.store else Path(tempfile.mkdtemp()) / "store"
@@ -144,13 +144,20 @@ def davis(args) -> None:
                 args.max_frames,
                 box if kind == "auto" else None,
             )
-            asset, cands = choose_template(bank, fixed.get(name), video.frames, video.masks)
-            res = fit_video(video, asset, cfg)
+            asset, cands, trial, _ = select_template(bank, fixed.get(name), video, cfg)
+            res = fit_video(video, asset, cfg, resume=trial)
             wall = time.perf_counter() - t
             H, W = video.size
             gt = _gt_masks(folder, store, video, (H, W))
             iou = float(np.nanmean(input_mask_iou(res, gt)))
-            top = ", ".join(f"{c['name']} {c['score']:.2f}" for c in cands[:3]) or "fixed"
+            top = (
+                ", ".join(
+                    f"{c['name']} {c['score']:.2f}"
+                    + (f" trial IoU {c['trial_iou']:.3f}" if "trial_iou" in c else "")
+                    for c in cands[:3]
+                )
+                or "fixed"
+            )
             print(
                 f"| {name} | {kind} | {video.num_frames} | {asset.name} ({top}) | {iou:.3f} | {wall:.0f} |",
                 flush=True,

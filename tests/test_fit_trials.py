@@ -16,7 +16,7 @@ TINY = {
     "stage1": {"iters": 4, "batch": 4},
     "stage2": {"iters": 3, "batch": 3},
     "camera": {"azimuths": 4, "elevations": [10.0], "search_size": 32},
-    "trials": {"candidates": 2, "iters": 6},
+    "trials": {"candidates": 2, "iters": 2},
 }
 
 
@@ -39,16 +39,55 @@ def test_trials_pick_the_template_whose_fit_matches_best(tmp_path, store):
 
     bank, thin = _bank_with_views(store)
     video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
+    video.masks[1] = False  # an empty mask (the animal left the frame) has no IoU: ignored
     cfg = FitConfig.from_dict(json.loads(json.dumps(TINY)))
     cands = [{"name": "fat", "score": -2.0}, {"name": "thin", "score": -1.0}]
-    asset, out = try_candidates(bank, video, cands, cfg)
+    asset, out, state = try_candidates(bank, video, cands, cfg)
     assert asset.name == "thin"
+    assert state["stage"] == 2 and state["iteration"] == 2 and len(state["history"]["stage2"]) == 2
     assert out[1]["trial_iou"] > out[0]["trial_iou"] and 0 <= out[0]["trial_iou"] <= 1
     assert cfg.stage2.iters == 3 and cfg.trials.candidates == 2  # the caller's config is untouched
     one = FitConfig.from_dict({**json.loads(json.dumps(TINY)), "trials": {"candidates": 1}})
     fresh = [{"name": "fat", "score": -2.0}, {"name": "thin", "score": -1.0}]
-    asset, out = try_candidates(bank, video, fresh, one)
-    assert asset.name == "fat" and "trial_iou" not in out[0]  # one candidate: no trial fits
+    asset, out, state = try_candidates(bank, video, fresh, one)
+    assert asset.name == "fat" and "trial_iou" not in out[0] and state is None  # one candidate: no trial fits
+
+
+def test_the_full_fit_continues_the_winning_trial(tmp_path, store):
+    """A trial is the start of the full fit, paused: continuing the winner's trial gives the same
+    fit as one run from scratch, without searching the camera or running stage 1 again."""
+    import torch
+
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.run import fit_video
+    from zooctl.fit.template import try_candidates
+
+    bank, thin = _bank_with_views(store)
+    video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
+    cfg = FitConfig.from_dict(json.loads(json.dumps(TINY)))
+    cands = [{"name": "fat", "score": -2.0}, {"name": "thin", "score": -1.0}]
+    asset, _, state = try_candidates(bank, video, cands, cfg)
+    trial_steps = list(state["history"]["stage2"])
+    continued = fit_video(video, asset, cfg, resume=state)
+    scratch = fit_video(video, asset, FitConfig.from_dict(json.loads(json.dumps(TINY))))
+    assert len(trial_steps) == 2 and continued.history["stage2"][:2] == trial_steps
+    assert continued.history == scratch.history and continued.camera_init == scratch.camera_init
+    a, b = continued.scene.state_dict(), scratch.scene.state_dict()
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    assert "camera" not in continued.timings and "stage1" not in continued.timings  # not run again
+
+
+def test_a_trial_as_long_as_the_fit_is_the_fit(tmp_path, store):
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.run import fit_video
+
+    bank, thin = _bank_with_views(store)
+    video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
+    cfg = FitConfig.from_dict(json.loads(json.dumps(TINY)))
+    trial = fit_video(video, thin, cfg, pause_at=10)
+    assert len(trial.history["stage2"]) == cfg.stage2.iters and trial.paused["iteration"] == 3
+    again = fit_video(video, thin, cfg, resume=trial.paused)
+    assert len(again.history["stage2"]) == 3 and np.allclose(again.iou, trial.iou, equal_nan=True)
 
 
 def test_fit_job_records_the_trials(tmp_path, store, monkeypatch):
@@ -65,3 +104,16 @@ def test_fit_job_records_the_trials(tmp_path, store, monkeypatch):
     assert rec["timings"]["template_trials"] > 0
     validate_record(json.loads(open(rec["outputs"]["fit_json"]).read()))  # the file the fit writes
     assert np.isfinite(rec["metrics"]["mask_iou"])
+
+
+def test_fit_cli_prints_the_trial_ious(tmp_path, store, capsys, monkeypatch):
+    from cli_helpers import run_inprocess
+
+    monkeypatch.setenv("ZOOCTL_EMBEDDERS", "silhouette")
+    monkeypatch.chdir(tmp_path)
+    _, thin = _bank_with_views(store)
+    folder = make_video(thin, tmp_path / "v", frames=3, size=32, seed=0)
+    (tmp_path / "tiny.json").write_text(json.dumps({**TINY, "stage2": {"iters": 4, "batch": 3}}))
+    r = run_inprocess(capsys, "fit", str(folder), "--config", str(tmp_path / "tiny.json"), "--name", "t")
+    assert r.code == 0, r.err
+    assert r.out.count("trial IoU") == 2 and "fitted t with template thin" in r.out

@@ -66,7 +66,7 @@ def fit(
     candidates: int = typer.Option(
         None,
         "--candidates",
-        help="Retrieved templates to try with a short fit each; the best is fitted in full (default 3; 1: the top result).",
+        help="Retrieved templates to try with a short fit each; the best one's fit goes on in full (default 3; 1: the top result).",
     ),
     device: str = typer.Option(None, "--device", help="cpu or cuda."),
     focal: float = typer.Option(
@@ -121,7 +121,11 @@ def fit(
     if rec.get("retrieval"):
         console.print(
             "template candidates: "
-            + ", ".join(f"{escape(c['name'])} ({c['score']:.3f})" for c in rec["retrieval"][:5]),
+            + ", ".join(
+                f"{escape(c['name'])} ({c['score']:.3f}"
+                + (f", trial IoU {c['trial_iou']:.3f})" if "trial_iou" in c else ")")
+                for c in rec["retrieval"][:5]
+            ),
             highlight=False,
         )
     m = rec["metrics"]

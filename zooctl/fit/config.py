@@ -65,12 +65,15 @@ class LossWeights:
 
 @dataclass
 class TemplateTrials:
-    """Retrieval's best candidates each get a short fit, and the template whose fitted silhouettes
-    match the video best is fitted in full: a check of the embedding ranking by the fit itself
-    (it corrects retrievals like Dolphin -> Stegosaurus). Only when the template was retrieved."""
+    """Retrieval's best candidates each get a short fit, and the fit of the template whose
+    silhouettes match the video best goes on from its trial to the full length: a check of the
+    embedding ranking by the fit itself (it corrects retrievals like Dolphin -> Stegosaurus).
+    Only when the template was retrieved."""
 
     candidates: int = 3  # 1: fit the top retrieval result directly
-    iters: int = 200  # stage-2 iterations of each trial fit (stage 1 and the camera search as set)
+    # Stage-2 iterations of each trial: the first ones of the full fit's schedule (after the camera
+    # search and stage 1), so the winner's fit goes on from its trial.
+    iters: int = 200
 
 
 @dataclass
@@ -102,14 +105,15 @@ class FitConfig:
     # Learning rates above CASA's (5e-2 / 4e-3) with a cosine decay: ~160 updates per frame instead
     # of CASA's 200 epochs need larger early steps, and the decay settles them (bench: +0.1 mask IoU).
     # Stage 2 keeps improving with steps (400 -> 800: mean mask IoU 0.792 -> 0.825 over the 28
-    # benchmark videos); 800 keeps a 60-frame, 4,000-vertex fit near 1 minute on a 2-core CPU.
+    # benchmark videos); 1,000 keeps a 60-frame, 4,000-vertex fit with the template trials well
+    # inside 3 minutes on a 2-core CPU (BENCHMARKS.md, Fit).
     stage1: StageConfig = field(
         default_factory=lambda: StageConfig(
             iters=60, lr=5e-2, lr_shape=5e-2, batch=16, renderer="soft", lr_final=0.1
         )
     )
     stage2: StageConfig = field(
-        default_factory=lambda: StageConfig(iters=800, lr=3e-2, lr_shape=1e-3, batch=12, lr_final=0.05)
+        default_factory=lambda: StageConfig(iters=1000, lr=3e-2, lr_shape=1e-3, batch=12, lr_final=0.05)
     )
     weights: LossWeights = field(default_factory=LossWeights)
     ablation: Ablation = field(default_factory=Ablation)

@@ -177,7 +177,7 @@ def fit_job(
     Outputs go to ``out``, else ``out_root/<name>`` (the CLI's ``fits/<name>``), else the fit's
     folder in the store."""
     from ..store.bank import Bank
-    from .template import choose_template, try_candidates
+    from .template import select_template
 
     fits = FitStore(store_root)
     bank = bank if bank is not None else Bank.open(store_root)
@@ -198,17 +198,14 @@ def fit_job(
     video = load_source(source, store_root, masks, cfg.max_frames, box, reporter)
     name = check_name(name or sanitize_name(video.name), "fit name")
     t_ret = time.perf_counter()
-    asset, candidates = choose_template(
-        bank, template, video.frames, video.masks, exclude=exclude, device=cfg.device
-    )
-    t_ret = time.perf_counter() - t_ret
-    t_trials = None
     if resume and state is not None:
-        candidates = fits.get(name).get("retrieval", [])  # (the template is the one chosen then)
-    elif len(candidates) > 1 and cfg.trials.candidates > 1 and cfg.ablation.optimise:
-        t_trials = time.perf_counter()
-        asset, candidates = try_candidates(bank, video, candidates, cfg, reporter)
-        t_trials = time.perf_counter() - t_trials
+        asset = bank.get(template)  # the template chosen (and tried) when the fit started
+        candidates, t_trials = fits.get(name).get("retrieval", []), None
+    else:
+        asset, candidates, state, t_trials = select_template(
+            bank, template, video, cfg, exclude=exclude, reporter=reporter
+        )
+    t_ret = time.perf_counter() - t_ret - (t_trials or 0.0)
     if out is not None:
         out_dir = Path(out)
     else:

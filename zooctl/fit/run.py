@@ -8,6 +8,7 @@ run is interrupted (Ctrl-C raises ``KeyboardInterrupt`` through here after the s
 
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -49,7 +50,8 @@ class _Silent:
 class FitResult:
     """scene: the fitted `FitScene` (fit resolution); scale: fit pixels per input pixel; history:
     per stage, a list of loss-term dicts per step; timings in seconds; iou (T,) per-frame mask IoU
-    at the input resolution (NaN where the mask is empty)."""
+    at the input resolution (NaN where the mask is empty); paused: with `fit_video`'s ``pause_at``,
+    the state to continue from."""
 
     scene: FitScene
     video: FitVideo
@@ -60,6 +62,7 @@ class FitResult:
     history: dict[str, list[dict[str, float]]] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
     iou: np.ndarray | None = None
+    paused: dict[str, Any] | None = None  # resume state where ``pause_at`` stopped stage 2
 
     def input_camera(self):
         """The fitted camera at the input resolution (one `Camera`)."""
@@ -92,8 +95,13 @@ def fit_video(
     reporter: Reporter | None = None,
     checkpoint: Callable[[dict[str, Any]], None] | None = None,
     resume: dict[str, Any] | None = None,
+    pause_at: int | None = None,
 ) -> FitResult:
-    """Fit ``template`` to ``video`` (see the module docstring). Deterministic for a given seed."""
+    """Fit ``template`` to ``video`` (see the module docstring). Deterministic for a given seed.
+
+    ``pause_at``: stop after that many stage-2 iterations (of the configured schedule, so the
+    learning rates are those of the full fit) and return with ``result.paused`` set; fitting on
+    from it with ``resume=result.paused`` gives what one uninterrupted fit gives."""
     rep = reporter or _Silent()
     cfg.validate()
     check_template(template)
@@ -184,6 +192,7 @@ def fit_video(
                 rep,
                 checkpoint,
                 opt_state if stage == start_stage else None,
+                pause_at if stage == 2 else None,
             )
     t2 = time.perf_counter()
     result.iou = input_mask_iou(result)
@@ -209,16 +218,18 @@ def _run_stage(
     rep: Reporter,
     checkpoint,
     opt_state,
+    pause_at: int | None = None,
 ) -> None:
     cfg, scene = result.config, result.scene
     st = stage_config(cfg, stage)
+    last = st.iters if pause_at is None else min(st.iters, max(pause_at, first))
     runner = StageRunner(scene, targets, cfg, stage)
     opt = make_optimizer(scene, cfg, stage, learn_focal)
     base_lr = [g["lr"] for g in opt.param_groups]
     if opt_state is not None:
         opt.load_state_dict(opt_state)
     key = f"stage{stage}"
-    rep.stage(key, st.iters, first)
+    rep.stage(key, last, first)
     t = time.perf_counter()
     it = first
 
@@ -241,7 +252,7 @@ def _run_stage(
         # Skip the runner's random windows already drawn before an interruption (resume = same run).
         for _ in range(first):
             runner.window()
-        for it in range(first, st.iters):
+        for it in range(first, last):
             factor = lr_factor(it, st.iters, st.lr_final)
             for g, lr in zip(opt.param_groups, base_lr, strict=True):
                 g["lr"] = lr * factor
@@ -254,6 +265,8 @@ def _run_stage(
         if checkpoint is not None:
             checkpoint(state(len(result.history[key])))
         raise
+    if pause_at is not None:
+        result.paused = copy.deepcopy(state(last))
     result.timings[key] = result.timings.get(key, 0.0) + time.perf_counter() - t
 
 

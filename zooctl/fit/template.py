@@ -4,7 +4,9 @@ Retrieval is `zooctl.retrieval` (CASA's embedding search over rendered views of 
 the masked crops of a few frames are embedded with the enabled embedders and the bank ranked.
 `try_candidates` then gives the best few a short fit each and keeps the one whose silhouettes fit
 the video best (``FitConfig.trials``): the embeddings rank body plans right about 7 times in 10
-(BENCHMARKS.md, Retrieval), the fit's own mask IoU is a direct check.
+(BENCHMARKS.md, Retrieval), the fit's own mask IoU is a direct check. A trial is the beginning of
+the full fit, paused: the winner's fit goes on from its trial, so the trials cost only the losers'
+fits.
 """
 
 from __future__ import annotations
@@ -69,34 +71,65 @@ def choose_template(
     return bank.get(cands[0]["name"]), cands
 
 
+def select_template(
+    bank: Any,
+    name: str | None,
+    video: Any,
+    cfg: Any,
+    exclude: set[str] | None = None,
+    reporter: Any = None,
+) -> tuple[RiggedAsset, list[dict[str, Any]], dict[str, Any] | None, float | None]:
+    """`choose_template`, then the template trials when the template was retrieved and the config
+    asks for them: (template, candidates, the winning trial's state to continue from or None,
+    seconds spent in the trials or None)."""
+    import time
+
+    asset, candidates = choose_template(
+        bank, name, video.frames, video.masks, exclude=exclude, device=cfg.device
+    )
+    if len(candidates) < 2 or cfg.trials.candidates < 2 or not cfg.ablation.optimise:
+        return asset, candidates, None, None
+    t = time.perf_counter()
+    asset, candidates, state = try_candidates(bank, video, candidates, cfg, reporter)
+    return asset, candidates, state, time.perf_counter() - t
+
+
 def try_candidates(
     bank: Any,
     video: Any,
     candidates: list[dict[str, Any]],
     cfg: Any,
     reporter: Any = None,
-) -> tuple[RiggedAsset, list[dict[str, Any]]]:
+) -> tuple[RiggedAsset, list[dict[str, Any]], dict[str, Any] | None]:
     """Short-fit the first ``cfg.trials.candidates`` retrieval candidates; (best template, the
-    candidates with ``trial_iou`` added to those tried). Ties keep the retrieval order."""
+    candidates with ``trial_iou`` added to those tried, the best trial's fit state or None).
+
+    A trial is the start of the full fit (camera search, stage 1 and the first ``cfg.trials.iters``
+    stage-2 iterations of the configured schedule), paused; the state returned continues the
+    winner's fit exactly where its trial stopped (`fit_video`'s ``resume``). Ties keep the
+    retrieval order."""
     import copy
 
     from .run import fit_video
 
     tried = candidates[: cfg.trials.candidates]
     if len(tried) < 2:
-        return bank.get(candidates[0]["name"]), candidates
-    short = copy.deepcopy(cfg)
-    short.trials.candidates = 1
-    short.stage2.iters = cfg.trials.iters
-    best, best_iou = None, -1.0
+        return bank.get(candidates[0]["name"]), candidates, None
+    trial_cfg = copy.deepcopy(cfg)
+    trial_cfg.checkpoint_every = 0
+    best, best_iou, best_state = None, -1.0, None
     for i, cand in enumerate(tried):
         if reporter is not None:
             reporter.message(f"trial fit {i + 1}/{len(tried)}: template {cand['name']}")
         asset = bank.get(cand["name"])
-        iou = float(np.mean(fit_video(video, asset, short, reporter).iou))
+        result = fit_video(video, asset, trial_cfg, reporter, pause_at=cfg.trials.iters)
+        # Frames with an empty mask have no IoU (NaN); a video of empty masks is refused earlier.
+        iou = float(np.nanmean(result.iou)) if np.isfinite(result.iou).any() else 0.0
         cand["trial_iou"] = round(iou, 4)
         if iou > best_iou:
-            best, best_iou = asset, iou
+            best, best_iou, best_state = asset, iou, result.paused
     if reporter is not None:
         reporter.message(f"template {best.name}: trial mask IoU {best_iou:.3f}")
-    return best, candidates
+    if best_state is not None:
+        best_state["timings"] = {}  # the trials are timed as a whole by the caller
+    return best, candidates, best_state
