@@ -6,7 +6,10 @@ from pathlib import Path
 
 import typer
 
+from ..fit.config import PRESETS
 from ._common import console, err_console, print_json, store_root
+
+PRESET_ITERS = {name: make().stage2.iters for name, make in PRESETS.items()}
 
 
 class RichReporter:
@@ -62,7 +65,11 @@ def fit(
     out: Path = typer.Option(None, "--out", help="Output folder (default: fits/NAME in the current folder)."),
     name: str = typer.Option(None, "--name", help="Fit name (default: the video's name)."),
     preset_name: str = typer.Option("fast", "--preset", help="fast or quality."),
-    iters: int = typer.Option(None, "--iters", help="Stage 2 iterations (overrides the preset)."),
+    iters: int = typer.Option(
+        None,
+        "--iters",
+        help=f"Stage 2 iterations (overrides the preset: {', '.join(f'{k} {v}' for k, v in PRESET_ITERS.items())}).",
+    ),
     candidates: int = typer.Option(
         None,
         "--candidates",
