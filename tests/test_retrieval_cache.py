@@ -140,3 +140,23 @@ def test_search_of_a_cached_stored_video_does_not_import_torch(stored_video, ban
         timeout=60,
     )
     assert out.stdout.strip().endswith("NOTORCH 0"), out.stdout + out.stderr
+
+
+def test_a_cached_query_of_another_size_is_embedded_again(bank_two, stored_video):
+    """The embedder changed size and the bank was reindexed since the video's query embeddings were
+    cached: `bank search` embeds the query again (and re-caches it) instead of failing."""
+    from zooctl.retrieval import query_cache
+    from zooctl.retrieval.search import search_source
+    from zooctl.store.videos import VideoStore
+
+    root, _ = stored_video
+    videos = VideoStore(root)
+    _, first = search_source(bank_two, "seq", ["silhouette"], frames=4, store_root=root)
+    hit = query_cache.read_cache(videos, "seq", 4, 224)
+    old = query_cache.CachedQuery(
+        hit.frames, hit.has_masks, hit.notes, {"silhouette": np.ones((4, 10), np.float32)}
+    )
+    query_cache.write_cache(videos, "seq", 4, 224, old, query_cache.video_identity(videos, "seq"))
+    _, again = search_source(bank_two, "seq", ["silhouette"], frames=4, store_root=root)
+    assert [m.name for m in again.matches] == [m.name for m in first.matches]
+    assert query_cache.read_cache(videos, "seq", 4, 224).emb["silhouette"].shape == (4, 576)

@@ -240,3 +240,28 @@ def test_rm_and_clean_leave_no_view_files_behind(store, capsys, tmp_path):
     assert not (views / "ghost.h5").exists() and not (views / "pack-silhouette-0123456789ab.npy").exists()
     assert (views / "fish.h5").is_file()
     assert [m["name"] for m in run_inprocess(capsys, *search).json()["matches"]] == ["fish"]
+
+
+def test_query_and_views_of_other_dimensions_say_reindex():
+    """An embedder whose output size changed (e.g. other CLIP weights) since `bank add`: one clear
+    error naming the command that fixes it, not a numpy shape error."""
+    import numpy as np
+    import pytest
+
+    from zooctl.errors import UsageError
+    from zooctl.retrieval.search import score_packs
+    from zooctl.store.views_h5 import Pack
+
+    pack = Pack(
+        "clip",
+        ["a", "b"],
+        np.array([2, 1]),
+        np.zeros((2, 2, 4), np.float16),
+        np.zeros((2, 4), np.float32),
+        {},
+    )
+    with pytest.raises(UsageError, match="4-dimensional.*6-dimensional") as exc:
+        score_packs({"clip": pack}, {"clip": np.ones((3, 6), np.float32)})
+    assert "bank reindex --embedder clip" in exc.value.hint
+    ok = score_packs({"clip": pack}, {"clip": np.ones((3, 4), np.float32)})
+    assert [m.name for m in ok.matches] == ["a", "b"]

@@ -39,21 +39,24 @@ def search(
     """Rank the bank's assets by how much their rendered views look like the animal in VIDEO."""
     from ..errors import UsageError
     from ..retrieval.index import enabled_embedders
-    from ..retrieval.search import query_embeddings, search_embedded
+    from ..retrieval.search import search_source
 
     if top < 1:  # before the slow part
         raise UsageError(f"--top {top} must be at least 1")
     bank = _bank()
-    query, q, notes = query_embeddings(
+    query, res = search_source(
+        bank,
         video,
         list(embedder) if embedder else enabled_embedders(),
-        k=frames,
+        top=top,
+        frames=frames,
         masks_dir=masks,
         store_root=store_root(),
         device=device,
         need_images=gallery is not None,
+        aggregation=aggregation,
+        fusion=fusion,
     )
-    res = search_embedded(bank, query, q, notes, top=top, aggregation=aggregation, fusion=fusion)
     if gallery is not None:
         from ..retrieval.gallery import save_gallery
 

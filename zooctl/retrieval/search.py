@@ -92,6 +92,18 @@ def _stored_video(source: Any, masks_dir: Any, store_root: Any):
     return videos if videos.exists(str(source)) else None
 
 
+class DimensionMismatch(UsageError):
+    """The bank's views and the query were embedded by embedders of different output sizes."""
+
+    def __init__(self, embedder: str, bank_dim: int, query_dim: int):
+        super().__init__(
+            f"the bank's {embedder} views are {bank_dim}-dimensional but the query's {embedder} "
+            f"embeddings are {query_dim}-dimensional: the {embedder} embedder changed since the views were made",
+            hint=f"run `zooctl bank reindex --embedder {embedder}`",
+        )
+        self.embedder = embedder
+
+
 def query_embeddings(
     source: Any,
     embedders: list[str],
@@ -101,12 +113,14 @@ def query_embeddings(
     store_root: Any = None,
     device: str = "cpu",
     need_images: bool = False,
+    refresh: set[str] | None = None,
 ) -> tuple[QueryFrames, dict[str, np.ndarray], list[str]]:
     """Load and embed a query (see `load_query` for ``source``): (query, {embedder: (K, D)}, notes).
 
     A stored video's embeddings are cached beside it (`zooctl.retrieval.query_cache`): a repeat
     search decodes nothing and builds no embedder; its query then has no pixels (``images`` is
-    (0, S, S, 3)) unless ``need_images``.
+    (0, S, S, 3)) unless ``need_images``. Embedders in ``refresh`` are embedded again even when
+    cached (the cache is updated).
     """
     if k < 1:
         raise UsageError(f"--frames {k} must be at least 1")
@@ -118,7 +132,8 @@ def query_embeddings(
     name = str(source)
     identity = query_cache.video_identity(videos, name)
     hit = query_cache.read_cache(videos, name, k, size)
-    cached = {e: hit.emb[e] for e in embedders if e in hit.emb} if hit is not None else {}
+    fresh = refresh or set()
+    cached = {e: hit.emb[e] for e in embedders if e in hit.emb and e not in fresh} if hit is not None else {}
     todo = [e for e in embedders if e not in cached]
     notes: list[str] = []
     if hit is not None and not hit.has_masks:  # mask embedders cannot use this video: no frames needed
@@ -214,6 +229,8 @@ def score_packs(
             emb[order] = p.emb[rows[order]]
         A, V, D = emb.shape
         q = np.ascontiguousarray(query_emb[e], dtype=np.float32)  # (Q, D)
+        if q.shape[1] != D:
+            raise DimensionMismatch(e, D, q.shape[1])
         sim = (emb.reshape(A * V, D).astype(np.float32) @ q.T).reshape(A, V, -1)  # (A, V, Q)
         d = 1.0 - sim.transpose(0, 2, 1)  # (A, Q, V)
         valid = np.arange(V)[None, :] < p.counts[rows][:, None]  # (A, V): padding rows are inf
@@ -260,6 +277,30 @@ def search(
     """Embed ``query`` and rank the bank; keeps the ``top`` best matches."""
     q, notes = embed_query(query, embedders, device)
     return search_embedded(bank, query, q, notes, top, **options)
+
+
+def search_source(
+    bank,
+    source: Any,
+    embedders: list[str],
+    top: int = DEFAULT_TOP,
+    frames: int = DEFAULT_QUERY_FRAMES,
+    masks_dir: Any = None,
+    store_root: Any = None,
+    device: str = "cpu",
+    need_images: bool = False,
+    **options: Any,
+) -> tuple[QueryFrames, SearchResult]:
+    """`query_embeddings` then `search_embedded`, what `zooctl bank search` runs. A stored video's
+    cached query embeddings of another size than the bank's views (the embedder changed, and the
+    bank was reindexed since) are embedded again once instead of failing."""
+    kw = dict(k=frames, masks_dir=masks_dir, store_root=store_root, device=device, need_images=need_images)
+    query, q, notes = query_embeddings(source, embedders, **kw)
+    try:
+        return query, search_embedded(bank, query, q, notes, top, **options)
+    except DimensionMismatch as exc:  # a cached query of the old size: embed it again (once)
+        query, q, notes = query_embeddings(source, embedders, refresh={exc.embedder}, **kw)
+        return query, search_embedded(bank, query, q, notes, top, **options)
 
 
 def search_embedded(
