@@ -11,7 +11,10 @@ TORCH_SPEC ?= torch==2.13.0
 
 $(STAMP): pyproject.toml Makefile
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
-	$(BIN)/pip install -q --disable-pip-version-check $(TORCH_SPEC) || $(BIN)/pip install -q "torch>=2.2,<2.15"
+	# Elsewhere: PyTorch's CPU wheel index first (PyPI's Linux wheels carry CUDA, several GB).
+	$(BIN)/pip install -q --disable-pip-version-check $(TORCH_SPEC) \
+		|| $(BIN)/pip install -q "torch>=2.2,<2.15" --index-url https://download.pytorch.org/whl/cpu \
+		|| $(BIN)/pip install -q "torch>=2.2,<2.15"
 	# compat mode: a plain .pth entry; the default editable finder cost ~35 ms on every command
 	$(BIN)/pip install -q --disable-pip-version-check -e '.[test]' --config-settings editable_mode=compat
 	touch $(STAMP)
