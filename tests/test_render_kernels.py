@@ -226,8 +226,8 @@ def test_environment_switch_disables_kernels(monkeypatch):
 def test_build_is_cached_and_keyed_by_the_sources(tmp_path, monkeypatch):
     lib = _kernels.build()  # built already (this module's skip condition): found, not rebuilt
     assert lib.parent == _kernels.cache_dir() and lib.exists()
-    mtime = lib.stat().st_mtime_ns
-    assert _kernels.build() == lib and lib.stat().st_mtime_ns == mtime
+    inode = lib.stat().st_ino  # a rebuild renames a new file over it; a use only touches it
+    assert _kernels.build() == lib and lib.stat().st_ino == inode
     cxx = _kernels._compiler()
     before = _kernels._build_hash(cxx)
     for src in _kernels.SOURCE_DIR.iterdir():
@@ -266,3 +266,19 @@ def test_bad_face_indices_are_an_input_error_not_a_memory_error():
             render(verts, bad, cam)
     with pytest.raises(InputError, match="faces must be"):
         SoftSilhouette(16)(verts, faces[:, :2], cam)
+
+
+def test_prune_deletes_only_stale_other_builds(tmp_path):
+    import os
+    import time
+
+    old, recent, keep = (tmp_path / f"render-{n}.so" for n in ("old", "recent", "keep"))
+    for p in (old, recent, keep):
+        p.write_bytes(b"x")
+    month_ago = time.time() - 40 * 86400
+    os.utime(old, (month_ago, month_ago))
+    os.utime(keep, (month_ago, month_ago))  # the library in use is never deleted
+    (tmp_path / "other.txt").write_bytes(b"x")
+    os.utime(tmp_path / "other.txt", (month_ago, month_ago))
+    assert _kernels.prune(tmp_path, keep=keep) == [old]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["other.txt", "render-keep.so", "render-recent.so"]

@@ -9,7 +9,8 @@ on the tensors' raw buffers. Autograd stays in Python (`torch.autograd.Function`
   ``$TORCH_EXTENSIONS_DIR/zooctl/render-<hash>.so`` (or the user cache dir,
   ``platformdirs.user_cache_dir("zooctl")/kernels``); the hash covers the sources, the flags and
   the compiler's version, so an edit rebuilds. Written to a temporary name and renamed, so
-  concurrent first uses are safe.
+  concurrent first uses are safe. A new build deletes the other builds unused for 30 days
+  (`prune`; every use touches its library).
 - Fallback: if there is no compiler or the build fails, `library()` returns None (with one
   warning) and the renderers use their pure-PyTorch path, which gives the same results.
 - ``ZOOCTL_RENDER_KERNELS=0`` (or the `disabled()` context manager) forces the PyTorch path.
@@ -132,6 +133,8 @@ def build(force: bool = False) -> Path:
     out_dir = cache_dir()
     lib = out_dir / f"render-{_build_hash(cxx)}.so"
     if lib.exists() and not force:
+        with contextlib.suppress(OSError):
+            os.utime(lib)  # in use: `prune` keeps it
         return lib
     out_dir.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=".render-", suffix=".so", dir=out_dir)
@@ -148,7 +151,26 @@ def build(force: bool = False) -> Path:
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
+    prune(out_dir, keep=lib)
     return lib
+
+
+def prune(out_dir: Path, keep: Path, max_age_days: float = 30.0) -> list[Path]:
+    """Delete builds of other sources, flags or compilers unused for ``max_age_days`` (every load
+    touches its library), so edits and upgrades do not pile up libraries; returns those deleted.
+    A library deleted while another installation still uses it is rebuilt on its next use."""
+    import time
+
+    cutoff = time.time() - max_age_days * 86400
+    gone = []
+    for p in out_dir.glob("render-*.so"):
+        try:
+            if p != keep and p.stat().st_mtime < cutoff:
+                p.unlink()
+                gone.append(p)
+        except OSError:
+            pass
+    return gone
 
 
 def _load() -> ctypes.CDLL | None:
