@@ -108,21 +108,17 @@ def try_candidates(
     stage-2 iterations of the configured schedule), paused; the state returned continues the
     winner's fit exactly where its trial stopped (`fit_video`'s ``resume``). Ties keep the
     retrieval order."""
-    import copy
-
     from .run import fit_video
 
     tried = candidates[: cfg.trials.candidates]
     if len(tried) < 2:
         return bank.get(candidates[0]["name"]), candidates, None
-    trial_cfg = copy.deepcopy(cfg)
-    trial_cfg.checkpoint_every = 0
     best, best_iou, best_state = None, -1.0, None
     for i, cand in enumerate(tried):
         if reporter is not None:
             reporter.message(f"trial fit {i + 1}/{len(tried)}: template {cand['name']}")
         asset = bank.get(cand["name"])
-        result = fit_video(video, asset, trial_cfg, reporter, pause_at=cfg.trials.iters)
+        result = fit_video(video, asset, cfg, reporter, pause_at=cfg.trials.iters)  # no checkpoints
         # Frames with an empty mask have no IoU (NaN); a video of empty masks is refused earlier.
         iou = float(np.nanmean(result.iou)) if np.isfinite(result.iou).any() else 0.0
         cand["trial_iou"] = round(iou, 4)

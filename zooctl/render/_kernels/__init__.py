@@ -30,6 +30,7 @@ import shutil
 import subprocess
 import tempfile
 import threading
+import time
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
@@ -159,8 +160,6 @@ def prune(out_dir: Path, keep: Path, max_age_days: float = 30.0) -> list[Path]:
     """Delete builds of other sources, flags or compilers unused for ``max_age_days`` (every load
     touches its library), so edits and upgrades do not pile up libraries; returns those deleted.
     A library deleted while another installation still uses it is rebuilt on its next use."""
-    import time
-
     cutoff = time.time() - max_age_days * 86400
     gone = []
     for p in out_dir.glob("render-*.so"):
