@@ -4,6 +4,8 @@ is rebuilt, never an error."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -160,3 +162,80 @@ def test_a_cached_query_of_another_size_is_embedded_again(bank_two, stored_video
     _, again = search_source(bank_two, "seq", ["silhouette"], frames=4, store_root=root)
     assert [m.name for m in again.matches] == [m.name for m in first.matches]
     assert query_cache.read_cache(videos, "seq", 4, 224).emb["silhouette"].shape == (4, 576)
+
+
+def _use_silhouette(monkeypatch, blur: float):
+    """Make the process's ``silhouette`` embedder another version of itself: same size (576),
+    other embeddings (as other weights of the same network would be)."""
+    from zooctl.embed.silhouette import SilhouetteEmbedder
+    from zooctl.retrieval import index
+
+    monkeypatch.setitem(index._EMBEDDERS, ("silhouette", "cpu", ()), SilhouetteEmbedder(blur=blur))
+
+
+def test_views_record_identities_and_reindexing_one_embedder_keeps_the_others(store, monkeypatch):
+    import json
+
+    import jsonschema
+
+    from zooctl.procedural import build_animal
+    from zooctl.retrieval.index import index_asset
+    from zooctl.store import views_h5
+    from zooctl.store.bank import Bank
+
+    bank = Bank(store)
+    a = build_animal("quadruped", name="Quad")
+    bank.add(a)
+    first = index_asset(bank, a, ["silhouette", "effnet"], n_views=3, size=48)
+    assert first["identities"]["silhouette"] == "silhouette/24/0.8"
+    assert first["identities"]["effnet"].startswith("effnet-lite0/")
+    schema = json.loads((Path(__file__).parents[1] / "schemas" / "bank_index.schema.json").read_text())
+    jsonschema.validate(json.loads(bank.index_path.read_text()), schema)
+    path = views_h5.views_path(store, "Quad")
+    sil = views_h5.read_views(path).embeddings["silhouette"]
+    # Another silhouette version is now loaded, but reindexing effnet alone copies silhouette's
+    # stored embeddings (same views) with their identity: nothing is dropped or silently mixed.
+    _use_silhouette(monkeypatch, 1.5)
+    again = index_asset(bank, a, ["effnet"], n_views=3, size=48)
+    assert set(again["embedders"]) == {"effnet", "silhouette"} and again["views_id"] != first["views_id"]
+    assert again["identities"] == first["identities"]
+    stored = views_h5.read_views(path)
+    np.testing.assert_array_equal(stored.embeddings["silhouette"], sil)
+    assert stored.input_kinds == {"effnet": "rgb", "silhouette": "mask"}
+    # Other views (4 instead of 3): the kept embedder embeds them again, as it is now.
+    four = index_asset(bank, a, ["effnet"], n_views=4, size=48)
+    assert four["count"] == 4 and four["identities"]["silhouette"] == "silhouette/24/1.5"
+    assert views_h5.read_views(path).embeddings["silhouette"].shape == (4, 576)
+
+
+def test_views_of_another_version_of_an_embedder_are_refused_or_the_query_reembedded(
+    bank_two, stored_video, monkeypatch
+):
+    """Same-size embeddings of two versions of one embedder (e.g. other CLIP weights) must never be
+    compared: a fresh query against old views says reindex; once the bank is reindexed, a video's
+    cached query of the old version is embedded again; a half-reindexed bank is refused."""
+    import pytest
+
+    from zooctl.retrieval import query_cache
+    from zooctl.retrieval.index import index_asset
+    from zooctl.retrieval.search import EmbedderMismatch, score_bank, search_source
+    from zooctl.store.videos import VideoStore
+
+    root, _ = stored_video
+    videos = VideoStore(root)
+    _, first = search_source(bank_two, "seq", ["silhouette"], frames=4, store_root=root)
+    assert query_cache.read_cache(videos, "seq", 4, 224).identities == {"silhouette": "silhouette/24/0.8"}
+    new = "silhouette/24/1.5"
+    with pytest.raises(EmbedderMismatch, match="2 of the bank's assets") as exc:
+        score_bank(bank_two, _query(), {"silhouette": new})
+    assert "bank reindex --embedder silhouette" in exc.value.hint
+    _use_silhouette(monkeypatch, 1.5)
+    index_asset(bank_two, bank_two.get("Quad"), ["silhouette"], n_views=3, size=48)
+    with pytest.raises(EmbedderMismatch, match="2 different versions"):
+        score_bank(bank_two, _query())  # no identity known for the query: the bank alone is mixed
+    with pytest.raises(EmbedderMismatch, match="1 of the bank's assets"):
+        score_bank(bank_two, _query(), {"silhouette": new})
+    index_asset(bank_two, bank_two.get("Noodle"), ["silhouette"], n_views=3, size=48)
+    _, again = search_source(bank_two, "seq", ["silhouette"], frames=4, store_root=root)
+    assert query_cache.read_cache(videos, "seq", 4, 224).identities == {"silhouette": new}
+    assert {m.name for m in again.matches} == {m.name for m in first.matches}

@@ -55,7 +55,7 @@ _EMBED = textwrap.dedent(
     e = get_embedder("clip")
     out = e.embed_batch(imgs)
     flipped = e.embed_batch(imgs[:, :, ::-1].copy())
-    print(json.dumps({"dim": e.dim, "emb": out.tolist(), "flipped": flipped.tolist()}))
+    print(json.dumps({"dim": e.dim, "emb": out.tolist(), "flipped": flipped.tolist(), "identity": e.identity}))
     """
 )
 
@@ -97,6 +97,10 @@ def test_checkpoint_loads_and_embeds(checkpoint):
     assert not np.allclose(emb, np.array(a["flipped"]), atol=1e-3)  # the image content matters
     b = _embed(checkpoint["openclip"])  # same weights in OpenCLIP's wrapping: same embeddings
     np.testing.assert_allclose(emb, np.array(b["emb"]), atol=1e-5)
+    # The identity is the checkpoint file's digest: another file counts as another version (a
+    # needless reindex at worst), so other weights of the same shape are never mixed with these.
+    assert a["identity"].startswith("clip/") and a["identity"].endswith("/quick_gelu")
+    assert a["identity"] != b["identity"] and a["identity"] == _embed(checkpoint["openai"])["identity"]
     info = zooctl("clip", "info", "--weights", str(checkpoint["openai"]))
     assert info.code == 0, info.err
     assert "width 64, 2 layers" in info.out and "patch 8, 32 px, embedding 16-d" in info.out

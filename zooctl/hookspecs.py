@@ -55,7 +55,9 @@ def register_embedders(register):
 
     ``factory(device="cpu", **options)`` returns an object with ``dim: int`` and
     ``embed_batch(images) -> (N, dim) float32`` where ``images`` is an (N, H, W, 3) uint8 RGB array;
-    embeddings are compared by cosine distance.
+    embeddings are compared by cosine distance. An ``identity: str`` attribute that changes with
+    the weights (e.g. ``zooctl.embed.base.file_digest`` of the weights file) lets a search refuse
+    bank views embedded by another version of the embedder; without it, name and ``dim`` stand in.
     """
 
 

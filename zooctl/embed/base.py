@@ -6,7 +6,11 @@ is an object with
 - ``name: str`` and ``dim: int``;
 - ``input_kind``: ``"rgb"`` (the default of the hook spec) or ``"mask"``;
 - ``embed_batch(x) -> (N, dim) float32``, unit-norm rows, compared by cosine distance. ``x`` is
-  (N, H, W, 3) uint8 RGB for ``"rgb"`` embedders and (N, H, W) bool masks for ``"mask"`` ones.
+  (N, H, W, 3) uint8 RGB for ``"rgb"`` embedders and (N, H, W) bool masks for ``"mask"`` ones;
+- optionally ``identity: str``, which changes whenever the embeddings would (other weights, input
+  size, options), e.g. a digest of the weights file (`file_digest`). Bank views and cached query
+  embeddings record it, so a search never compares embeddings of two versions of one embedder
+  (`embedder_identity`; without the attribute, the name and ``dim`` stand for it).
 
 Retrieval hands every embedder square crops centred on the animal (`zooctl.retrieval.crop`), the
 same way for rendered bank views and for query video frames.
@@ -14,7 +18,9 @@ same way for rendered bank views and for query video frames.
 
 from __future__ import annotations
 
+import hashlib
 import os
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
@@ -30,6 +36,30 @@ class Embedder(Protocol):
     input_kind: str
 
     def embed_batch(self, x: np.ndarray) -> np.ndarray: ...
+
+
+_DIGESTS: dict[tuple[str, int, int], str] = {}
+
+
+def file_digest(path: str | Path) -> str:
+    """The first 16 hex digits of the SHA-256 of a file (weights), computed once per process and
+    file version (path, size, mtime)."""
+    p = Path(path).expanduser().resolve()
+    st = p.stat()
+    key = (str(p), int(st.st_size), int(st.st_mtime_ns))
+    if key not in _DIGESTS:
+        h = hashlib.sha256()
+        with open(p, "rb") as f:
+            for block in iter(lambda: f.read(1 << 22), b""):
+                h.update(block)
+        _DIGESTS[key] = h.hexdigest()[:16]
+    return _DIGESTS[key]
+
+
+def embedder_identity(embedder: Any) -> str:
+    """What distinguishes this embedder's embeddings from another version's (module docstring)."""
+    ident = getattr(embedder, "identity", None)
+    return str(ident) if ident else f"{embedder.name}/{int(embedder.dim)}"
 
 
 def l2_normalize(x: np.ndarray, eps: float = 1e-12) -> np.ndarray:

@@ -62,6 +62,13 @@ class EffnetEmbedder:
         self.size = int(size)
         self.batch = int(batch)
         path = weights_path() if weights is None else Path(weights)
+        from .base import file_digest
+
+        # Both backends compute the same features, so the identity names the weights, not the
+        # backend. The shipped file's name carries its content hash (torch hub style), which spares
+        # a search hashing 19 MB; other weights are hashed.
+        tag = path.stem if weights is None else file_digest(path)
+        self.identity = f"effnet-lite0/{tag}/{self.size}px"
         if self.backend == "numpy":
             from .effnet_numpy import load_numpy_model
 

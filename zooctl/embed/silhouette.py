@@ -30,6 +30,7 @@ class SilhouetteEmbedder:
         self.grid = int(grid)
         self.blur = float(blur)
         self.dim = self.grid * self.grid
+        self.identity = f"silhouette/{self.grid}/{self.blur:g}"
 
     def embed_batch(self, masks: np.ndarray) -> np.ndarray:
         """(N, H, W) bool -> (N, grid*grid) float32 unit-norm descriptors."""

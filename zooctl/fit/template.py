@@ -39,7 +39,7 @@ def retrieve(
     images, crop_masks, chosen = crops_from_frames(frames, masks, 8, 224)
     query = QueryFrames(images, crop_masks, chosen, "fit")
     emb, _ = embed_query(query, enabled_embedders(), device)
-    res = score_bank(bank, emb, exclude=exclude)
+    res = score_bank(bank, emb, query.identities, exclude=exclude)
     if not res.matches:
         raise UsageError(
             "template retrieval found no candidate in the bank",

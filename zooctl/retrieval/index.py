@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ..embed.base import DEFAULT_EMBEDDERS, Embedder, get_embedder
+from ..embed.base import DEFAULT_EMBEDDERS, Embedder, embedder_identity, get_embedder
 from ..errors import StoreError, UsageError
 from ..store import views_h5
 from .views import DEFAULT_SIZE, DEFAULT_VIEWS, ViewSet, render_views
@@ -65,7 +65,11 @@ def index_asset(
 ) -> dict[str, Any]:
     """Render, embed and store the retrieval views of ``asset`` (already in ``bank``).
 
-    Returns the ``views`` entry recorded in the bank index: count, size, embedder dims, views_id.
+    The asset's other embedders' embeddings are kept: where its stored views are the ones this
+    call renders (same asset, count, size and seed; renders are deterministic) they are copied,
+    otherwise those embedders embed the new views too. So `bank reindex --embedder clip` adds or
+    refreshes clip without dropping effnet. Returns the ``views`` entry recorded in the bank index:
+    count, size, embedder dims and identities (`embedder_identity`), views_id.
     """
     names = list(embedders) if embedders is not None else enabled_embedders()
     summary = bank.summary(asset.name)
@@ -73,11 +77,19 @@ def index_asset(
     vs: ViewSet = render_views(
         asset, n_views=n_views, size=size, seed=view_seed(asset.name, seed), device=device
     )
-    embs, kinds = {}, {}
-    for e in names:
+    embs, kinds, idents = {}, {}, {}
+    old = summary.get("views") if isinstance(summary.get("views"), dict) else {}
+    others = [e for e in old.get("embedders", {}) if e not in names]
+    kept = _stored_embeddings(bank, asset.name, old, others, digest, vs)
+    for e, (arr, kind, ident) in kept.items():
+        embs[e], kinds[e] = arr, kind
+        if ident:
+            idents[e] = ident
+    for e in names + [e for e in others if e not in kept]:
         emb = cached_embedder(e, device)
         embs[e] = embed_inputs(emb, vs.images, vs.masks)
         kinds[e] = getattr(emb, "input_kind", "rgb")
+        idents[e] = embedder_identity(emb)
     views_id = views_h5.write_views(bank.root, asset.name, vs, embs, digest, kinds)
     if views_h5.summary_digest(bank.summary(asset.name)) != digest:
         raise StoreError(
@@ -88,10 +100,33 @@ def index_asset(
         "count": len(vs),
         "size": size,
         "embedders": {e: int(a.shape[1]) for e, a in embs.items()},
+        "identities": idents,
         "views_id": views_id,
     }
     bank.update_summary(asset.name, views=entry)
     return entry
+
+
+def _stored_embeddings(
+    bank, name: str, entry: dict[str, Any], embedders: list[str], digest: str, vs: ViewSet
+) -> dict[str, tuple[np.ndarray, str, str | None]]:
+    """{embedder: (V, D) embeddings, input kind, identity} of the asset's current sidecar, for
+    those of ``embedders`` it holds, when its views are the ones ``vs`` renders again."""
+    if not embedders or not entry.get("views_id"):
+        return {}
+    try:
+        sv = views_h5.read_views(views_h5.views_path(bank.root, name), embedders=embedders)
+    except StoreError:
+        return {}
+    same = (
+        sv.views_id == entry["views_id"]
+        and sv.asset_digest == digest
+        and (sv.count, sv.size, sv.seed) == (len(vs), vs.images.shape[1], vs.seed)
+    )
+    if not same:
+        return {}
+    idents = entry.get("identities", {})
+    return {e: (a, sv.input_kinds.get(e, "rgb"), idents.get(e)) for e, a in sv.embeddings.items()}
 
 
 def views_entries(bank, summaries: list[dict[str, Any]] | None = None) -> dict[str, dict[str, Any]]:

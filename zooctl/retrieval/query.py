@@ -22,13 +22,15 @@ DEFAULT_QUERY_FRAMES = 8
 @dataclass
 class QueryFrames:
     """K query crops. images (K, S, S, 3) uint8; masks (K, S, S) bool or None; frames (K,) indices
-    of the chosen frames in the decoded video; source: what was decoded."""
+    of the chosen frames in the decoded video; source: what was decoded; identities: {embedder:
+    `zooctl.embed.base.embedder_identity`} of the embedders that embedded it (set by the search)."""
 
     images: np.ndarray
     masks: np.ndarray | None
     frames: np.ndarray
     source: str
     notes: list[str] = field(default_factory=list)
+    identities: dict[str, str] = field(default_factory=dict)
 
 
 def sample_indices(n: int, k: int) -> np.ndarray:

@@ -4,8 +4,10 @@ same video skips decoding, cropping, loading the embedders and importing torch.
 One file per sampling, ``videos/<name>.cache/query-k<K>-s<S>.npz`` (`VideoStore.cache_dir`, removed
 with the video): ``frames`` (K,) int64 chosen frame indices, ``emb/<embedder>`` (K, D) float32 per
 embedder, and ``meta`` (JSON): cache version, the video file's identity (inode, size, mtime: a
-re-added video is a new file), whether the crops had masks, the query notes. Anything unreadable or
-not matching is a miss, never an error: the cache is rebuilt from the video.
+re-added video is a new file), whether the crops had masks, the query notes, each embedder's
+identity (`zooctl.embed.base.embedder_identity`, so a search can tell embeddings of an older
+version of an embedder from the bank's). Anything unreadable or not matching is a miss, never an
+error: the cache is rebuilt from the video.
 """
 
 from __future__ import annotations
@@ -27,13 +29,14 @@ CACHE_VERSION = 1
 
 @dataclass
 class CachedQuery:
-    """What a search needs of a query without its pixels: frames (K,), has_masks, notes, and
-    emb {embedder: (K, D) float32}."""
+    """What a search needs of a query without its pixels: frames (K,), has_masks, notes,
+    emb {embedder: (K, D) float32} and identities {embedder: identity} (absent in older caches)."""
 
     frames: np.ndarray
     has_masks: bool
     notes: list[str]
     emb: dict[str, np.ndarray] = field(default_factory=dict)
+    identities: dict[str, str] = field(default_factory=dict)
 
 
 def cache_path(videos, name: str, k: int, size: int) -> Path:
@@ -70,7 +73,14 @@ def read_cache(videos, name: str, k: int, size: int) -> CachedQuery | None:
         return None
     if frames.ndim != 1 or any(e.ndim != 2 or len(e) != len(frames) for e in emb.values()):
         return None
-    return CachedQuery(frames, bool(meta.get("has_masks")), [str(n) for n in meta.get("notes", [])], emb)
+    idents = meta.get("identities") if isinstance(meta.get("identities"), dict) else {}
+    return CachedQuery(
+        frames,
+        bool(meta.get("has_masks")),
+        [str(n) for n in meta.get("notes", [])],
+        emb,
+        {str(k): str(v) for k, v in idents.items() if k in emb},
+    )
 
 
 def write_cache(videos, name: str, k: int, size: int, query: CachedQuery, identity: list[int] | None) -> None:
@@ -84,6 +94,7 @@ def write_cache(videos, name: str, k: int, size: int, query: CachedQuery, identi
         "video": identity,
         "has_masks": query.has_masks,
         "notes": query.notes,
+        "identities": query.identities,
     }
     buf = io.BytesIO()
     np.savez(

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from ..embed.base import embedder_identity
 from ..errors import UsageError
 from . import query_cache
 from .index import cached_embedder, current_pack, embed_inputs
@@ -71,7 +72,8 @@ class SearchResult:
 def embed_query(
     query: QueryFrames, embedders: list[str], device: str = "cpu"
 ) -> tuple[dict[str, np.ndarray], list[str]]:
-    """{embedder: (K, D)} for the embedders the query can feed; notes for the ones it cannot."""
+    """{embedder: (K, D)} for the embedders the query can feed; notes for the ones it cannot.
+    Records each embedder's identity in ``query.identities``."""
     out, notes = {}, []
     for e in embedders:
         emb = cached_embedder(e, device)
@@ -79,6 +81,7 @@ def embed_query(
             notes.append(f"{e}: skipped, the query has no masks")
             continue
         out[e] = embed_inputs(emb, query.images, query.masks)
+        query.identities[e] = embedder_identity(emb)
     return out, notes
 
 
@@ -92,16 +95,48 @@ def _stored_video(source: Any, masks_dir: Any, store_root: Any):
     return videos if videos.exists(str(source)) else None
 
 
-class DimensionMismatch(UsageError):
+class EmbedderMismatch(UsageError):
+    """The bank's views and the query were embedded by different versions of one embedder."""
+
+    def __init__(self, embedder: str, message: str):
+        super().__init__(message, hint=f"run `zooctl bank reindex --embedder {embedder}`")
+        self.embedder = embedder
+
+
+class DimensionMismatch(EmbedderMismatch):
     """The bank's views and the query were embedded by embedders of different output sizes."""
 
     def __init__(self, embedder: str, bank_dim: int, query_dim: int):
         super().__init__(
+            embedder,
             f"the bank's {embedder} views are {bank_dim}-dimensional but the query's {embedder} "
             f"embeddings are {query_dim}-dimensional: the {embedder} embedder changed since the views were made",
-            hint=f"run `zooctl bank reindex --embedder {embedder}`",
         )
-        self.embedder = embedder
+
+
+def check_identities(entries: list[dict[str, Any]], embedder: str, query_identity: str | None) -> None:
+    """Refuse to compare a query with views that another version of ``embedder`` made (other weights
+    of the same size), and a bank whose views mix versions. ``entries``: `Bank.list()`; views
+    without a recorded identity (older banks) are not checked."""
+    seen: dict[str, int] = {}
+    for s in entries:
+        views = s.get("views")
+        ident = views.get("identities", {}).get(embedder) if isinstance(views, dict) else None
+        if ident:
+            seen[ident] = seen.get(ident, 0) + 1
+    if query_identity is not None:
+        stale = sum(n for i, n in seen.items() if i != query_identity)
+        if stale:
+            raise EmbedderMismatch(
+                embedder,
+                f"{stale} of the bank's assets have {embedder} views made by another version of the "
+                f"{embedder} embedder (other weights or options) than the one embedding the query",
+            )
+    elif len(seen) > 1:
+        raise EmbedderMismatch(
+            embedder,
+            f"the bank's {embedder} views were made by {len(seen)} different versions of the embedder",
+        )
 
 
 def query_embeddings(
@@ -145,14 +180,20 @@ def query_embeddings(
         masks = np.zeros((0, size, size), bool) if hit.has_masks else None
         query = QueryFrames(np.zeros((0, size, size, 3), np.uint8), masks, hit.frames, f"stored video {name}")
         query.notes = list(hit.notes)
+        query.identities = {e: hit.identities[e] for e in cached if e in hit.identities}
         return query, cached, notes
     query = stored_query(videos, name, k, size)
     known = hit.emb if hit is not None else {}
     if hit is not None and not np.array_equal(hit.frames, query.frames):  # never mix two samplings
         known, cached, todo, notes = {}, {}, list(embedders), []
     new, new_notes = embed_query(query, todo, device)
+    idents = {e: i for e, i in (hit.identities if hit is not None and known else {}).items() if e in known}
+    idents.update(query.identities)
+    query.identities = {e: idents[e] for e in embedders if e in idents and (e in cached or e in new)}
     if new:
-        entry = query_cache.CachedQuery(query.frames, query.masks is not None, query.notes, {**known, **new})
+        entry = query_cache.CachedQuery(
+            query.frames, query.masks is not None, query.notes, {**known, **new}, idents
+        )
         query_cache.write_cache(videos, name, k, size, entry, identity)
     return (
         query,
@@ -161,12 +202,16 @@ def query_embeddings(
     )
 
 
-def load_packs(bank, embedders: list[str]) -> tuple[dict[str, Any], list[str]]:
-    """The current pack of each embedder (one read of the bank index) and notes on missing views."""
+def load_packs(
+    bank, embedders: list[str], identities: dict[str, str] | None = None
+) -> tuple[dict[str, Any], list[str]]:
+    """The current pack of each embedder (one read of the bank index) and notes on missing views.
+    ``identities``: the query's embedder identities, checked against the views' (`check_identities`)."""
     entries = bank.list()
     notes = []
     packs = {}
     for e in embedders:
+        check_identities(entries, e, (identities or {}).get(e))
         pack, missing = current_pack(bank, e, entries)
         if missing:
             notes.append(
@@ -253,14 +298,18 @@ def score_packs(
     return SearchResult(matches, list(query_emb), aggregation, fusion, len(cand))
 
 
-def score_bank(bank, query_emb: dict[str, np.ndarray], **options: Any) -> SearchResult:
-    """Rank every asset with views for all of ``query_emb``'s embedders. See the module docstring."""
+def score_bank(
+    bank, query_emb: dict[str, np.ndarray], identities: dict[str, str] | None = None, **options: Any
+) -> SearchResult:
+    """Rank every asset with views for all of ``query_emb``'s embedders. See the module docstring.
+    ``identities``: the query's embedder identities (`QueryFrames.identities`); views of another
+    version of an embedder are refused with `EmbedderMismatch`."""
     if not query_emb:
         raise UsageError(
             "no embedder could embed this query",
             hint="give masks for mask embedders, or choose another --embedder",
         )
-    packs, notes = load_packs(bank, list(query_emb))
+    packs, notes = load_packs(bank, list(query_emb), identities)
     res = score_packs(packs, query_emb, **options)
     res.notes = notes
     return res
@@ -292,13 +341,13 @@ def search_source(
     **options: Any,
 ) -> tuple[QueryFrames, SearchResult]:
     """`query_embeddings` then `search_embedded`, what `zooctl bank search` runs. A stored video's
-    cached query embeddings of another size than the bank's views (the embedder changed, and the
-    bank was reindexed since) are embedded again once instead of failing."""
+    cached query embeddings from another version of an embedder than the bank's views (the
+    embedder changed, and the bank was reindexed since) are embedded again once instead of failing."""
     kw = dict(k=frames, masks_dir=masks_dir, store_root=store_root, device=device, need_images=need_images)
     query, q, notes = query_embeddings(source, embedders, **kw)
     try:
         return query, search_embedded(bank, query, q, notes, top, **options)
-    except DimensionMismatch as exc:  # a cached query of the old size: embed it again (once)
+    except EmbedderMismatch as exc:  # a cached query of an older embedder: embed it again (once)
         query, q, notes = query_embeddings(source, embedders, refresh={exc.embedder}, **kw)
         return query, search_embedded(bank, query, q, notes, top, **options)
 
@@ -314,7 +363,7 @@ def search_embedded(
     """Rank the bank for query embeddings {embedder: (K, D)}; keeps the ``top`` best matches."""
     if top < 1:
         raise UsageError(f"--top {top} must be at least 1")
-    res = score_bank(bank, q, **options)
+    res = score_bank(bank, q, query.identities, **options)
     res.matches = res.matches[:top]
     res.notes = query.notes + notes + res.notes
     return res

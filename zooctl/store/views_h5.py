@@ -87,7 +87,8 @@ def summary_digest(summary: dict[str, Any]) -> str:
 @dataclass
 class StoredViews:
     """What a sidecar holds. images (V, S, S, 3) uint8 (None unless asked for), masks (V, S, S) bool,
-    embeddings {embedder: (V, D) float32}, params {key: (V,...) array}."""
+    embeddings {embedder: (V, D) float32} and their input_kinds {embedder: "rgb" or "mask"},
+    params {key: (V,...) array}."""
 
     asset: str
     views_id: str
@@ -96,6 +97,7 @@ class StoredViews:
     count: int
     seed: int
     embeddings: dict[str, np.ndarray] = field(default_factory=dict)
+    input_kinds: dict[str, str] = field(default_factory=dict)
     masks: np.ndarray | None = None
     images: np.ndarray | None = None
     params: dict[str, np.ndarray] = field(default_factory=dict)
@@ -217,6 +219,7 @@ def read_views(
         )
         names = list(f["embeddings"]) if embedders is None else [e for e in embedders if e in f["embeddings"]]
         out.embeddings = {e: f["embeddings"][e][()].astype(np.float32) for e in names}
+        out.input_kinds = {e: str(f["embeddings"][e].attrs.get("input_kind", "rgb")) for e in names}
         idx = np.arange(out.count) if rows is None else np.asarray(rows, dtype=np.int64)
         if masks:
             out.masks = (

@@ -37,8 +37,13 @@ class ClipEmbedder:
                 hint=f"set {WEIGHTS_ENV}=/path/to/ViT-B-32.pt (nothing is downloaded)",
             )
         self.device = torch.device(device)
-        self.model = load_checkpoint(weights, act or os.environ.get(ACT_ENV, "quick_gelu")).to(self.device)
+        act = act or os.environ.get(ACT_ENV, "quick_gelu")
+        self.model = load_checkpoint(weights, act).to(self.device)
         self.dim = self.model.cfg.embed_dim
+        from zooctl.embed.base import file_digest
+
+        # Other weights of the same shape give other embeddings: views and queries record this.
+        self.identity = f"clip/{file_digest(weights)}/{act}"
         self.batch = int(batch)
         self.weights = str(weights)
 
