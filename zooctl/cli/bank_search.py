@@ -92,7 +92,8 @@ def reindex(
     embedder: list[str] = typer.Option(
         None,
         "--embedder",
-        help="Embedders to store (repeatable; default: ZOOCTL_EMBEDDERS or effnet and silhouette).",
+        help="Embedders to embed the views with (repeatable; default: ZOOCTL_EMBEDDERS or effnet and "
+        "silhouette). The asset's other embedders' views are kept.",
     ),
     views: int = typer.Option(24, "--views", help="Views rendered per asset."),
     size: int = typer.Option(224, "--size", help="View size in pixels."),
