@@ -187,9 +187,8 @@ def query_embeddings(
     if hit is not None and not np.array_equal(hit.frames, query.frames):  # never mix two samplings
         known, cached, todo, notes = {}, {}, list(embedders), []
     new, new_notes = embed_query(query, todo, device)
-    idents = {e: i for e, i in (hit.identities if hit is not None and known else {}).items() if e in known}
-    idents.update(query.identities)
-    query.identities = {e: idents[e] for e in embedders if e in idents and (e in cached or e in new)}
+    idents = {**(hit.identities if known else {}), **query.identities}  # new embeddings, new identities
+    query.identities = {e: idents[e] for e in (*cached, *new) if e in idents}
     if new:
         entry = query_cache.CachedQuery(
             query.frames, query.masks is not None, query.notes, {**known, **new}, idents
@@ -348,6 +347,8 @@ def search_source(
     try:
         return query, search_embedded(bank, query, q, notes, top, **options)
     except EmbedderMismatch as exc:  # a cached query of an older embedder: embed it again (once)
+        if _stored_video(source, masks_dir, store_root) is None:  # nothing was cached: the bank is stale
+            raise
         query, q, notes = query_embeddings(source, embedders, refresh={exc.embedder}, **kw)
         return query, search_embedded(bank, query, q, notes, top, **options)
 
