@@ -62,6 +62,11 @@ def run(
         None, "--template", help="Fit every video with this bank asset instead of retrieval."
     ),
     limit: int = typer.Option(None, "--limit", help="Only the first N videos."),
+    known_camera: bool = typer.Option(
+        False,
+        "--known-camera",
+        help="Give each fit its video's camera rotations (CASA's protocol on synthetic data) instead of estimating the camera's motion.",
+    ),
     report: Path = typer.Option(None, "--report", help="Also write the markdown table here."),
     json_out: bool = JsonOpt,
 ) -> None:
@@ -89,6 +94,7 @@ def run(
         template,
         limit,
         progress=progress,
+        known_camera=known_camera,
     )
     table = markdown_table(res)
     if report is not None:

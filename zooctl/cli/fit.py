@@ -79,6 +79,13 @@ def fit(
     focal: float = typer.Option(
         None, "--focal", help="Focal length in pixels of the input frames (default: estimated)."
     ),
+    cameras: str = typer.Option(
+        None,
+        "--cameras",
+        help="Known camera rotations: a .npz or .json with `rotations` (frames x 3 x 3, world-to-camera, "
+        "OpenCV axes: x right, y down, z forward), or 'gt' for a `bench make` video's own cameras. The "
+        "viewpoint search then finds the animal's one orientation in the world instead of tracking it.",
+    ),
     config: Path = typer.Option(None, "--config", help="JSON config applied on top of the preset."),
     seed: int = typer.Option(None, "--seed", help="Random seed."),
     max_frames: int = typer.Option(None, "--max-frames", help="Fit only the first N frames."),
@@ -121,6 +128,7 @@ def fit(
             resume=resume,
             box=parse_box(box) if box else None,
             out_root=Path("fits"),
+            cameras=cameras,
         )
     if json_out:
         print_json(rec)

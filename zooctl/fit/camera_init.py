@@ -9,6 +9,12 @@ finer local grid, then *tracked*: every ``track_every`` frames a small grid arou
 keyframe's rotation is scored on that keyframe, so camera motion and turning animals are
 followed. Frames between keyframes get slerped rotations; every frame's translation comes from
 its own bounding-box alignment (frames whose mask is empty interpolate their neighbours').
+
+With known camera rotations (a calibrated or tracked camera, or the benchmark's own cameras:
+CASA's protocol on synthetic data) nothing is tracked: the animal's orientation in the world is
+one unknown, each frame's root rotation follows from it through the camera's motion, and every
+candidate is scored on keyframes spread over the whole video. Silhouettes alone cannot tell an
+animal turning one way from its depth mirror turning the other; the camera's known motion can.
 """
 
 from __future__ import annotations
@@ -154,13 +160,16 @@ def initialise_camera(
     seed: int = 0,
     principal: tuple[float, float] | None = None,
     image_height: int | None = None,
+    camera_rotations: np.ndarray | None = None,
 ) -> CameraInit:
     """Search focal and viewpoint, track the root rotation, align every frame (module docstring).
 
     rest (V, 3) template rest vertices; faces (F, 3); masks (T, H, W) bool at the input size (or a
     crop of the input around the animal, with ``principal`` the principal point in the crop's
     pixels and ``image_height`` the uncropped height that the focal candidates refer to);
-    fit_scale: fit pixels per input pixel. Returns a `CameraInit` in fit pixels.
+    fit_scale: fit pixels per input pixel; camera_rotations: (T, 3, 3) world-to-camera rotations
+    of the video's camera (OpenCV axes: x right, y down, z forward) when they are known.
+    Returns a `CameraInit` in fit pixels.
     """
     T, H, W = masks.shape
     principal = principal if principal is not None else (W / 2, H / 2)
@@ -180,7 +189,17 @@ def initialise_camera(
             for az in np.arange(cfg.azimuths) * 360.0 / cfg.azimuths:
                 for roll in cfg.rolls:
                     cands.append((float(az), float(el), float(roll), f))
-    scores = scorer.score([view_rotation(*c[:3]) for c in cands], frames, [c[3] for c in cands])
+    if camera_rotations is not None:
+        # Keyframes over the whole video; a candidate is the root rotation at ``first``, and the
+        # camera's motion carries it to every other frame.
+        frames = present[:: max(cfg.track_every, 1)]
+        if len(frames) > _MAX_KNOWN_KEYFRAMES:
+            frames = [frames[int(round(i))] for i in np.linspace(0, len(frames) - 1, _MAX_KNOWN_KEYFRAMES)]
+        follow = camera_follow(np.asarray(camera_rotations, np.float64), first)
+        score = lambda rots, fs: _score_followed(scorer, follow, rots, frames, fs)  # noqa: E731
+    else:
+        score = lambda rots, fs: scorer.score(rots, frames, fs)  # noqa: E731
+    scores = score([view_rotation(*c[:3]) for c in cands], [c[3] for c in cands])
     order = np.argsort(-scores)
     best = cands[order[0]]
     top = [
@@ -203,10 +222,22 @@ def initialise_camera(
         for dr in (-step / 2, 0.0, step / 2)
         for fs in fsteps
     ]
-    lscores = scorer.score([view_rotation(*c[:3]) for c in local], frames, [c[3] for c in local])
+    lscores = score([view_rotation(*c[:3]) for c in local], [c[3] for c in local])
     best = local[int(np.argmax(lscores))]
     iou = float(lscores.max())
     focal = best[3]
+    if camera_rotations is not None:
+        R0 = view_rotation(*best[:3])
+        rot_q = np.stack([matrix_to_quat(follow[t] @ R0) for t in range(T)])
+        key_iou = [float(scorer.score([follow[k] @ R0], [k], [focal])[0]) for k in frames]
+        return CameraInit(
+            focal * fit_scale,
+            rot_q,
+            _box_translations(scorer, masks, rot_q, rest, focal, principal, present),
+            top,
+            iou,
+            key_iou,
+        )
     # Track the root rotation over keyframes.
     key_rot = {first: view_rotation(*best[:3])}
     key_iou = [iou]
@@ -236,7 +267,46 @@ def initialise_camera(
         else:
             a = (t - keys[j]) / (keys[j + 1] - keys[j])
             rot_q[t] = quat_slerp(kq[j], kq[j + 1], a)
-    # Translations: each frame's own box alignment, at the input resolution's camera.
+    trans = _box_translations(scorer, masks, rot_q, rest, focal, principal, present)
+    return CameraInit(focal * fit_scale, rot_q, trans, top, iou, key_iou)
+
+
+_MAX_KNOWN_KEYFRAMES = 10
+
+
+def camera_follow(camera_rotations: np.ndarray, first: int) -> np.ndarray:
+    """(T, 3, 3) F_t such that F_t @ R is frame t's root rotation when R is frame ``first``'s and
+    the animal keeps its orientation in the world while the camera moves (camera_rotations
+    (T, 3, 3) world-to-camera, OpenCV axes; the fit's camera is fixed at `CAMERA_ROTATION`)."""
+    C = camera_rotations
+    return CAMERA_ROTATION.T @ C @ C[first].T @ CAMERA_ROTATION
+
+
+def _score_followed(
+    scorer: SilhouetteScorer,
+    follow: np.ndarray,
+    rots: list[np.ndarray],
+    frames: list[int],
+    focals: list[float],
+) -> np.ndarray:
+    total = np.zeros(len(rots))
+    for k in frames:
+        total += scorer.score([follow[k] @ R for R in rots], [k], focals)
+    return total / max(len(frames), 1)
+
+
+def _box_translations(
+    scorer: SilhouetteScorer,
+    masks: np.ndarray,
+    rot_q: np.ndarray,
+    rest: np.ndarray,
+    focal: float,
+    principal: tuple[float, float],
+    present: list[int],
+) -> np.ndarray:
+    """(T, 3) each frame's own box alignment at the input resolution's camera (frames whose mask
+    is empty interpolate their neighbours')."""
+    T, H, W = masks.shape
     trans = np.full((T, 3), np.nan)
     full = SilhouetteScorer.__new__(SilhouetteScorer)
     full.rest, full.boxes, full.scale, full.w, full.h = scorer.rest, [mask_box(m) for m in masks], 1.0, W, H
@@ -249,4 +319,4 @@ def initialise_camera(
     idx = np.array(present)
     for c in range(3):
         trans[:, c] = np.interp(np.arange(T), idx, trans[idx, c])
-    return CameraInit(focal * fit_scale, rot_q, trans, top, iou, key_iou)
+    return trans

@@ -29,7 +29,9 @@ class FitVideo:
 
     frames (T, H, W, 3) uint8; masks (T, H, W) bool; flow (T-1, H, W, 2) float32 forward flow in
     pixels of this resolution or None; flow_valid (T-1, H, W) bool; intrinsics (4,) fx, fy, cx, cy
-    in pixels of this resolution or None; gt: ground truth arrays (benchmark videos only).
+    in pixels of this resolution or None; gt: ground truth arrays (benchmark videos only);
+    camera_rotations (T, 3, 3) world-to-camera rotations (OpenCV axes) when the camera's motion is
+    known (``--cameras``, or `zooctl bench run --known-camera`), else None.
     """
 
     name: str
@@ -42,6 +44,7 @@ class FitVideo:
     gt: dict[str, Any] = field(default_factory=dict)
     source: str = ""
     mask_source: str = "given"
+    camera_rotations: np.ndarray | None = None
 
     @property
     def num_frames(self) -> int:
@@ -84,6 +87,7 @@ class FitVideo:
             {k: (v[:n] if k in _PER_FRAME_GT else v) for k, v in self.gt.items()},
             self.source,
             self.mask_source,
+            None if self.camera_rotations is None else self.camera_rotations[:n],
         )
 
 
@@ -270,3 +274,52 @@ def resample_flow(
     )
     vf = compute_video_flow(DISFlow("medium"), small)
     return vf.forward.astype(np.float32), ~vf.occlusion_forward
+
+
+# -- known cameras -----------------------------------------------------------------------------
+
+
+def load_camera_rotations(spec: str, video: FitVideo) -> np.ndarray:
+    """(T, 3, 3) known world-to-camera rotations for ``video`` (OpenCV axes: x right, y down,
+    z forward). ``spec``: ``gt`` for a benchmark video's own cameras, or a ``.npz`` / ``.json``
+    file holding ``rotations`` (T, 3, 3) (more frames than the video: the first T are used)."""
+    import json
+
+    T = video.num_frames
+    if spec == "gt":
+        if "cam_rotation" not in video.gt:
+            raise UsageError(
+                f"video {video.name!r} has no ground-truth cameras",
+                hint="`--cameras gt` is for `zooctl bench make` videos; give a .npz or .json file",
+            )
+        rots = np.asarray(video.gt["cam_rotation"], np.float64)
+    else:
+        path = Path(spec).expanduser()
+        if not path.is_file():
+            raise InputError(
+                f"camera file {spec} does not exist", hint="give a .npz or .json with `rotations`"
+            )
+        try:
+            if path.suffix.lower() == ".json":
+                rots = np.asarray(json.loads(path.read_text())["rotations"], np.float64)
+            else:
+                with np.load(path) as z:
+                    rots = np.asarray(z["rotations"], np.float64)
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise InputError(
+                f"camera file {spec} is unreadable ({type(exc).__name__}: {exc})",
+                hint="a .npz or .json with `rotations`: (frames, 3, 3) world-to-camera rotations",
+            ) from None
+    if rots.ndim != 3 or rots.shape[1:] != (3, 3) or len(rots) < T:
+        raise InputError(
+            f"camera rotations of shape {tuple(rots.shape)} for a video of {T} frames",
+            hint="give one (3, 3) world-to-camera rotation per frame",
+        )
+    rots = rots[:T]
+    eye = np.einsum("tij,tkj->tik", rots, rots)
+    if not np.isfinite(rots).all() or np.abs(eye - np.eye(3)).max() > 1e-3 or (np.linalg.det(rots) < 0).any():
+        raise InputError(
+            "the camera rotations are not all rotation matrices (orthonormal, determinant +1)",
+            hint="give world-to-camera rotations, OpenCV axes (x right, y down, z forward)",
+        )
+    return rots

@@ -17,7 +17,7 @@ from ..errors import InputError, MissingDependencyError, NotFoundError, UsageErr
 from ..names import check_name, sanitize_name
 from ..store.fits import FitStore
 from .config import FitConfig, preset
-from .inputs import FitVideo, load_fit_video
+from .inputs import FitVideo, load_camera_rotations, load_fit_video
 from .run import FitResult, Reporter, fit_video
 
 
@@ -171,8 +171,12 @@ def fit_job(
     outputs: tuple[str, ...] = ("usd", "glb", "overlay", "loss"),
     box: tuple[float, float, float, float] | None = None,
     out_root: Path | None = None,
+    cameras: str | None = None,
 ) -> dict[str, Any]:
     """Fit a video and write its outputs and store record; returns the record (``fit.json``).
+
+    ``cameras``: known camera rotations (`zooctl.fit.inputs.load_camera_rotations`: a file, or
+    ``gt`` for a benchmark video's own cameras).
 
     Outputs go to ``out``, else ``out_root/<name>`` (the CLI's ``fits/<name>``), else the fit's
     folder in the store."""
@@ -193,9 +197,14 @@ def fit_job(
         box = tuple(old["box"]) if old.get("box") else None
         out = Path(old["out"]) if old.get("out") else out
         exclude = set(old.get("excluded", [])) or exclude
+        cameras = old.get("cameras")
     cfg = (cfg or preset("fast")).validate()
     t_start = time.perf_counter()
     video = load_source(source, store_root, masks, cfg.max_frames, box, reporter)
+    if cameras is not None:
+        video.camera_rotations = load_camera_rotations(cameras, video)
+        if cameras != "gt":
+            cameras = str(Path(cameras).expanduser().resolve())
     name = check_name(name or sanitize_name(video.name), "fit name")
     t_ret = time.perf_counter()
     if resume and state is not None:
@@ -217,6 +226,7 @@ def fit_job(
         "source": str(source),
         "video": video.name,
         "masks": masks,
+        "cameras": cameras,
         "box": list(box) if box is not None else None,
         "stored_video": video.source[len("video:") :] if video.source.startswith("video:") else None,
         "mask_source": video.mask_source,

@@ -158,6 +158,7 @@ def fit_video(
             cfg.seed,
             (W / 2 - x0, H / 2 - y0),
             H,
+            video.camera_rotations,
         )
         with torch.no_grad():
             scene.log_focal.fill_(float(np.log(init.focal)))
