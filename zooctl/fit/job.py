@@ -201,7 +201,7 @@ def fit_job(
     cfg = (cfg or preset("fast")).validate()
     t_start = time.perf_counter()
     video = load_source(source, store_root, masks, cfg.max_frames, box, reporter)
-    if cameras is not None:
+    if cameras is not None and not resume:  # a resumed fit's camera search is done already
         video.camera_rotations = load_camera_rotations(cameras, video)
         if cameras != "gt":
             cameras = str(Path(cameras).expanduser().resolve())
