@@ -5,9 +5,11 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from zooctl.benchdata.make import make_video
 from zooctl.benchdata.run import markdown_table, run_benchmark
+from zooctl.errors import UsageError
 from zooctl.rig.synthetic import tube_asset
 
 TINY = {
@@ -71,6 +73,12 @@ def test_bench_run_table(tmp_path, store):
     assert row["template"] == "tube2" and 0 <= row["mask_iou"] <= 1 and row["miou"] is not None
     table = markdown_table(res)
     assert "| full | 1 |" in table and "no-flow" in table
+    assert "Camera motion: estimated" in table
+    own = run_benchmark(tmp_path / "v", store, own_template=True, known_camera=True, overrides=TINY)
+    assert own["rows"][0]["template"] == "tube" and own["own_template"] and own["known_camera"]
+    assert "each video's own asset" in markdown_table(own) and "Camera motion: known" in markdown_table(own)
+    with pytest.raises(UsageError, match="exclude each other"):
+        run_benchmark(tmp_path / "v", store, template="tube2", own_template=True)
 
 
 def test_reanimation_uses_the_scale_of_the_frame_it_starts_from(tmp_path):

@@ -62,6 +62,11 @@ def run(
         None, "--template", help="Fit every video with this bank asset instead of retrieval."
     ),
     limit: int = typer.Option(None, "--limit", help="Only the first N videos."),
+    own_template: bool = typer.Option(
+        False,
+        "--own-template",
+        help="Fit each video with its own asset (no retrieval): what a bank that holds the animal allows.",
+    ),
     known_camera: bool = typer.Option(
         False,
         "--known-camera",
@@ -95,6 +100,7 @@ def run(
         limit,
         progress=progress,
         known_camera=known_camera,
+        own_template=own_template,
     )
     table = markdown_table(res)
     if report is not None:
