@@ -15,6 +15,8 @@ CASA's protocol on synthetic data) nothing is tracked: the animal's orientation 
 one unknown, each frame's root rotation follows from it through the camera's motion, and every
 candidate is scored on keyframes spread over the whole video. Silhouettes alone cannot tell an
 animal turning one way from its depth mirror turning the other; the camera's known motion can.
+An animal that itself turns far in the world (a fish swimming round) gets the one orientation
+that fits its keyframes best, and the optimisation has to follow the rest.
 """
 
 from __future__ import annotations
