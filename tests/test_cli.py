@@ -50,4 +50,4 @@ def test_internal_failure_exits_1_with_hint(tmp_path, capsys):
     (store / "bank").mkdir(parents=True)
     (store / "bank" / "index.json").write_text("{not json")
     r = run_inprocess(capsys, "--store", str(store), "bank", "list")
-    assert r.code == 1 and "error: the bank index" in r.err and "unreadable" in r.err
+    assert r.code == 1 and "error: the bank index" in r.err and "damaged" in r.err and "bank repair" in r.err

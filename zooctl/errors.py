@@ -50,3 +50,11 @@ class PluginError(ZooctlError):
 
 class MissingDependencyError(UsageError):
     """An optional external tool or package needed for this request is not installed."""
+
+
+class ReadOnlyStoreError(StoreError):
+    """A write to the store was refused by the system (read-only folder or filesystem)."""
+
+
+class NoSpaceError(StoreError):
+    """A store write ran out of room (disk full, quota, or a file-size limit)."""

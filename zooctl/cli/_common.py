@@ -106,3 +106,49 @@ def stage_progress(enabled: bool) -> Iterator[object]:
             prog.update(tasks[stage], completed=done, total=total)
 
         yield update
+
+
+def print_skipped(skipped: dict[str, str], what: str) -> None:
+    """One warning line per file a store command could not use."""
+    from rich.markup import escape
+
+    for name, why in skipped.items():
+        err_console.print(
+            f"[yellow]skipped[/] {escape(name)} ({what}): {escape(why)}", highlight=False, soft_wrap=True
+        )
+
+
+def print_repair(report: dict[str, Any], items: str) -> None:
+    """What `bank repair` / `video repair` did (`zooctl.store.indexed.IndexedStore.repair`)."""
+    n = len(report["indexed"])
+    verb = "rebuilt" if report["written"] else "checked (nothing to change)"
+    console.print(
+        f"index {verb}: {n} {items} indexed; the previous index was {report['previous']}",
+        highlight=False,
+        markup=False,
+    )
+    for note in report["fixed"]:
+        console.print(f"  {note}", highlight=False, markup=False)
+    print_skipped(report["skipped"], "not a valid file, left in place")
+    if report["dropped"]:
+        err_console.print(
+            f"[yellow]dropped from the index[/] (no valid file): {', '.join(report['dropped'])}",
+            highlight=False,
+            markup=False,
+        )
+
+
+def print_clean(report: dict[str, Any], noun: str, repair_cmd: str) -> None:
+    """What `bank clean` / `video clean` removed, and the unindexed files it kept."""
+    console.print(
+        f"removed {report['temporaries']} temporaries and {report['orphans']} leftover files",
+        highlight=False,
+    )
+    if report["unindexed"]:
+        err_console.print(
+            f"kept {len(report['unindexed'])} {noun} files the index does not name "
+            f"({', '.join(report['unindexed'])}): run `{repair_cmd}` to index the valid ones",
+            highlight=False,
+            markup=False,
+            soft_wrap=True,
+        )

@@ -6,7 +6,18 @@ from pathlib import Path
 
 import typer
 
-from ._common import JsonOpt, console, err_console, print_json, print_table, stage_progress, store_root
+from ._common import (
+    JsonOpt,
+    console,
+    err_console,
+    print_clean,
+    print_json,
+    print_repair,
+    print_skipped,
+    print_table,
+    stage_progress,
+    store_root,
+)
 
 app = typer.Typer(
     help="Manage the bank of rigged, animated assets (templates for fitting).", no_args_is_help=True
@@ -186,19 +197,33 @@ def migrate(json_out: bool = JsonOpt) -> None:
         console.print(
             f"{report['migrated']} assets migrated, {report['current']} already current", highlight=False
         )
+        print_skipped(report["skipped"], "left as they are")
 
 
 @app.command("clean")
 def clean(json_out: bool = JsonOpt) -> None:
-    """Remove leftovers of killed writers (temporary files, files no index entry names)."""
+    """Remove leftovers of killed writers (temporary files; cards and views of removed assets).
+
+    Never deletes an asset file: ones the index does not name are listed (`zooctl bank repair`
+    indexes the valid ones)."""
     report = _bank().cleanup()
     if json_out:
         print_json(report)
     else:
-        console.print(
-            f"removed {report['temporaries']} temporaries and {report['orphans']} unindexed files",
-            highlight=False,
-        )
+        print_clean(report, "asset", "zooctl bank repair")
+
+
+@app.command("repair")
+def repair(json_out: bool = JsonOpt) -> None:
+    """Rebuild the bank index from the asset files (after it was lost or damaged).
+
+    Every valid asset file is indexed (its retrieval views too, when their sidecar is intact);
+    invalid files are listed with the reason and left where they are. Missing cards are rewritten."""
+    report = _bank().repair()
+    if json_out:
+        print_json(report)
+    else:
+        print_repair(report, "assets")
 
 
 from . import bank_rig  # noqa: E402  (export, seed, render live in their own module)

@@ -43,15 +43,41 @@ def main(
         help="Data root (asset bank, videos, fits). Default: ./store in a checkout, else the user data dir.",
         show_default=False,
     ),
+    wait: float = typer.Option(
+        None,
+        "--wait",
+        help="Seconds a writer waits for another zooctl process's store lock before giving up "
+        "(default: ZOOCTL_LOCK_TIMEOUT, else 120).",
+        show_default=False,
+        min=0,
+    ),
     version: bool = typer.Option(
         False, "--version", callback=_version, is_eager=True, help="Print the version and exit."
     ),
 ) -> None:
+    from ..store import fs
+
     state.store = store
+    if wait is not None:
+        fs.set_lock_timeout(wait)
+    fs.on_lock_wait = _tell_lock_wait
+
+
+def _tell_lock_wait(holder: str) -> None:
+    from ..store import fs
+
+    err_console.print(
+        f"waiting for the store lock, held by {escape(holder)} (up to {fs.LOCK_TIMEOUT_S:g} s; --wait to change)",
+        highlight=False,
+        soft_wrap=True,
+    )
 
 
 def _register_groups() -> None:
-    """Every command group is registered here, in one place."""
+    """Every command group is registered here, in one place (once: `run` is called many times
+    in one process by tests, and each copy of a group slowed every later call)."""
+    if app.registered_groups:
+        return
     from . import animate, bank, bench, motion, plugins_cmd, video
 
     app.add_typer(bank.app, name="bank")
@@ -75,7 +101,7 @@ def _builtin_names() -> set[str]:
 def _first_command(argv: list[str]) -> str | None:
     it = iter(argv)
     for a in it:
-        if a == "--store":
+        if a in ("--store", "--wait"):
             next(it, None)
         elif not a.startswith("-"):
             return a

@@ -229,12 +229,28 @@ def export(
 
 @app.command("clean")
 def clean(json_out: bool = JsonOpt) -> None:
-    """Remove leftovers of killed writers (temporary files, files no index entry names)."""
+    """Remove leftovers of killed writers (temporary files, caches of removed videos).
+
+    Never deletes a video file: ones the index does not name are listed (`zooctl video repair`
+    indexes the valid ones)."""
+    from ._common import print_clean
+
     report = _store().cleanup()
     if json_out:
         print_json(report)
     else:
-        console.print(
-            f"removed {report['temporaries']} temporaries and {report['orphans']} unindexed files",
-            highlight=False,
-        )
+        print_clean(report, "video", "zooctl video repair")
+
+
+@app.command("repair")
+def repair(json_out: bool = JsonOpt) -> None:
+    """Rebuild the video index from the video files (after it was lost or damaged).
+
+    Every valid video file is indexed; invalid ones are listed with the reason and left in place."""
+    from ._common import print_repair
+
+    report = _store().repair()
+    if json_out:
+        print_json(report)
+    else:
+        print_repair(report, "videos")

@@ -7,7 +7,7 @@ embedder, and ``meta`` (JSON): cache version, the video file's identity (inode, 
 re-added video is a new file), whether the crops had masks, the query notes, each embedder's
 identity (`zooctl.embed.base.embedder_identity`, so a search can tell embeddings of an older
 version of an embedder from the bank's). Anything unreadable or not matching is a miss, never an
-error: the cache is rebuilt from the video.
+error: the cache is rebuilt from the video. On a read-only or full store it is not written.
 """
 
 from __future__ import annotations
@@ -21,7 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..store.fs import publish, store_lock, temp_path
+from ..errors import NoSpaceError, ReadOnlyStoreError
+from ..store.fs import store_lock, write_bytes_atomic
 from .crop import DEFAULT_MARGIN
 
 CACHE_VERSION = 1
@@ -104,12 +105,10 @@ def write_cache(videos, name: str, k: int, size: int, query: CachedQuery, identi
         **{f"emb/{e}": np.asarray(v, np.float32) for e, v in query.emb.items()},
     )
     final = cache_path(videos, name, k, size)
-    with store_lock(Path(videos.root)):
-        if video_identity(videos, name) != identity:  # removed or replaced while we embedded
-            return
-        tmp = temp_path(final)
-        try:
-            tmp.write_bytes(buf.getvalue())
-            publish(tmp, final)
-        finally:
-            tmp.unlink(missing_ok=True)
+    try:
+        with store_lock(Path(videos.root)):
+            if video_identity(videos, name) != identity:  # removed or replaced while we embedded
+                return
+            write_bytes_atomic(final, buf.getvalue())
+    except (ReadOnlyStoreError, NoSpaceError):
+        return  # a cache: a search on a read-only or full store works without it

@@ -53,38 +53,45 @@ MIGRATIONS: list[Migration] = []
 
 
 def write_asset(path: Path, asset: RiggedAsset) -> None:
-    """Write ``asset`` to ``path`` (a temporary the caller publishes)."""
-    with h5py.File(path, "w", libver="latest") as f:
-        f.attrs["zooctl_kind"] = "asset"
-        f.attrs["schema_version"] = SCHEMA_VERSION
-        f.attrs["name"] = asset.name
-        f.attrs["meta"] = json.dumps(asset.meta, default=str)
-        m = f.create_group("mesh")
-        m.create_dataset("vertices", data=asset.vertices.astype(np.float32))
-        m.create_dataset("faces", data=asset.faces.astype(np.int32))
-        if asset.uvs is not None:
-            m.create_dataset("uvs", data=asset.uvs.astype(np.float32))
-        if asset.vertex_colors is not None:
-            m.create_dataset("vertex_colors", data=asset.vertex_colors.astype(np.float32))
-        if asset.texture_png is not None:
-            m.create_dataset("texture_png", data=np.frombuffer(asset.texture_png, dtype=np.uint8))
-        s = f.create_group("skeleton")
-        s.create_dataset("joint_names", data=np.array(asset.joint_names, dtype=object), dtype=_STR)
-        s.create_dataset("parents", data=asset.parents.astype(np.int32))
-        s.create_dataset("rest_local", data=asset.rest_local.astype(np.float64))
-        s.create_dataset("inverse_bind", data=asset.inverse_bind.astype(np.float64))
-        k = f.create_group("skin")
-        k.create_dataset("joints", data=asset.skin_joints.astype(np.int32))
-        k.create_dataset("weights", data=asset.skin_weights.astype(np.float32))
-        c = f.create_group("clips")
-        for i, clip in enumerate(asset.clips.values()):
-            g = c.create_group(str(i))
-            g.attrs["name"] = clip.name
-            g.attrs["fps"] = float(clip.fps)
-            for key in ("rotations", "translations", "scales"):
-                g.create_dataset(
-                    key, data=getattr(clip, key).astype(np.float32), compression="lzf", shuffle=True
-                )
+    """Write ``asset`` to ``path`` (a temporary the caller publishes), built in memory first so a
+    full disk is a clean `NoSpaceError`."""
+    from .fs import h5_image, writing
+
+    image = h5_image(lambda f: fill_asset(f, asset), libver="latest")
+    with writing(f"writing {path}"):
+        Path(path).write_bytes(image)
+
+
+def fill_asset(f: h5py.File, asset: RiggedAsset) -> None:
+    """Write ``asset`` into the open, empty HDF5 file ``f``."""
+    f.attrs["zooctl_kind"] = "asset"
+    f.attrs["schema_version"] = SCHEMA_VERSION
+    f.attrs["name"] = asset.name
+    f.attrs["meta"] = json.dumps(asset.meta, default=str)
+    m = f.create_group("mesh")
+    m.create_dataset("vertices", data=asset.vertices.astype(np.float32))
+    m.create_dataset("faces", data=asset.faces.astype(np.int32))
+    if asset.uvs is not None:
+        m.create_dataset("uvs", data=asset.uvs.astype(np.float32))
+    if asset.vertex_colors is not None:
+        m.create_dataset("vertex_colors", data=asset.vertex_colors.astype(np.float32))
+    if asset.texture_png is not None:
+        m.create_dataset("texture_png", data=np.frombuffer(asset.texture_png, dtype=np.uint8))
+    s = f.create_group("skeleton")
+    s.create_dataset("joint_names", data=np.array(asset.joint_names, dtype=object), dtype=_STR)
+    s.create_dataset("parents", data=asset.parents.astype(np.int32))
+    s.create_dataset("rest_local", data=asset.rest_local.astype(np.float64))
+    s.create_dataset("inverse_bind", data=asset.inverse_bind.astype(np.float64))
+    k = f.create_group("skin")
+    k.create_dataset("joints", data=asset.skin_joints.astype(np.int32))
+    k.create_dataset("weights", data=asset.skin_weights.astype(np.float32))
+    c = f.create_group("clips")
+    for i, clip in enumerate(asset.clips.values()):
+        g = c.create_group(str(i))
+        g.attrs["name"] = clip.name
+        g.attrs["fps"] = float(clip.fps)
+        for key in ("rotations", "translations", "scales"):
+            g.create_dataset(key, data=getattr(clip, key).astype(np.float32), compression="lzf", shuffle=True)
 
 
 def read_asset(path: Path) -> RiggedAsset:
@@ -95,31 +102,43 @@ def read_asset(path: Path) -> RiggedAsset:
             f"asset file {path} is unreadable: {exc}", hint="re-add the asset with --replace"
         ) from None
     with f:
-        _check_version(f, path)
-        m, s, k = f["mesh"], f["skeleton"], f["skin"]
-        clips = {}
-        for key in sorted(f["clips"], key=int):
-            g = f["clips"][key]
-            name = str(g.attrs["name"])
-            clips[name] = Clip(
-                name, float(g.attrs["fps"]), g["rotations"][()], g["translations"][()], g["scales"][()]
-            )
-        return RiggedAsset(
-            name=str(f.attrs["name"]),
-            vertices=m["vertices"][()],
-            faces=m["faces"][()],
-            joint_names=[x.decode() if isinstance(x, bytes) else str(x) for x in s["joint_names"][()]],
-            parents=s["parents"][()],
-            rest_local=s["rest_local"][()],
-            inverse_bind=s["inverse_bind"][()],
-            skin_joints=k["joints"][()],
-            skin_weights=k["weights"][()],
-            clips=clips,
-            uvs=m["uvs"][()] if "uvs" in m else None,
-            vertex_colors=m["vertex_colors"][()] if "vertex_colors" in m else None,
-            texture_png=m["texture_png"][()].tobytes() if "texture_png" in m else None,
-            meta=json.loads(f.attrs.get("meta", "{}")),
+        try:
+            if f.attrs.get("zooctl_kind") != "asset":
+                raise StoreError(f"{path} is not a zooctl asset file", hint="re-add the asset with --replace")
+            _check_version(f, path)
+            return _read(f)
+        except (OSError, KeyError, ValueError, TypeError, AttributeError) as exc:  # damaged inside
+            raise StoreError(
+                f"asset file {path} is damaged: {type(exc).__name__}: {exc}",
+                hint="re-add the asset with --replace",
+            ) from None
+
+
+def _read(f: h5py.File) -> RiggedAsset:
+    m, s, k = f["mesh"], f["skeleton"], f["skin"]
+    clips = {}
+    for key in sorted(f["clips"], key=int):
+        g = f["clips"][key]
+        name = str(g.attrs["name"])
+        clips[name] = Clip(
+            name, float(g.attrs["fps"]), g["rotations"][()], g["translations"][()], g["scales"][()]
         )
+    return RiggedAsset(
+        name=str(f.attrs["name"]),
+        vertices=m["vertices"][()],
+        faces=m["faces"][()],
+        joint_names=[x.decode() if isinstance(x, bytes) else str(x) for x in s["joint_names"][()]],
+        parents=s["parents"][()],
+        rest_local=s["rest_local"][()],
+        inverse_bind=s["inverse_bind"][()],
+        skin_joints=k["joints"][()],
+        skin_weights=k["weights"][()],
+        clips=clips,
+        uvs=m["uvs"][()] if "uvs" in m else None,
+        vertex_colors=m["vertex_colors"][()] if "vertex_colors" in m else None,
+        texture_png=m["texture_png"][()].tobytes() if "texture_png" in m else None,
+        meta=json.loads(f.attrs.get("meta", "{}")),
+    )
 
 
 def _check_version(f: h5py.File, path: Path) -> None:

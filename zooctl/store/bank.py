@@ -11,8 +11,9 @@ Why one file per asset: a killed writer can at worst leave a temporary file, nev
 bank, and replacing one asset rewrites only that asset. Every file is published by writing a
 temporary beside it, fsync, ``os.replace``; the index is the single source of truth for which
 assets exist, and it is replaced last, under the store's writers' lock. An asset file that the
-index does not name (a writer killed between the two replaces) is invisible and overwritten by the
-next add of that name.
+index does not name (a writer killed between the two replaces) is invisible; `bank clean` keeps
+and reports it, `bank repair` indexes it. A missing or damaged index is an error that names
+`zooctl bank repair`, which rebuilds it from the asset files (`zooctl.store.indexed`).
 """
 
 from __future__ import annotations
@@ -22,72 +23,77 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..errors import AlreadyExistsError, NotFoundError, StoreError
+from ..errors import StoreError
 from ..names import check_name
-from .fs import publish, remove_stale_temps, store_lock, temp_path, write_json_atomic
+from .fs import h5_image, publish, store_lock, temp_path, write_bytes_atomic, write_json_atomic, writing
+from .indexed import INDEX_VERSION, IndexedStore
 
 if TYPE_CHECKING:  # numpy/h5py stay unimported for `bank list` and `bank show`
     from ..asset import RiggedAsset
 
-INDEX_VERSION = 1
+__all__ = ["Bank", "INDEX_VERSION"]
 
 
-class Bank:
+def _bbox_ok(b: Any) -> bool:
+    return isinstance(b, list) and len(b) == 2 and all(isinstance(v, list) and len(v) == 3 for v in b)
+
+
+class Bank(IndexedStore):
     """The asset bank of one store root."""
+
+    noun, place, list_cmd = "asset", "the bank", "zooctl bank list"
+    key, label, repair_cmd = "assets", "bank index", "zooctl bank repair"
+    required = {
+        "name": str,
+        "vertices": int,
+        "faces": int,
+        "joints": int,
+        "clips": dict,
+        "bbox": list,
+        "tags": list,
+        "license": str,
+        "source": str,
+        "has_texture": bool,
+    }
 
     def __init__(self, root: str | Path):
         self.root = Path(root)
         self.dir = self.root / "bank"
-        self.assets_dir = self.dir / "assets"
-        self.index_path = self.dir / "index.json"
+        self.assets_dir = self.files_dir = self.dir / "assets"
 
     @classmethod
     def open(cls, root: str | Path) -> Bank:
         return cls(root)
 
+    def check_entry(self, name: str, entry: Any) -> str | None:
+        problem = super().check_entry(name, entry)
+        if problem:
+            return problem
+        if not _bbox_ok(entry["bbox"]):
+            return "has a bad 'bbox'"
+        v = entry.get("views")
+        if v is not None and not (
+            isinstance(v, dict)
+            and isinstance(v.get("views_id"), str)
+            and isinstance(v.get("embedders"), dict)
+        ):
+            return "has a bad 'views'"
+        return None
+
     # -- reading (no lock: every visible file is complete) --------------------------------
-    def _read_index(self) -> dict[str, Any]:
-        try:
-            data = json.loads(self.index_path.read_text())
-        except FileNotFoundError:
-            return {"schema_version": INDEX_VERSION, "assets": {}}
-        except (OSError, json.JSONDecodeError) as exc:
-            raise StoreError(f"the bank index {self.index_path} is unreadable: {exc}") from None
-        v = data.get("schema_version")
-        if v != INDEX_VERSION:
-            raise StoreError(
-                f"the bank index has schema version {v}, this zooctl reads {INDEX_VERSION}",
-                hint="upgrade zooctl"
-                if isinstance(v, int) and v > INDEX_VERSION
-                else "run `zooctl bank migrate`",
-            )
-        return data
-
-    def names(self) -> list[str]:
-        return sorted(self._read_index()["assets"])
-
-    def exists(self, name: str) -> bool:
-        return name in self._read_index()["assets"]
-
-    def list(self) -> list[dict[str, Any]]:
-        """Summaries of every asset, sorted by name (from the index alone)."""
-        assets = self._read_index()["assets"]
-        return [assets[n] for n in sorted(assets)]
-
-    def summary(self, name: str) -> dict[str, Any]:
-        assets = self._read_index()["assets"]
-        if name not in assets:
-            raise self._not_found(name, assets)
-        return assets[name]
-
     def card(self, name: str) -> dict[str, Any]:
         """Summary plus joint tree (what `bank show` prints), without opening the HDF5 file."""
         summary = self.summary(name)
         try:
-            card = json.loads(self.card_path(name).read_text())
-        except (OSError, json.JSONDecodeError) as exc:
+            card = json.loads(self.card_path(name).read_bytes())
+            if not isinstance(card, dict) or not isinstance(card.get("joint_names"), list):
+                raise ValueError("not an asset card")
+            if not isinstance(card.get("parents"), list) or not isinstance(card.get("skin_influences"), int):
+                raise ValueError("not an asset card")
+        except (OSError, ValueError, RecursionError) as exc:
             raise StoreError(
-                f"the card of asset {name!r} is unreadable: {exc}", hint="re-add the asset with --replace"
+                f"the card of asset {name!r} is unreadable: {exc}",
+                hint="run `zooctl bank repair` (it rewrites cards from the asset files)",
             ) from None
         card.update(summary)
         return card
@@ -109,51 +115,53 @@ class Bank:
         return iter(self.names())
 
     def __len__(self) -> int:
-        return len(self._read_index()["assets"])
-
-    def _not_found(self, name: str, assets: dict[str, Any]) -> NotFoundError:
-        import difflib
-
-        close = difflib.get_close_matches(name, list(assets), n=3)
-        hint = f"did you mean {', '.join(close)}?" if close else "see `zooctl bank list`"
-        return NotFoundError(f"no asset named {name!r} in the bank at {self.root}", hint=hint)
+        return len(self._entries())
 
     # -- writing ---------------------------------------------------------------------------
     def add(self, asset: RiggedAsset, replace: bool = False) -> dict[str, Any]:
         """Store an asset atomically; returns its summary.
 
-        The HDF5 file is written outside the lock (slow part, concurrent writers proceed in
-        parallel); the existence check, the publish and the index update happen under it.
+        The HDF5 file is built in memory outside the lock (slow part, concurrent writers proceed
+        in parallel); the existence check, the publish and the index update happen under it.
         """
-        from .asset_h5 import card_of, write_asset
+        from .asset_h5 import card_of, fill_asset
 
         asset.validate()
         name = check_name(asset.name, "asset name")
         if not replace and self.exists(name):
             raise self.exists_error(name)
-        self.assets_dir.mkdir(parents=True, exist_ok=True)
+        image = h5_image(lambda f: fill_asset(f, asset), libver="latest")
+        summary = asset.summary()
+        card = json.dumps(card_of(asset), indent=1).encode()
         final = self.asset_path(name)
         tmp = temp_path(final)
         card_tmp = temp_path(self.card_path(name))
         try:
-            write_asset(tmp, asset)
-            summary = asset.summary()
-            card_tmp.write_text(json.dumps(card_of(asset), indent=1))
-            with store_lock(self.root):
-                index = self._read_index()
-                if not replace and name in index["assets"]:
-                    raise self.exists_error(name)
-                publish(tmp, final)
-                publish(card_tmp, self.card_path(name))
-                index["assets"][name] = summary
-                write_json_atomic(self.index_path, index)
+            with writing(f"adding asset {name!r}"):
+                tmp.write_bytes(image)
+                card_tmp.write_bytes(card)
+                with store_lock(self.root):
+                    index = self._read_index()
+                    if not replace and name in index["assets"]:
+                        raise self.exists_error(name)
+                    index["assets"][name] = summary
+                    # The index is checked for room before any file is replaced, so a full disk
+                    # fails here with the bank as it was.
+                    idx_tmp = temp_path(self.index_path)
+                    try:
+                        idx_tmp.write_bytes(_index_bytes(index))
+                        publish(tmp, final)
+                        publish(card_tmp, self.card_path(name))
+                        publish(idx_tmp, self.index_path)
+                    finally:
+                        idx_tmp.unlink(missing_ok=True)
         finally:
             tmp.unlink(missing_ok=True)
             card_tmp.unlink(missing_ok=True)
         return summary
 
     def remove(self, name: str) -> None:
-        with store_lock(self.root):
+        with store_lock(self.root), writing(f"removing asset {name!r}"):
             index = self._read_index()
             if name not in index["assets"]:
                 raise self._not_found(name, index["assets"])
@@ -166,41 +174,92 @@ class Bank:
 
     def update_summary(self, name: str, **fields: Any) -> None:
         """Change fields of an asset's index entry (tags, license) under the lock."""
-        with store_lock(self.root):
+        with store_lock(self.root), writing(f"updating asset {name!r}"):
             index = self._read_index()
             if name not in index["assets"]:
                 raise self._not_found(name, index["assets"])
             index["assets"][name].update(fields)
             write_json_atomic(self.index_path, index)
 
-    def cleanup(self) -> dict[str, int]:
-        """Remove what killed writers left: temporaries of dead processes and unindexed files
-        (asset files, and retrieval-view sidecars and pack files that nothing refers to)."""
+    def cleanup(self) -> dict[str, Any]:
+        """Remove what killed writers left: temporaries of dead processes, cards and retrieval
+        sidecars of assets that are gone, pack files nothing refers to. Asset files the index does
+        not name are kept and reported (`repair` indexes the valid ones)."""
+        from .fs import remove_stale_temps
         from .views_h5 import unreferenced_files, views_dir
 
-        views = views_dir(self.root)
-        with store_lock(self.root):
-            temps = (
-                remove_stale_temps(self.assets_dir) + remove_stale_temps(self.dir) + remove_stale_temps(views)
-            )
-            index = self._read_index()
+        with store_lock(self.root), writing("cleaning the bank"):
+            index = self._read_index()  # a missing or damaged index stops here: nothing is deleted
+            temps = self._clean_temps() + remove_stale_temps(views_dir(self.root))
+            stored = set(self.item_files())
+            keep = set(index["assets"]) | stored
             orphans = 0
-            for p in unreferenced_files(self.root, set(index["assets"])):
+            for p in unreferenced_files(self.root, keep):
                 p.unlink(missing_ok=True)
                 orphans += 1
             if self.assets_dir.is_dir():
-                for p in self.assets_dir.iterdir():
-                    if (
-                        p.suffix in (".h5", ".json")
-                        and not p.name.startswith(".")
-                        and p.stem not in index["assets"]
-                    ):
+                for p in self.assets_dir.glob("*.json"):
+                    if not p.name.startswith(".") and p.stem not in keep:
                         p.unlink(missing_ok=True)
                         orphans += 1
-        return {"temporaries": temps, "orphans": orphans}
+        return {"temporaries": temps, "orphans": orphans, "unindexed": self.unindexed(index["assets"])}
 
-    def exists_error(self, name: str) -> AlreadyExistsError:
-        return AlreadyExistsError(
-            f"an asset named {name!r} is already in the bank",
-            hint="pass --replace to overwrite it, or --name to choose another name",
-        )
+    # -- repair ----------------------------------------------------------------------------
+    def rebuild_entry(
+        self, name: str, path: Path, old: dict[str, Any] | None
+    ) -> tuple[dict[str, Any], list[str]]:
+        from .asset_h5 import card_of, read_asset
+
+        asset = read_asset(path)
+        try:
+            asset.validate()
+        except ValueError as exc:
+            raise StoreError(f"the asset in {path.name} is invalid: {exc}") from None
+        if asset.name != name:
+            raise StoreError(f"{path.name} holds an asset named {asset.name!r}")
+        entry = asset.summary()
+        if old is not None and all(old.get(k) == entry[k] for k in ("vertices", "faces", "joints", "tags")):
+            entry = dict(old)  # the same asset: keep what was recorded (its views entry above all)
+        notes = []
+        views = self._views_entry(name, entry)
+        if views is None and "views" in entry:
+            notes.append("its retrieval views are gone (run `zooctl bank reindex --missing`)")
+        entry.pop("views", None)
+        if views is not None:
+            entry["views"] = views
+        try:
+            card = json.loads(self.card_path(name).read_bytes())
+            ok = isinstance(card, dict) and isinstance(card.get("joint_names"), list)
+        except (OSError, ValueError, RecursionError):
+            ok = False
+        if not ok:
+            write_bytes_atomic(self.card_path(name), json.dumps(card_of(asset), indent=1).encode())
+            notes.append("card rewritten")
+        return entry, notes
+
+    def _views_entry(self, name: str, entry: dict[str, Any]) -> dict[str, Any] | None:
+        """The ``views`` entry of an asset whose sidecar is intact and belongs to this asset."""
+        from .views_h5 import read_views, summary_digest, views_path
+
+        p = views_path(self.root, name)
+        if not p.is_file():
+            return None
+        try:
+            sv = read_views(p)
+        except Exception:  # a damaged sidecar is no views: `bank reindex` renders them again
+            return None
+        if sv.asset != name or sv.asset_digest != summary_digest(entry):
+            return None
+        old = entry.get("views")
+        if isinstance(old, dict) and old.get("views_id") == sv.views_id:
+            return old
+        return {
+            "count": sv.count,
+            "size": sv.size,
+            "embedders": {e: int(a.shape[1]) for e, a in sv.embeddings.items()},
+            "views_id": sv.views_id,
+        }
+
+
+def _index_bytes(index: dict[str, Any]) -> bytes:
+    return (json.dumps(index, sort_keys=True, separators=(",", ":")) + "\n").encode()

@@ -21,12 +21,15 @@ from typing import Any
 from ..errors import NotFoundError, StoreError
 from ..names import check_name
 from .fs import store_lock, write_bytes_atomic, write_json_atomic
+from .indexed import NamedStore
 
 RECORD_VERSION = 1
 
 
-class FitStore:
+class FitStore(NamedStore):
     """The fits of one store root."""
+
+    noun, article, place, list_cmd = "fit", "a", "the store", "zooctl fits list"
 
     def __init__(self, root: str | Path):
         self.root = Path(root)
@@ -57,13 +60,7 @@ class FitStore:
         try:
             return json.loads(p.read_text())
         except FileNotFoundError:
-            import difflib
-
-            close = difflib.get_close_matches(name, self.names(), n=3)
-            raise NotFoundError(
-                f"no fit named {name!r} in {self.root}",
-                hint=f"did you mean {', '.join(close)}?" if close else "see `zooctl fits list`",
-            ) from None
+            raise self._not_found(name) from None
         except (OSError, json.JSONDecodeError) as exc:
             raise StoreError(f"the record of fit {name!r} is unreadable: {exc}") from None
 
@@ -135,6 +132,6 @@ class FitStore:
     def remove(self, name: str) -> None:
         with store_lock(self.root):
             if not self.exists(name):
-                raise NotFoundError(f"no fit named {name!r} in {self.root}", hint="see `zooctl fits list`")
+                raise self._not_found(name)
             self.record_path(name).unlink()  # the fit is gone once its record is
         shutil.rmtree(self.path(name), ignore_errors=True)

@@ -9,18 +9,23 @@ import h5py
 
 from .asset_h5 import SCHEMA_VERSION, Migration, migrate_file
 from .bank import Bank
-from .fs import publish, store_lock, temp_path
+from .fs import publish, store_lock, temp_path, writing
 
 
 def migrate_bank(bank: Bank, migrations: list[Migration] | None = None) -> dict[str, Any]:
     """Migrate every asset file older than `SCHEMA_VERSION`; each one is copied, upgraded and
-    published atomically, so an interrupted migration leaves every asset readable."""
-    migrated, current, applied = 0, 0, {}
-    with store_lock(bank.root):
+    published atomically, so an interrupted migration leaves every asset readable. Unreadable
+    files are reported in ``skipped`` and left as they are."""
+    migrated, current, applied, skipped = 0, 0, {}, {}
+    with store_lock(bank.root), writing("migrating the bank"):
         for name in bank.names():
             path = bank.asset_path(name)
-            with h5py.File(path, "r") as f:
-                v = int(f.attrs.get("schema_version", 0))
+            try:
+                with h5py.File(path, "r") as f:
+                    v = int(f.attrs.get("schema_version", 0))
+            except (OSError, ValueError, TypeError) as exc:
+                skipped[name] = f"unreadable: {exc}"
+                continue
             if v >= SCHEMA_VERSION:
                 current += 1
                 continue
@@ -32,4 +37,4 @@ def migrate_bank(bank: Bank, migrations: list[Migration] | None = None) -> dict[
             finally:
                 tmp.unlink(missing_ok=True)
             migrated += 1
-    return {"migrated": migrated, "current": current, "applied": applied}
+    return {"migrated": migrated, "current": current, "applied": applied, "skipped": skipped}

@@ -17,14 +17,18 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from ..errors import AlreadyExistsError, NotFoundError, StoreError
+from ..errors import NotFoundError, StoreError
 from ..names import check_name
-from .fs import _pid_alive, fsync_dir, store_lock
+from .fs import _pid_alive, fsync_dir, store_lock, writing
+from .indexed import NamedStore
 
 CONFIG = "config.json"
 
 
-class MotionStore:
+class MotionStore(NamedStore):
+    noun, article, place, list_cmd = "motion prior", "a", "the store", "zooctl motion list"
+    exists_hint = "use --replace or another --name"
+
     def __init__(self, root: str | Path):
         self.root = Path(root)
         self.dir = self.root / "motion"
@@ -88,11 +92,13 @@ class MotionStore:
         final = self.path(name)
         if not replace and self.exists(name):
             raise self._exists(name)
-        self.dir.mkdir(parents=True, exist_ok=True)
-        self.cleanup()
-        tmp = Path(tempfile.mkdtemp(prefix=f".{name}.{os.getpid()}.", suffix=".tmp", dir=self.dir))
+        with writing(f"adding motion prior {name!r}"):
+            self.dir.mkdir(parents=True, exist_ok=True)
+            self.cleanup()
+            tmp = Path(tempfile.mkdtemp(prefix=f".{name}.{os.getpid()}.", suffix=".tmp", dir=self.dir))
         try:
-            write(tmp)
+            with writing(f"writing motion prior {name!r}"):
+                write(tmp)
             if not (tmp / CONFIG).is_file():
                 raise StoreError(f"motion prior {name!r} was written without {CONFIG}")
             for f in tmp.iterdir():
@@ -141,14 +147,5 @@ class MotionStore:
             n += 1
         return n
 
-    def _not_found(self, name: str) -> NotFoundError:
-        import difflib
-
-        close = difflib.get_close_matches(name, self.names(), n=3)
-        hint = f"did you mean {', '.join(close)}?" if close else "see `zooctl motion list`"
-        return NotFoundError(f"no motion prior named {name!r} in the store at {self.root}", hint=hint)
-
-    def _exists(self, name: str) -> AlreadyExistsError:
-        return AlreadyExistsError(
-            f"a motion prior named {name!r} already exists", hint="use --replace or another --name"
-        )
+    def _exists(self, name: str):
+        return self.exists_error(name)

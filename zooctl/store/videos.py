@@ -7,10 +7,12 @@ Layout under the store root (JSON Schemas: ``schemas/video_index.schema.json`` a
     videos/<name>.h5       frames, masks, boxes, forward/backward flow, occlusion masks, source metadata
     videos/<name>.cache/   derived data (retrieval query embeddings), removed with the video
 
-Same rules as the bank: the HDF5 file is written to a temporary beside its final path outside the
-lock (the slow part), then under the store's writers' lock the name is checked again, the file is
-fsynced and ``os.replace``d into place, and the index is replaced last. A failure at any point
-leaves the store as it was (at worst an unindexed temporary that `cleanup` removes).
+Same rules as the bank: the HDF5 file is built in memory and written to a temporary beside its
+final path outside the lock (the slow part), then under the store's writers' lock the name is
+checked again, the file is fsynced and ``os.replace``d into place, and the index is replaced last.
+A failure at any point (a full disk included) leaves the store as it was (at worst an unindexed
+temporary that `cleanup` removes). A missing or damaged index is an error naming
+`zooctl video repair`, which rebuilds it from the video files (`zooctl.store.indexed`).
 """
 
 from __future__ import annotations
@@ -23,11 +25,12 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import AlreadyExistsError, NotFoundError, StoreError
+from ..errors import StoreError
 from ..names import check_name
-from .fs import publish, remove_stale_temps, store_lock, temp_path, write_json_atomic
+from .fs import h5_image, publish, store_lock, temp_path, write_json_atomic, writing
+from .indexed import INDEX_VERSION, IndexedStore
 
-INDEX_VERSION = 1
+__all__ = ["INDEX_VERSION", "FILE_VERSION", "VideoRecord", "VideoStore"]
 FILE_VERSION = 1
 _GZIP = 3  # frames and masks: a fair size/speed trade; flow is float16 with the shuffle filter
 
@@ -118,48 +121,53 @@ def boxes_of(masks: np.ndarray) -> np.ndarray:
 
 
 def write_video_h5(path: Path, rec: VideoRecord) -> None:
-    """Write ``rec`` to ``path`` (a temporary: callers publish it). Layout: schemas/video_h5.schema.json."""
-    import h5py
+    """Write ``rec`` to ``path`` (a temporary: callers publish it). Layout: schemas/video_h5.schema.json.
 
+    Built in memory first: a full disk is then one clean `NoSpaceError`, not a failure inside HDF5."""
     rec.validate()
+    image = h5_image(lambda f: _fill_video(f, rec))
+    with writing(f"writing {path}"):
+        Path(path).write_bytes(image)
+
+
+def _fill_video(f: Any, rec: VideoRecord) -> None:
     t, h, w = rec.frames.shape[:3]
-    with h5py.File(path, "w") as f:
-        f.attrs["zooctl_kind"] = "video"
-        f.attrs["schema_version"] = FILE_VERSION
-        f.attrs["name"] = rec.name
-        f.attrs["fps"] = float(rec.fps)
-        f.attrs["source"] = json.dumps(rec.source, sort_keys=True, default=str)
-        f.attrs["segmenter"] = json.dumps(rec.segmenter, sort_keys=True, default=str)
-        f.attrs["flow_estimator"] = json.dumps(rec.flow_estimator, sort_keys=True, default=str)
-        f.create_dataset(
-            "frames", data=rec.frames, chunks=(1, h, w, 3), compression="gzip", compression_opts=_GZIP
-        )
-        f.create_dataset(
-            "masks",
-            data=rec.masks.astype(np.uint8),
-            chunks=(1, h, w),
+    f.attrs["zooctl_kind"] = "video"
+    f.attrs["schema_version"] = FILE_VERSION
+    f.attrs["name"] = rec.name
+    f.attrs["fps"] = float(rec.fps)
+    f.attrs["source"] = json.dumps(rec.source, sort_keys=True, default=str)
+    f.attrs["segmenter"] = json.dumps(rec.segmenter, sort_keys=True, default=str)
+    f.attrs["flow_estimator"] = json.dumps(rec.flow_estimator, sort_keys=True, default=str)
+    f.create_dataset(
+        "frames", data=rec.frames, chunks=(1, h, w, 3), compression="gzip", compression_opts=_GZIP
+    )
+    f.create_dataset(
+        "masks",
+        data=rec.masks.astype(np.uint8),
+        chunks=(1, h, w),
+        compression="gzip",
+        compression_opts=_GZIP,
+    )
+    f.create_dataset("boxes", data=rec.boxes)
+    f.create_dataset("source_indices", data=np.asarray(rec.source_indices, np.int64))
+    g = f.create_group("flow")
+    for key, arr in (("forward", rec.flow_forward), ("backward", rec.flow_backward)):
+        g.create_dataset(
+            key,
+            data=arr.astype(np.float16),
+            chunks=(1, h, w, 2),
             compression="gzip",
-            compression_opts=_GZIP,
+            compression_opts=1,
+            shuffle=True,
         )
-        f.create_dataset("boxes", data=rec.boxes)
-        f.create_dataset("source_indices", data=np.asarray(rec.source_indices, np.int64))
-        g = f.create_group("flow")
-        for key, arr in (("forward", rec.flow_forward), ("backward", rec.flow_backward)):
-            g.create_dataset(
-                key,
-                data=arr.astype(np.float16),
-                chunks=(1, h, w, 2),
-                compression="gzip",
-                compression_opts=1,
-                shuffle=True,
-            )
-        for key, arr in (
-            ("occlusion_forward", rec.occlusion_forward),
-            ("occlusion_backward", rec.occlusion_backward),
-        ):
-            g.create_dataset(
-                key, data=arr.astype(np.uint8), chunks=(1, h, w), compression="gzip", compression_opts=_GZIP
-            )
+    for key, arr in (
+        ("occlusion_forward", rec.occlusion_forward),
+        ("occlusion_backward", rec.occlusion_backward),
+    ):
+        g.create_dataset(
+            key, data=arr.astype(np.uint8), chunks=(1, h, w), compression="gzip", compression_opts=_GZIP
+        )
 
 
 def read_video_h5(path: Path, what: tuple[str, ...] = ("frames", "masks", "flow")) -> VideoRecord:
@@ -174,26 +182,36 @@ def read_video_h5(path: Path, what: tuple[str, ...] = ("frames", "masks", "flow"
             hint="remove it with `zooctl video rm` and add it again",
         ) from None
     with f:
-        if f.attrs.get("zooctl_kind") != "video" or int(f.attrs.get("schema_version", -1)) != FILE_VERSION:
+        try:
+            return _read_video(f, path, what)
+        except (OSError, KeyError, ValueError, TypeError, AttributeError) as exc:  # damaged inside
             raise StoreError(
-                f"{path} is not a version-{FILE_VERSION} zooctl video file", hint="add the video again"
-            )
-        empty = np.zeros((0,), np.float32)
-        fl = "flow" in what
-        return VideoRecord(
-            name=str(f.attrs["name"]),
-            frames=f["frames"][()] if "frames" in what else np.zeros((0, 0, 0, 3), np.uint8),
-            masks=f["masks"][()].astype(bool) if "masks" in what else np.zeros((0, 0, 0), bool),
-            flow_forward=f["flow/forward"][()].astype(np.float32) if fl else empty,
-            flow_backward=f["flow/backward"][()].astype(np.float32) if fl else empty,
-            occlusion_forward=f["flow/occlusion_forward"][()].astype(bool) if fl else empty,
-            occlusion_backward=f["flow/occlusion_backward"][()].astype(bool) if fl else empty,
-            fps=float(f.attrs["fps"]),
-            source=json.loads(f.attrs["source"]),
-            source_indices=f["source_indices"][()],
-            segmenter=json.loads(f.attrs["segmenter"]),
-            flow_estimator=json.loads(f.attrs["flow_estimator"]),
+                f"the video file {path} is damaged: {type(exc).__name__}: {exc}",
+                hint="remove it with `zooctl video rm` and add it again",
+            ) from None
+
+
+def _read_video(f: Any, path: Path, what: tuple[str, ...]) -> VideoRecord:
+    if f.attrs.get("zooctl_kind") != "video" or int(f.attrs.get("schema_version", -1)) != FILE_VERSION:
+        raise StoreError(
+            f"{path} is not a version-{FILE_VERSION} zooctl video file", hint="add the video again"
         )
+    empty = np.zeros((0,), np.float32)
+    fl = "flow" in what
+    return VideoRecord(
+        name=str(f.attrs["name"]),
+        frames=f["frames"][()] if "frames" in what else np.zeros((0, 0, 0, 3), np.uint8),
+        masks=f["masks"][()].astype(bool) if "masks" in what else np.zeros((0, 0, 0), bool),
+        flow_forward=f["flow/forward"][()].astype(np.float32) if fl else empty,
+        flow_backward=f["flow/backward"][()].astype(np.float32) if fl else empty,
+        occlusion_forward=f["flow/occlusion_forward"][()].astype(bool) if fl else empty,
+        occlusion_backward=f["flow/occlusion_backward"][()].astype(bool) if fl else empty,
+        fps=float(f.attrs["fps"]),
+        source=json.loads(f.attrs["source"]),
+        source_indices=f["source_indices"][()],
+        segmenter=json.loads(f.attrs["segmenter"]),
+        flow_estimator=json.loads(f.attrs["flow_estimator"]),
+    )
 
 
 def describe_h5(path: Path) -> dict[str, Any]:
@@ -227,48 +245,41 @@ def describe_h5(path: Path) -> dict[str, Any]:
 # -- the store -------------------------------------------------------------------------------------
 
 
-class VideoStore:
+class VideoStore(IndexedStore):
     """The preprocessed videos of one store root."""
+
+    noun, article, place, list_cmd = "video", "a", "the store", "zooctl video list"
+    key, label, repair_cmd = "videos", "video index", "zooctl video repair"
+    required = {
+        "name": str,
+        "frames": int,
+        "fps": (int, float),
+        "width": int,
+        "height": int,
+        "duration_s": (int, float),
+        "mask_coverage_mean": (int, float),
+        "empty_masks": int,
+        "segmenter": str,
+        "flow_estimator": str,
+        "source": dict,
+        "bytes": int,
+    }
 
     def __init__(self, root: str | Path):
         self.root = Path(root)
-        self.dir = self.root / "videos"
-        self.index_path = self.dir / "index.json"
+        self.dir = self.files_dir = self.root / "videos"
 
     @classmethod
     def open(cls, root: str | Path) -> VideoStore:
         return cls(root)
 
-    # -- reading (no lock: every visible file is complete) --------------------------------------
-    def _read_index(self) -> dict[str, Any]:
-        try:
-            data = json.loads(self.index_path.read_text())
-        except FileNotFoundError:
-            return {"schema_version": INDEX_VERSION, "videos": {}}
-        except (OSError, json.JSONDecodeError) as exc:
-            raise StoreError(f"the video index {self.index_path} is unreadable: {exc}") from None
-        if data.get("schema_version") != INDEX_VERSION:
-            raise StoreError(
-                f"the video index has schema version {data.get('schema_version')}, this zooctl reads {INDEX_VERSION}",
-                hint="upgrade zooctl",
-            )
-        return data
-
-    def names(self) -> list[str]:
-        return sorted(self._read_index()["videos"])
-
-    def exists(self, name: str) -> bool:
-        return name in self._read_index()["videos"]
-
-    def list(self) -> list[dict[str, Any]]:
-        videos = self._read_index()["videos"]
-        return [videos[n] for n in sorted(videos)]
-
-    def summary(self, name: str) -> dict[str, Any]:
-        videos = self._read_index()["videos"]
-        if name not in videos:
-            raise self._not_found(name, videos)
-        return videos[name]
+    def check_entry(self, name: str, entry: Any) -> str | None:
+        problem = super().check_entry(name, entry)
+        if problem is None and not all(
+            isinstance(entry["source"].get(k), str) for k in ("path", "kind", "sha256")
+        ):
+            return "has a bad 'source'"
+        return problem
 
     def path(self, name: str) -> Path:
         return self.dir / f"{name}.h5"
@@ -293,7 +304,7 @@ class VideoStore:
                     _, h, w, _ = f["frames"].shape
                     return idx, np.zeros((0, h, w, 3), np.uint8), np.zeros((0, h, w), bool)
                 return idx, f["frames"][idx], f["masks"][idx].astype(bool)
-        except (OSError, KeyError) as exc:
+        except (OSError, KeyError, ValueError, TypeError) as exc:
             raise StoreError(
                 f"the video file {self.path(name)} is unreadable: {exc}",
                 hint="remove it with `zooctl video rm` and add it again",
@@ -303,19 +314,6 @@ class VideoStore:
         """Load a stored video (only the parts in ``what``). Raises `NotFoundError` for an unknown name."""
         self.summary(name)
         return read_video_h5(self.path(name), what)
-
-    def _not_found(self, name: str, videos: dict[str, Any]) -> NotFoundError:
-        import difflib
-
-        close = difflib.get_close_matches(name, list(videos), n=3)
-        hint = f"did you mean {', '.join(close)}?" if close else "see `zooctl video list`"
-        return NotFoundError(f"no video named {name!r} in the store at {self.root}", hint=hint)
-
-    def exists_error(self, name: str) -> AlreadyExistsError:
-        return AlreadyExistsError(
-            f"a video named {name!r} is already in the store",
-            hint="pass --replace to overwrite it, or --name to choose another name",
-        )
 
     # -- writing ---------------------------------------------------------------------------------
     def check_new(self, name: str, replace: bool = False) -> str:
@@ -328,27 +326,36 @@ class VideoStore:
     def add(self, rec: VideoRecord, replace: bool = False) -> dict[str, Any]:
         """Store a video atomically; returns its index summary."""
         name = self.check_new(rec.name, replace)
-        self.dir.mkdir(parents=True, exist_ok=True)
+        rec.validate()
+        image = h5_image(lambda f: _fill_video(f, rec))
+        summary = rec.summary()
+        summary["bytes"] = len(image)
         final = self.path(name)
         tmp = temp_path(final)
         try:
-            write_video_h5(tmp, rec)
-            summary = rec.summary()
-            summary["bytes"] = tmp.stat().st_size
-            with store_lock(self.root):
-                index = self._read_index()
-                if not replace and name in index["videos"]:
-                    raise self.exists_error(name)
-                publish(tmp, final)
-                shutil.rmtree(self.cache_dir(name), ignore_errors=True)
-                index["videos"][name] = summary
-                write_json_atomic(self.index_path, index)
+            with writing(f"adding video {name!r}"):
+                tmp.write_bytes(image)
+                with store_lock(self.root):
+                    index = self._read_index()
+                    if not replace and name in index["videos"]:
+                        raise self.exists_error(name)
+                    index["videos"][name] = summary
+                    idx_tmp = temp_path(self.index_path)  # room for the index before any replace
+                    try:
+                        idx_tmp.write_bytes(
+                            (json.dumps(index, sort_keys=True, separators=(",", ":")) + "\n").encode()
+                        )
+                        publish(tmp, final)
+                        shutil.rmtree(self.cache_dir(name), ignore_errors=True)
+                        publish(idx_tmp, self.index_path)
+                    finally:
+                        idx_tmp.unlink(missing_ok=True)
         finally:
             tmp.unlink(missing_ok=True)
         return summary
 
     def remove(self, name: str) -> None:
-        with store_lock(self.root):
+        with store_lock(self.root), writing(f"removing video {name!r}"):
             index = self._read_index()
             if name not in index["videos"]:
                 raise self._not_found(name, index["videos"])
@@ -357,18 +364,32 @@ class VideoStore:
             self.path(name).unlink(missing_ok=True)
             shutil.rmtree(self.cache_dir(name), ignore_errors=True)
 
-    def cleanup(self) -> dict[str, int]:
-        """Remove what killed writers left: temporaries and files the index does not name."""
-        with store_lock(self.root):
-            temps = remove_stale_temps(self.dir)
-            index = self._read_index()
+    def cleanup(self) -> dict[str, Any]:
+        """Remove what killed writers left: temporaries of dead processes and caches of videos
+        that are gone. Video files the index does not name are kept and reported (`repair`
+        indexes the valid ones)."""
+        with store_lock(self.root), writing("cleaning the videos"):
+            index = self._read_index()  # a missing or damaged index stops here: nothing is deleted
+            temps = self._clean_temps()
+            keep = set(index["videos"]) | set(self.item_files())
             orphans = 0
             if self.dir.is_dir():
-                for p in self.dir.glob("*.h5"):
-                    if p.stem not in index["videos"]:
-                        p.unlink(missing_ok=True)
-                        orphans += 1
                 for p in self.dir.glob("*.cache"):
-                    if p.is_dir() and p.name[: -len(".cache")] not in index["videos"]:
+                    if p.is_dir() and p.name[: -len(".cache")] not in keep:
                         shutil.rmtree(p, ignore_errors=True)
-        return {"temporaries": temps, "orphans": orphans}
+                        orphans += 1
+        return {"temporaries": temps, "orphans": orphans, "unindexed": self.unindexed(index["videos"])}
+
+    def rebuild_entry(
+        self, name: str, path: Path, old: dict[str, Any] | None
+    ) -> tuple[dict[str, Any], list[str]]:
+        rec = read_video_h5(path)
+        try:
+            rec.validate()
+        except ValueError as exc:
+            raise StoreError(f"the video in {path.name} is invalid: {exc}") from None
+        if rec.name != name:
+            raise StoreError(f"{path.name} holds a video named {rec.name!r}")
+        summary = rec.summary()
+        summary["bytes"] = path.stat().st_size
+        return summary, []

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import time
 import uuid
 from dataclasses import dataclass, field
@@ -39,8 +40,8 @@ from typing import Any
 import h5py
 import numpy as np
 
-from ..errors import StoreError
-from .fs import publish, store_lock, temp_path
+from ..errors import NoSpaceError, ReadOnlyStoreError, StoreError
+from .fs import h5_image, publish, store_lock, temp_path, writing
 
 SCHEMA_VERSION = 1
 JPEG_QUALITY = 90
@@ -140,45 +141,51 @@ def write_views(
     Returns the new ``views_id``.
     """
     final = views_path(root, name)
-    tmp = temp_path(final)
     views_id = uuid.uuid4().hex[:16]
     V = len(viewset)
+
+    def fill(f: h5py.File) -> None:
+        f.attrs.update(
+            zooctl_kind="asset_views",
+            schema_version=SCHEMA_VERSION,
+            asset=name,
+            views_id=views_id,
+            asset_digest=asset_digest,
+            seed=int(viewset.seed),
+            size=int(viewset.images.shape[1]),
+            count=V,
+            created=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        )
+        jpegs = f.create_dataset("images", (V,), dtype=h5py.vlen_dtype(np.uint8))
+        for i, im in enumerate(viewset.images):
+            jpegs[i] = encode_jpeg(im)
+        f.create_dataset(
+            "masks",
+            data=viewset.masks.astype(bool),
+            compression="lzf",
+            chunks=(1, *viewset.masks.shape[1:]),
+        )
+        p = f.create_group("params")
+        p.attrs["clip_names"] = json.dumps(list(viewset.clip_names))
+        for key, arr in viewset.params.items():
+            p.create_dataset(key, data=np.asarray(arr))
+        e = f.create_group("embeddings")
+        for emb_name, arr in embeddings.items():
+            arr = np.asarray(arr, np.float32)
+            if arr.shape[0] != V:
+                raise StoreError(f"embedder {emb_name!r} returned {arr.shape[0]} rows for {V} views")
+            d = e.create_dataset(emb_name, data=arr.astype(np.float16))
+            d.attrs["dim"] = int(arr.shape[1])
+            d.attrs["input_kind"] = (input_kinds or {}).get(emb_name, "rgb")
+
+    # Built in memory: a full disk is then a clean error from write(), not one inside HDF5.
+    image = h5_image(fill, libver="latest")
+    tmp = temp_path(final)
     try:
-        with h5py.File(tmp, "w", libver="latest") as f:
-            f.attrs.update(
-                zooctl_kind="asset_views",
-                schema_version=SCHEMA_VERSION,
-                asset=name,
-                views_id=views_id,
-                asset_digest=asset_digest,
-                seed=int(viewset.seed),
-                size=int(viewset.images.shape[1]),
-                count=V,
-                created=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-            )
-            jpegs = f.create_dataset("images", (V,), dtype=h5py.vlen_dtype(np.uint8))
-            for i, im in enumerate(viewset.images):
-                jpegs[i] = encode_jpeg(im)
-            f.create_dataset(
-                "masks",
-                data=viewset.masks.astype(bool),
-                compression="lzf",
-                chunks=(1, *viewset.masks.shape[1:]),
-            )
-            p = f.create_group("params")
-            p.attrs["clip_names"] = json.dumps(list(viewset.clip_names))
-            for key, arr in viewset.params.items():
-                p.create_dataset(key, data=np.asarray(arr))
-            e = f.create_group("embeddings")
-            for emb_name, arr in embeddings.items():
-                arr = np.asarray(arr, np.float32)
-                if arr.shape[0] != V:
-                    raise StoreError(f"embedder {emb_name!r} returned {arr.shape[0]} rows for {V} views")
-                d = e.create_dataset(emb_name, data=arr.astype(np.float16))
-                d.attrs["dim"] = int(arr.shape[1])
-                d.attrs["input_kind"] = (input_kinds or {}).get(emb_name, "rgb")
-        with store_lock(Path(root)):
-            publish(tmp, final)
+        with writing(f"writing the views of {name!r}"):
+            tmp.write_bytes(image)
+            with store_lock(Path(root)):
+                publish(tmp, final)
     finally:
         tmp.unlink(missing_ok=True)
     return views_id
@@ -200,41 +207,52 @@ def read_views(
             f"views file {path} is unreadable: {exc}", hint="run `zooctl bank reindex`"
         ) from None
     with f:
-        a = f.attrs
-        if a.get("zooctl_kind") != "asset_views":
-            raise StoreError(f"{path} is not a zooctl views file")
-        v = int(a.get("schema_version", 0))
-        if v != SCHEMA_VERSION:
+        try:
+            return _read_views(f, path, images, masks, embedders, rows)
+        except (OSError, KeyError, ValueError, TypeError, AttributeError) as exc:  # damaged inside
             raise StoreError(
-                f"{path} has views layout {v}, this zooctl reads {SCHEMA_VERSION}",
-                hint="run `zooctl bank reindex`",
-            )
-        out = StoredViews(
-            str(a["asset"]),
-            str(a["views_id"]),
-            str(a["asset_digest"]),
-            int(a["size"]),
-            int(a["count"]),
-            int(a["seed"]),
+                f"views file {path} is damaged: {type(exc).__name__}: {exc}", hint="run `zooctl bank reindex`"
+            ) from None
+
+
+def _read_views(
+    f: h5py.File, path: Path, images: bool, masks: bool, embedders: list[str] | None, rows: np.ndarray | None
+) -> StoredViews:
+    a = f.attrs
+    if a.get("zooctl_kind") != "asset_views":
+        raise StoreError(f"{path} is not a zooctl views file")
+    v = int(a.get("schema_version", 0))
+    if v != SCHEMA_VERSION:
+        raise StoreError(
+            f"{path} has views layout {v}, this zooctl reads {SCHEMA_VERSION}",
+            hint="run `zooctl bank reindex`",
         )
-        names = list(f["embeddings"]) if embedders is None else [e for e in embedders if e in f["embeddings"]]
-        out.embeddings = {e: f["embeddings"][e][()].astype(np.float32) for e in names}
-        out.input_kinds = {e: str(f["embeddings"][e].attrs.get("input_kind", "rgb")) for e in names}
-        idx = np.arange(out.count) if rows is None else np.asarray(rows, dtype=np.int64)
-        if masks:
-            out.masks = (
-                np.stack([f["masks"][int(i)] for i in idx])
-                if len(idx)
-                else np.zeros((0, out.size, out.size), bool)
-            )
-        if images:
-            out.images = (
-                np.stack([decode_jpeg(f["images"][int(i)]) for i in idx])
-                if len(idx)
-                else np.zeros((0, out.size, out.size, 3), np.uint8)
-            )
-        out.params = {k: f["params"][k][()] for k in f["params"]}
-        out.clip_names = json.loads(f["params"].attrs.get("clip_names", "[]"))
+    out = StoredViews(
+        str(a["asset"]),
+        str(a["views_id"]),
+        str(a["asset_digest"]),
+        int(a["size"]),
+        int(a["count"]),
+        int(a["seed"]),
+    )
+    names = list(f["embeddings"]) if embedders is None else [e for e in embedders if e in f["embeddings"]]
+    out.embeddings = {e: f["embeddings"][e][()].astype(np.float32) for e in names}
+    out.input_kinds = {e: str(f["embeddings"][e].attrs.get("input_kind", "rgb")) for e in names}
+    idx = np.arange(out.count) if rows is None else np.asarray(rows, dtype=np.int64)
+    if masks:
+        out.masks = (
+            np.stack([f["masks"][int(i)] for i in idx])
+            if len(idx)
+            else np.zeros((0, out.size, out.size), bool)
+        )
+    if images:
+        out.images = (
+            np.stack([decode_jpeg(f["images"][int(i)]) for i in idx])
+            if len(idx)
+            else np.zeros((0, out.size, out.size, 3), np.uint8)
+        )
+    out.params = {k: f["params"][k][()] for k in f["params"]}
+    out.clip_names = json.loads(f["params"].attrs.get("clip_names", "[]"))
     return out
 
 
@@ -264,6 +282,9 @@ class Pack:
         return self._positions
 
 
+_PACK_FILE = re.compile(r"pack-[A-Za-z0-9_.\-]+\.npy")
+
+
 def _pack_meta_path(root: Path, embedder: str) -> Path:
     return views_dir(root) / f"pack-{embedder}.json"
 
@@ -275,13 +296,20 @@ def read_pack(root: Path, embedder: str) -> Pack | None:
         meta = json.loads(_pack_meta_path(root, embedder).read_text())
         if meta.get("schema_version") != SCHEMA_VERSION:
             return None
+        if not all(_PACK_FILE.fullmatch(str(f)) for f in meta["files"].values()):
+            return None
         emb = np.load(d / meta["files"]["emb"], mmap_mode="r")
         mean = np.load(d / meta["files"]["mean"], mmap_mode="r")
-    except (OSError, ValueError, KeyError):
+        names, counts, ids = (
+            list(meta["names"]),
+            np.asarray(meta["counts"], np.int64),
+            dict(meta["views_ids"]),
+        )
+        if emb.ndim != 3 or mean.ndim != 2 or not emb.shape[0] == mean.shape[0] == len(names) == len(counts):
+            return None
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):  # only a cache: rebuilt
         return None
-    if emb.shape[0] != len(meta["names"]) or mean.shape[0] != len(meta["names"]):
-        return None
-    return Pack(embedder, meta["names"], np.asarray(meta["counts"], np.int64), emb, mean, meta["views_ids"])
+    return Pack(embedder, names, counts, emb, mean, ids)
 
 
 def write_pack(
@@ -309,25 +337,36 @@ def write_pack(
         "counts": counts.tolist(),
         "views_ids": views_ids,
     }
-    finals = [d / files["emb"], d / files["mean"], meta_p]
-    tmps = [temp_path(p) for p in finals]
     try:
-        with open(tmps[0], "wb") as fh:
-            np.save(fh, emb)
-        with open(tmps[1], "wb") as fh:
-            np.save(fh, mean.astype(np.float32))
-        tmps[2].write_text(json.dumps(meta))
-        with store_lock(Path(root)):
+        _publish_pack(d, meta_p, files, meta, emb, mean)
+    except (ReadOnlyStoreError, NoSpaceError):
+        # A pack is only a cache: on a read-only or full store, search with the one built here.
+        return Pack(embedder, list(names), counts, emb, mean.astype(np.float32), dict(views_ids))
+    return read_pack(root, embedder) or Pack(embedder, list(names), counts, emb, mean, views_ids)
+
+
+def _publish_pack(d: Path, meta_p: Path, files: dict, meta: dict, emb: np.ndarray, mean: np.ndarray) -> None:
+    root = d.parent.parent
+    finals = [d / files["emb"], d / files["mean"], meta_p]
+    tmps: list[Path] = []
+    try:
+        tmps += [temp_path(p) for p in finals]
+        with writing("writing a search pack"):
+            with open(tmps[0], "wb") as fh:
+                np.save(fh, emb)
+            with open(tmps[1], "wb") as fh:
+                np.save(fh, mean.astype(np.float32))
+            tmps[2].write_text(json.dumps(meta))
+        with store_lock(Path(root)), writing("publishing a search pack"):
             try:
-                old = json.loads(meta_p.read_text()).get("files", {})
-            except (OSError, ValueError):
-                old = {}
+                old = list(json.loads(meta_p.read_text()).get("files", {}).values())
+            except (OSError, ValueError, AttributeError, TypeError):
+                old = []
             for t, p in zip(tmps, finals):
                 publish(t, p)
-            for f in old.values():
-                if f not in files.values():
+            for f in old:  # a damaged pack file must not name anything else to delete
+                if isinstance(f, str) and _PACK_FILE.fullmatch(f) and f not in files.values():
                     (d / f).unlink(missing_ok=True)
     finally:
         for t in tmps:
             t.unlink(missing_ok=True)
-    return read_pack(root, embedder) or Pack(embedder, list(names), counts, emb, mean, views_ids)
