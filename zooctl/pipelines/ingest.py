@@ -74,9 +74,11 @@ def add_files(
                 asset.meta["tags"] = sorted(set(asset.meta.get("tags", [])) | set(tags))
             if license is not None:
                 asset.meta["license"] = license
-            r.summary = bank.add(asset, replace=replace)
+            new = not bank.exists(asset_name)
+            summary = bank.add(asset, replace=replace)
             if views:
-                r.summary = {**r.summary, "views": _index_views(bank, asset)}
+                summary = {**summary, "views": _index_views(bank, asset, undo=new)}
+            r.summary = summary
         except ZooctlError as exc:
             r.error = exc
         results.append(r)
@@ -114,12 +116,24 @@ def _views_default() -> bool:
     return os.environ.get("ZOOCTL_VIEWS", "1") != "0"
 
 
-def _index_views(bank: Bank, asset) -> dict:
+def _index_views(bank: Bank, asset, undo: bool = False) -> dict:
+    """Render and store the asset's views. ``undo``: the asset is new, so a failure removes it
+    again (an asset in the index without its views is a half-done add)."""
     from ..retrieval.index import index_asset
 
     try:
         return index_asset(bank, asset)
     except ZooctlError as exc:
+        if undo:
+            try:
+                bank.remove(asset.name)
+            except ZooctlError:
+                pass  # the error below still says what happened
+            else:
+                raise type(exc)(
+                    f"{asset.name} was not added: its retrieval views failed: {exc.message}",
+                    hint=exc.hint or "fix that and add it again (or add it with --no-views)",
+                ) from None
         raise type(exc)(
             f"{asset.name} was added, but its retrieval views failed: {exc.message}",
             hint=f"fix that, then run `zooctl bank reindex {asset.name}`",
