@@ -118,6 +118,7 @@ def test_read_only_store_refuses_writes_clearly_and_searches_without_writing(tmp
             ["video", "rm", "v"],
             ["video", "clean"],
             ["video", "repair"],
+            ["video", "add", str(davis_folder), "--name", "w", "-q"],
         ):
             one_clear_line(cli(store, *args, readonly=True), "the store is read-only")
         r = cli(store, "bank", "list", "--json", readonly=True)

@@ -236,3 +236,25 @@ def test_a_waiting_writer_says_who_holds_the_lock_and_gives_up(tmp_path):
         holder.kill()
         holder.wait()
     assert Bank(root).names() == ["a"]
+
+
+def test_repair_keeps_retrieval_views_that_belong_to_the_asset(tmp_path, monkeypatch):
+    from zooctl.pipelines.ingest import add_files
+
+    monkeypatch.setenv("ZOOCTL_EMBEDDERS", "silhouette")
+    root = tmp_path / "store"
+    bank = Bank(root)
+    glbs = [write_tiny_glb(tmp_path / f"{n}.glb") for n in ("a", "b")]
+    assert all(r.error is None for r in add_files(bank, glbs, views=True))
+    want = {s["name"]: s["views"] for s in bank.list()}
+    bank.index_path.unlink()
+    (root / "bank" / "views" / "b.h5").write_bytes(b"damaged")
+    report = bank.repair()
+    assert report["indexed"] == ["a", "b"]
+    assert any("b: its retrieval views are gone" in n for n in report["fixed"])
+    got = {s["name"]: s.get("views") for s in bank.list()}
+    # The embedders' identities live only in the index: a rebuilt entry has none, which search
+    # reads as a bank indexed before they were recorded.
+    assert got["a"] == {k: v for k, v in want["a"].items() if k != "identities"}
+    assert got["b"] is None  # `bank reindex --missing` renders b again
+    validate(json.loads(bank.index_path.read_text()), "bank_index")

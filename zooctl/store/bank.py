@@ -222,8 +222,10 @@ class Bank(IndexedStore):
             entry = dict(old)  # the same asset: keep what was recorded (its views entry above all)
         notes = []
         views = self._views_entry(name, entry)
-        if views is None and "views" in entry:
-            notes.append("its retrieval views are gone (run `zooctl bank reindex --missing`)")
+        from .views_h5 import views_path
+
+        if views is None and ("views" in entry or views_path(self.root, name).exists()):
+            notes.append("its retrieval views are gone or damaged (run `zooctl bank reindex --missing`)")
         entry.pop("views", None)
         if views is not None:
             entry["views"] = views
