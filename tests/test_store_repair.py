@@ -258,3 +258,14 @@ def test_repair_keeps_retrieval_views_that_belong_to_the_asset(tmp_path, monkeyp
     assert got["a"] == {k: v for k, v in want["a"].items() if k != "identities"}
     assert got["b"] is None  # `bank reindex --missing` renders b again
     validate(json.loads(bank.index_path.read_text()), "bank_index")
+
+
+def test_repair_never_rewrites_an_index_of_a_newer_zooctl(tmp_path):
+    bank = tiny_bank(tmp_path / "store", names=("a",))
+    newer = '{"schema_version": 2, "assets": {}}'
+    bank.index_path.write_text(newer)
+    with pytest.raises(StoreError, match="schema version 2") as err:
+        bank.repair()
+    assert err.value.hint == "upgrade zooctl" and bank.index_path.read_text() == newer
+    bank.index_path.write_text('{"schema_version": 1, "assets": [1, 2]}')
+    assert bank.repair()["indexed"] == ["a"]

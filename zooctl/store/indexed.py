@@ -175,16 +175,16 @@ class IndexedStore(NamedStore):
             return {}, f"unreadable ({exc.strerror})"
         except (ValueError, RecursionError):
             return {}, "damaged (not JSON)"
+        v = data.get("schema_version") if isinstance(data, dict) else None
+        if isinstance(v, int) and not isinstance(v, bool) and v > INDEX_VERSION:
+            self._check_index(data)  # written by a newer zooctl: raises, never rewritten here
         try:
             self._check_index(data)
             return dict(data[self.key]), "ok"
         except StoreError as exc:
             items = data.get(self.key) if isinstance(data, dict) else None
-            good = {
-                n: e
-                for n, e in (items or {}).items()
-                if isinstance(items, dict) and not self.check_entry(n, e)
-            }
+            items = items if isinstance(items, dict) else {}
+            good = {n: e for n, e in items.items() if not self.check_entry(n, e)}
             return good, "damaged (" + exc.message.split(": ", 1)[-1] + ")"
 
     def repair(self) -> dict[str, Any]:
