@@ -147,7 +147,20 @@ def _damage_index(root: Path, rel: str, key: str, rng: random.Random) -> str:
     p = root / rel
     data = json.loads(p.read_text())
     how = rng.choice(
-        ["file", "file", "text", "text", "field", "type", "entry", "rename", "ghost", "drop", "directory"]
+        [
+            "file",
+            "file",
+            "text",
+            "text",
+            "field",
+            "type",
+            "entry",
+            "rename",
+            "ghost",
+            "drop",
+            "directory",
+            "fifo",
+        ]
     )
     entries = data[key]
     name = rng.choice(sorted(entries)) if entries else None
@@ -160,6 +173,10 @@ def _damage_index(root: Path, rel: str, key: str, rng: random.Random) -> str:
         p.unlink()
         p.mkdir()
         return "index is a folder"
+    if how == "fifo":  # reading it would block forever
+        p.unlink()
+        os.mkfifo(p)
+        return "index is a FIFO"
     if name is None:
         p.unlink()
         return "index deleted"

@@ -20,7 +20,7 @@ from typing import Any
 
 from ..errors import NotFoundError, StoreError
 from ..names import check_name
-from .fs import store_lock, write_bytes_atomic, write_json_atomic
+from .fs import store_lock, write_bytes_atomic, write_json_atomic, writing
 from .indexed import NamedStore
 
 RECORD_VERSION = 1
@@ -112,7 +112,7 @@ class FitStore(NamedStore):
         tmp = temp_path(final)
         try:
             write_asset(tmp, asset)
-            with store_lock(self.root):
+            with store_lock(self.root), writing(f"saving the character of fit {name!r}"):
                 publish(tmp, final)
         finally:
             tmp.unlink(missing_ok=True)
@@ -130,7 +130,7 @@ class FitStore(NamedStore):
         return read_asset(p)
 
     def remove(self, name: str) -> None:
-        with store_lock(self.root):
+        with store_lock(self.root), writing(f"removing fit {name!r}"):
             if not self.exists(name):
                 raise self._not_found(name)
             self.record_path(name).unlink()  # the fit is gone once its record is

@@ -77,6 +77,21 @@ def writing(what: str) -> Iterator[None]:
         raise os_error(exc, what) from None
 
 
+def read_regular(path: Path) -> bytes:
+    """A file's bytes; something else at ``path`` (a FIFO, a device) is an error, not a hang."""
+    import stat
+
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise IsADirectoryError(errno.EISDIR, "not a regular file", str(path))
+        with os.fdopen(fd, "rb", closefd=False) as f:
+            return f.read()
+    finally:
+        os.close(fd)
+
+
 def lock_holder(root: Path) -> str:
     """Who holds the lock, as its holder wrote it (pid, command, since), or a generic phrase."""
     try:

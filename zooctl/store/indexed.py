@@ -17,7 +17,7 @@ from typing import Any
 
 from ..errors import AlreadyExistsError, NotFoundError, StoreError
 from ..names import check_name
-from .fs import remove_stale_temps, store_lock, write_json_atomic, writing
+from .fs import read_regular, remove_stale_temps, store_lock, write_json_atomic, writing
 
 INDEX_VERSION = 1
 
@@ -84,7 +84,7 @@ class IndexedStore(NamedStore):
 
     def _read_index(self) -> dict[str, Any]:
         try:
-            text = self.index_path.read_bytes()
+            text = read_regular(self.index_path)
         except FileNotFoundError:
             n = len(self.item_files())
             if n:
@@ -168,7 +168,7 @@ class IndexedStore(NamedStore):
     def _salvage(self) -> tuple[dict[str, Any], str]:
         """The usable entries of the current index (if any) and what state it was in."""
         try:
-            data = json.loads(self.index_path.read_bytes())
+            data = json.loads(read_regular(self.index_path))
         except FileNotFoundError:
             return {}, "missing"
         except OSError as exc:

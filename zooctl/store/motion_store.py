@@ -108,7 +108,7 @@ class MotionStore(NamedStore):
                 finally:
                     os.close(fd)
             fsync_dir(tmp)
-            with store_lock(self.root):
+            with store_lock(self.root), writing(f"publishing motion prior {name!r}"):
                 old = None
                 if final.exists():
                     if not replace and (final / CONFIG).is_file():
@@ -126,7 +126,7 @@ class MotionStore(NamedStore):
 
     def remove(self, name: str) -> None:
         final = self.path(name)
-        with store_lock(self.root):
+        with store_lock(self.root), writing(f"removing motion prior {name!r}"):
             if not (final / CONFIG).is_file():
                 raise self._not_found(name)
             gone = self.dir / f".{name}.{os.getpid()}.rm.tmp"
