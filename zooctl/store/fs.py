@@ -95,7 +95,7 @@ def read_regular(path: Path) -> bytes:
 def lock_holder(root: Path) -> str:
     """Who holds the lock, as its holder wrote it (pid, command, since), or a generic phrase."""
     try:
-        info = json.loads((Path(root) / ".lock").read_text() or "{}")
+        info = json.loads(read_regular(Path(root) / ".lock") or b"{}")
         return f"pid {int(info['pid'])} (`{info['command']}`, since {info['since']})"
     except (OSError, ValueError, KeyError, TypeError):
         return "another zooctl process"
