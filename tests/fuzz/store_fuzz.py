@@ -148,6 +148,7 @@ def _damage_index(root: Path, rel: str, key: str, rng: random.Random) -> str:
     data = json.loads(p.read_text())
     how = rng.choice(
         [
+            "delete",
             "file",
             "file",
             "text",
@@ -164,6 +165,9 @@ def _damage_index(root: Path, rel: str, key: str, rng: random.Random) -> str:
     )
     entries = data[key]
     name = rng.choice(sorted(entries)) if entries else None
+    if how == "delete":  # the damage of issue 18: once read as an empty store
+        p.unlink()
+        return "index deleted"
     if how == "file":
         return "index " + _damage_file(p, rng)
     if how == "text":
