@@ -8,6 +8,7 @@ The defaults are far above real assets (the shared animals: under 1,000 frames, 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
@@ -60,6 +61,10 @@ def check(what: str, value: float, key: str, unit: str = "") -> None:
     lim = getattr(current(), key)
     if not value <= lim:
         raise InputError(
-            f"{what} {value:,g}{unit}, over the import limit of {lim:,g}{unit}",
+            f"{what} {_num(value)}{unit}, over the import limit of {_num(lim)}{unit}",
             hint=f"if the file is what you meant, raise the limit with `zooctl bank add {OPTION[key]} N`",
         )
+
+
+def _num(v: float) -> str:
+    return f"{v:,.0f}" if math.isfinite(v) and v == int(v) else f"{v:,g}"
