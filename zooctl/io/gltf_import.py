@@ -316,7 +316,16 @@ def _node_local(path: Path, i: int, node: dict[str, Any]) -> tuple[np.ndarray, n
     """Rest TRS of a node (from its matrix when it has one)."""
     if "matrix" in node:
         m = _floats(path, node["matrix"], 16, f"node {i} matrix").reshape(4, 4).T  # column-major
-        return decompose_trs(m)
+        if not np.any(m[:3, :3]):  # scale 0, as a TRS node may have
+            return m[:3, 3].copy(), np.array([1.0, 0, 0, 0]), np.zeros(3)
+        t, q, s = decompose_trs(m)
+        back = compose_trs(t[None], q[None], s[None])[0]
+        if not np.allclose(back[:3, :3], m[:3, :3], atol=1e-4 * np.abs(m[:3, :3]).max()):
+            raise InputError(
+                f"{path}: node {i} matrix is singular or sheared; glTF node matrices must be "
+                "translation x rotation x scale"
+            )
+        return t, q, s
     t = _floats(path, node.get("translation", [0, 0, 0]), 3, f"node {i} translation")
     x, y, z, w = _floats(path, node.get("rotation", [0, 0, 0, 1]), 4, f"node {i} rotation")
     if not (x or y or z or w):
