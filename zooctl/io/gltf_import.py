@@ -414,6 +414,10 @@ def load_gltf(path: str | Path, name: str, fps: float = 30.0) -> RiggedAsset:
     path = Path(path)
     try:
         return _load(path, name, fps)
+    except InputError as exc:
+        if exc.hint is None:
+            exc.hint = "the file is damaged or not glTF 2.0: re-export it, or check it with the Khronos glTF validator"
+        raise
     except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:
         # The checks above name what they know; any other structural defect of the JSON (a
         # string where an object belongs, a missing key) still gets one line, not a traceback.

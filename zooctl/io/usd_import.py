@@ -63,7 +63,8 @@ def load_usd(path: str | Path, name: str) -> RiggedAsset:
         except InputError as exc:
             if exc.message.startswith(path.name):
                 raise
-            raise InputError(f"{path.name}: {exc.message}", hint=exc.hint) from None
+            hint = exc.hint or "export the file again as UsdSkel (SkelRoot, Skeleton, a bound Mesh)"
+            raise InputError(f"{path.name}: {exc.message}", hint=hint) from None
         except Exception as exc:  # pxr raises Tf.ErrorException (RuntimeError) with many lines
             raise _bad(path, f"USD could not read it ({_first_line(exc)})", _USD_HINT) from exc
 
