@@ -133,10 +133,12 @@ class _Doc:
         ai = self.index(ai, "accessors", "a mesh, skin or animation")
         a = self.get("accessors")[ai]
         what = f"accessor {ai}"
-        dtype = np.dtype(
-            _COMPONENT.get(a.get("componentType"), None) or _bad(self.path, f"{what} component type")
-        )
-        nc = _NCOMP.get(a.get("type"), 0) or _bad(self.path, f"{what} type")
+        ctype, atype = a.get("componentType"), a.get("type")
+        if not isinstance(ctype, int) or ctype not in _COMPONENT:
+            _bad(self.path, f"{what} component type {ctype!r}")
+        if not isinstance(atype, str) or atype not in _NCOMP:
+            _bad(self.path, f"{what} type {atype!r}")
+        dtype, nc = np.dtype(_COMPONENT[ctype]), _NCOMP[atype]
         count = _count(self.path, a, "count", what)
         check_limit(f"{self.path}: {what} has", count, "max_elements", " elements")
         if "bufferView" in a:
@@ -875,7 +877,12 @@ def _clips(doc: _Doc, nodes, node_to_joint, rest, order, fps: float) -> dict[str
             if not isinstance(tgt, dict):
                 raise InputError(f"{doc.path}: animation {ai} has a channel without a target")
             node, prop = tgt.get("node"), tgt.get("path")
-            if not isinstance(node, int) or node not in node_to_joint or prop not in _WIDTH:
+            if (
+                not isinstance(node, int)
+                or node not in node_to_joint
+                or not isinstance(prop, str)
+                or prop not in _WIDTH
+            ):
                 continue
             times, vals, interp = _channel(doc, ai, samplers, ch, prop)
             if times.size == 0:

@@ -73,25 +73,26 @@ _USD_HINT = "check the file is USD (.usda text, .usdc binary or a .usdz package)
 
 
 def _first_line(exc: BaseException) -> str:
-    """The telling line of a pxr error: its commentary, without the C++ location."""
+    """The telling part of a pxr error: the commentary of its first (root-cause) error, without
+    the C++ function and source location, on one line."""
+    import re
+
+    for chunk in re.split(r"Error in '", str(exc)):
+        m = re.search(r"in file \S+ : '(.*)", chunk, flags=re.S)
+        if m:
+            return " ".join(m.group(1).strip().rstrip("'").split())[:300]
     lines = [ln.strip() for ln in str(exc).strip().splitlines() if ln.strip()]
-    if not lines:
-        return type(exc).__name__
-    text = lines[-1]
-    for marker in (" -- ", "' : "):
-        if marker in text:
-            text = text.split(marker, 1)[1]
-    return text.strip(" '")[:300]
+    return lines[0][:300] if lines else type(exc).__name__
 
 
 @contextmanager
-def _trapped_diagnostics() -> Iterator[None]:
+def _trapped_diagnostics() -> Iterator[Any]:
     """Keep USD's C++ diagnostics off the terminal: Tf.DiagnosticTrap catches what goes through
     Tf's diagnostic manager, and fd 2 is pointed at /dev/null for anything printed directly."""
     import os
 
     if os.environ.get("ZOOCTL_DEBUG", "") not in ("", "0"):
-        yield
+        yield None
         return
     from pxr import Tf
 
@@ -104,11 +105,11 @@ def _trapped_diagnostics() -> Iterator[None]:
     try:
         os.dup2(devnull, 2)
         if trap_cls is None:
-            yield
+            yield None
         else:
             with trap_cls() as trap:
                 try:
-                    yield
+                    yield trap
                 finally:
                     trap.Clear()
     finally:
