@@ -21,30 +21,78 @@ from _util import REPO, machine
 
 sys.path.insert(0, str(REPO / "tests" / "fuzz"))
 from file_mutants import Case, make_store, mutants, run_cli, run_library, summarize  # noqa: E402
-from gltf_builder import glb_bytes, tiny_gltf  # noqa: E402
+from gltf_builder import glb_bytes  # noqa: E402
 
 
-def boundary_glb(path: Path, joints: int = 100, clips: int = 6, seconds: float = 555.0) -> Path:
-    """A small file just inside the default limits: ``joints`` joints (a chain of ancestors above
-    the two-bone rig) and ``clips`` clips of ``seconds`` each, 30 fps: 6 x 16,651 frames x 100
-    joints = 9.99 million joint-frames. Its import is the most memory a file may ask for."""
+def boundary_glb(
+    path: Path, joints: int = 50, clips: int = 6, seconds: float = 555.0, copies: int = 488
+) -> Path:
+    """A small file just inside the default limits, the most memory a file may ask for: a chain
+    of ``joints`` joints, ``clips`` clips of ``seconds`` at 30 fps (6 x 16,651 frames x 50 joints
+    = 5.0 million joint-frames), and one 1,024-vertex grid with 8 influences per vertex drawn
+    ``copies`` times (primitives naming the same accessors: 499,712 vertices)."""
     import numpy as np
 
-    doc, binary = tiny_gltf()
-    first = len(doc["nodes"])
-    for i in range(joints - 2):
-        doc["nodes"].append({"name": f"a{i}", "children": [first + i + 1 if i < joints - 3 else 1]})
-    doc["scenes"][0]["nodes"] = [0, first]
-    times = np.array([0, seconds], np.float32).tobytes()
-    doc["bufferViews"].append({"buffer": 0, "byteOffset": len(binary), "byteLength": len(times)})
-    doc["accessors"].append(
-        {"bufferView": len(doc["bufferViews"]) - 1, "componentType": 5126, "count": 2, "type": "SCALAR"}
-    )
-    binary += times
-    doc["buffers"][0]["byteLength"] = len(binary)
-    anim = doc["animations"][0]
-    anim["samplers"][0]["input"] = len(doc["accessors"]) - 1
-    doc["animations"] = [{**anim, "name": f"clip{k}"} for k in range(clips)]
+    n = 32
+    gx, gy = np.meshgrid(np.arange(n, dtype=np.float32), np.arange(n, dtype=np.float32))
+    pos = np.stack([gx.ravel(), gy.ravel(), np.zeros(n * n, np.float32)], 1) / n
+    quad = np.array([[0, 1, n], [1, n + 1, n]])
+    cells = (np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]).ravel()
+    idx = (cells[:, None, None] + quad[None]).reshape(-1).astype(np.uint32)
+    base = np.minimum((pos[:, 1] * joints).astype(np.int64), joints - 8)
+    jnt = (base[:, None] + np.arange(8)).astype(np.uint16)  # 8 influences: JOINTS_0 and JOINTS_1
+    wts = np.full((n * n, 8), 1 / 8, np.float32)
+    ibm = np.tile(np.eye(4, dtype=np.float32), (joints, 1, 1))
+    ibm[:, 1, 3] = -np.arange(joints) / joints  # joint k sits at y = k / joints
+    times = np.array([0, seconds], np.float32)
+    rots = np.array([[0, 0, 0, 1], [0, 0, 0.7071068, 0.7071068]], np.float32)
+    blobs = [pos, idx, jnt[:, :4].copy(), wts[:, :4].copy(), ibm.transpose(0, 2, 1).copy(), times, rots]
+    blobs += [jnt[:, 4:].copy(), wts[:, 4:].copy()]
+    views, binary = [], b""
+    for blob in blobs:
+        views.append({"buffer": 0, "byteOffset": len(binary), "byteLength": blob.nbytes})
+        binary += blob.tobytes()
+    acc = [
+        {"bufferView": 0, "componentType": 5126, "count": n * n, "type": "VEC3"},
+        {"bufferView": 1, "componentType": 5125, "count": len(idx), "type": "SCALAR"},
+        {"bufferView": 2, "componentType": 5123, "count": n * n, "type": "VEC4"},
+        {"bufferView": 3, "componentType": 5126, "count": n * n, "type": "VEC4"},
+        {"bufferView": 4, "componentType": 5126, "count": joints, "type": "MAT4"},
+        {"bufferView": 5, "componentType": 5126, "count": 2, "type": "SCALAR"},
+        {"bufferView": 6, "componentType": 5126, "count": 2, "type": "VEC4"},
+        {"bufferView": 7, "componentType": 5123, "count": n * n, "type": "VEC4"},
+        {"bufferView": 8, "componentType": 5126, "count": n * n, "type": "VEC4"},
+    ]
+    attrs = {"POSITION": 0, "JOINTS_0": 2, "WEIGHTS_0": 3, "JOINTS_1": 7, "WEIGHTS_1": 8}
+    prim = {"attributes": attrs, "indices": 1}
+    nodes = [{"name": "mesh", "mesh": 0, "skin": 0}]
+    nodes += [
+        {
+            "name": f"j{k}",
+            "translation": [0, 1 / joints if k else 0, 0],
+            **({"children": [k + 2]} if k < joints - 1 else {}),
+        }
+        for k in range(joints)
+    ]
+    anims = [
+        {
+            "name": f"clip{c}",
+            "channels": [{"sampler": 0, "target": {"node": 1 + joints // 2, "path": "rotation"}}],
+            "samplers": [{"input": 5, "output": 6}],
+        }
+        for c in range(clips)
+    ]
+    doc = {
+        "asset": {"version": "2.0"},
+        "scenes": [{"nodes": [0, 1]}],
+        "nodes": nodes,
+        "meshes": [{"primitives": [prim] * copies}],
+        "skins": [{"joints": list(range(1, joints + 1)), "inverseBindMatrices": 4}],
+        "animations": anims,
+        "accessors": acc,
+        "bufferViews": views,
+        "buffers": [{"byteLength": len(binary)}],
+    }
     path.write_bytes(glb_bytes(doc, binary))
     return path
 

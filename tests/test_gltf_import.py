@@ -324,3 +324,33 @@ def test_bank_add_limit_options(tmp_path, store, capsys):
     assert r.code == 2 and "--max-frames" in r.err
     r = run_inprocess(capsys, "bank", "add", str(p), "--name", "again", "--max-frames", "0")
     assert r.code == 2 and "must be positive" in r.err
+
+
+def test_references_repeated_many_times_stay_bounded(tmp_path):
+    """Thousands of primitives or channels naming the same accessors: limited (or deduplicated),
+    not decoded and copied thousands of times."""
+    from zooctl.limits import import_limits
+
+    doc, binary = tiny_gltf()
+    p = tmp_path / "many.glb"
+    doc["meshes"][0]["primitives"] *= 3000
+    p.write_bytes(_glb(doc, binary))
+    assert load_gltf(p, "many").num_vertices == 12000
+    with import_limits(max_vertices=1000), pytest.raises(InputError, match="1,000 vertices") as err:
+        load_gltf(p, "many")
+    assert "--max-vertices" in err.value.hint
+    with (
+        import_limits(max_elements=100),
+        pytest.raises(InputError, match="read .* over the import limit of 400"),
+    ):
+        load_gltf(p, "many")
+    doc, binary = tiny_gltf()
+    want = load_gltf(_write(tmp_path / "one.glb", doc, binary), "one").clips["bend"].rotations
+    doc["animations"][0]["channels"] *= 20000
+    got = load_gltf(_write(p, doc, binary), "many").clips["bend"].rotations
+    np.testing.assert_array_equal(got, want)
+
+
+def _write(p, doc, binary):
+    p.write_bytes(_glb(doc, binary))
+    return p

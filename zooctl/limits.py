@@ -21,7 +21,8 @@ from .errors import InputError
 class ImportLimits:
     max_clip_seconds: float = 600.0  # one clip, first to last keyframe
     max_frames: int = 100_000  # all clips of one asset together, after resampling
-    max_elements: int = 10_000_000  # one accessor's element count; frames x joints of all clips
+    max_vertices: int = 500_000  # all meshes together: posing 8 influences takes ~2 kB per vertex
+    max_elements: int = 5_000_000  # one accessor; frames x joints of all clips
 
 
 DEFAULT = ImportLimits()
@@ -30,6 +31,7 @@ _current: ContextVar[ImportLimits] = ContextVar("zooctl_import_limits", default=
 OPTION = {
     "max_clip_seconds": "--max-clip-seconds",
     "max_frames": "--max-frames",
+    "max_vertices": "--max-vertices",
     "max_elements": "--max-elements",
 }
 
@@ -55,10 +57,10 @@ def import_limits(**changes: float | int | None) -> Iterator[ImportLimits]:
         _current.reset(token)
 
 
-def check(what: str, value: float, key: str, unit: str = "") -> None:
-    """Raise an `InputError` when ``value`` is over limit ``key`` (NaN counts as over): ``what``
-    says what is too big, the hint names the `bank add` option that allows it."""
-    lim = getattr(current(), key)
+def check(what: str, value: float, key: str, unit: str = "", factor: float = 1) -> None:
+    """Raise an `InputError` when ``value`` is over ``factor`` times limit ``key`` (NaN counts as
+    over): ``what`` says what is too big, the hint names the `bank add` option that allows it."""
+    lim = getattr(current(), key) * factor
     if not value <= lim:
         raise InputError(
             f"{what} {_num(value)}{unit}, over the import limit of {_num(lim)}{unit}",

@@ -46,10 +46,16 @@ def add(
         help="Refuse an asset whose clips have more frames in all [default: 100000].",
         show_default=False,
     ),
+    max_vertices: int = typer.Option(
+        None,
+        "--max-vertices",
+        help="Refuse an asset with more vertices [default: 500000].",
+        show_default=False,
+    ),
     max_elements: int = typer.Option(
         None,
         "--max-elements",
-        help="Refuse larger arrays: one glTF accessor, or frames x joints of all clips [default: 10000000].",
+        help="Refuse larger arrays: one glTF accessor, or frames x joints of all clips [default: 5000000].",
         show_default=False,
     ),
     json_out: bool = JsonOpt,
@@ -64,7 +70,12 @@ def add(
     from ..limits import import_limits
     from ..pipelines.ingest import add_files
 
-    limits = dict(max_clip_seconds=max_clip_seconds, max_frames=max_frames, max_elements=max_elements)
+    limits = dict(
+        max_clip_seconds=max_clip_seconds,
+        max_frames=max_frames,
+        max_vertices=max_vertices,
+        max_elements=max_elements,
+    )
     with import_limits(**limits), stage_progress(not json_out and len(paths) > 1) as progress:
         results = add_files(
             _bank(),

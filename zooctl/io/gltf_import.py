@@ -44,6 +44,7 @@ _COMPONENT = {
 }
 _NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 MAX_INFLUENCES = 8
+READ_FACTOR = 4  # a file's readers may take its accessors' elements this many times --max-elements
 
 
 class _Doc:
@@ -69,6 +70,8 @@ class _Doc:
                 f"{path}: glTF version {version!r} is not supported", hint="convert it to glTF 2.0"
             )
         self._buffers: dict[int, bytes] = {}
+        self._accessors: dict[int, np.ndarray] = {}
+        self._handed_out = 0  # elements returned by accessor(), cached or not
 
     def get(self, key: str) -> list[dict[str, Any]]:
         v = self.json.get(key, [])
@@ -130,7 +133,28 @@ class _Doc:
         return buf, off, length, stride
 
     def accessor(self, ai: Any) -> np.ndarray:
+        """Accessor ``ai`` as a read-only (count, components) array, decoded once.
+
+        Every call counts against a budget of a few times `--max-elements`: a small file whose
+        thousands of primitives, channels or skins name the same large accessor would otherwise
+        make its readers copy it thousands of times."""
         ai = self.index(ai, "accessors", "a mesh, skin or animation")
+        if ai not in self._accessors:
+            out = self._decode(ai)
+            out.flags.writeable = False
+            self._accessors[ai] = out
+        out = self._accessors[ai]
+        self._handed_out += len(out)
+        check_limit(
+            f"{self.path}: its meshes, skins and animations read",
+            self._handed_out,
+            "max_elements",
+            " accessor elements",
+            factor=READ_FACTOR,
+        )
+        return out
+
+    def _decode(self, ai: int) -> np.ndarray:
         a = self.get("accessors")[ai]
         what = f"accessor {ai}"
         ctype, atype = a.get("componentType"), a.get("type")
@@ -397,6 +421,29 @@ def _hierarchy(path: Path, nodes: list[dict[str, Any]]) -> np.ndarray:
     return parent
 
 
+def _joint_anchors(
+    parent: np.ndarray, node_to_joint: dict[int, int], rest_m: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each node's nearest skeleton ancestor (-1: none) and its transform relative to it, found
+    in one pass (no walk per node) and without inverting the joint (it may have scale 0)."""
+    n = len(parent)
+    anchor = np.full(n, -2, dtype=np.int64)
+    below = np.empty_like(rest_m)
+    for i in range(n):
+        chain = []
+        j = i
+        while j >= 0 and anchor[j] == -2:
+            chain.append(j)
+            j = int(parent[j])
+        for k in reversed(chain):
+            p = int(parent[k])
+            if p < 0 or p in node_to_joint:
+                anchor[k], below[k] = p, rest_m[k]
+            else:
+                anchor[k], below[k] = anchor[p], below[p] @ rest_m[k]
+    return anchor, below
+
+
 def _check_invertible(path: Path, m: np.ndarray, names: list[str], what: str) -> None:
     """A rest-pose or bind matrix that cannot be inverted (a zero scale) is an input error."""
     if not len(m):
@@ -519,19 +566,23 @@ def _load(path: Path, name: str, fps: float) -> RiggedAsset:
     offset = 0
     meshes = doc.get("meshes")
     materials = doc.get("materials")
+    per_skin: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     for node_i, node in skinned:
         s = doc.index(node["skin"], "skins", f"node {node_i}")
-        skin_joints = np.array([node_to_joint[int(j)] for j in skins[s]["joints"]], dtype=np.int64)
-        # A skin whose bind matrices differ from the canonical ones by one transform M gets v -> M v.
-        fix = np.linalg.inv(ibm[skin_joints]) @ ibm_skin[s]
-        if not np.allclose(fix, fix[:1], atol=1e-4 * max(1.0, float(np.abs(fix).max()))):
-            raise InputError(f"{path}: skins {first} and {s} bind the same joints inconsistently")
-        M = fix[0]
+        if s not in per_skin:
+            skin_joints = np.array([node_to_joint[int(j)] for j in skins[s]["joints"]], dtype=np.int64)
+            # A skin whose bind matrices differ from the canonical ones by one transform M gets v -> M v.
+            fix = np.linalg.inv(ibm[skin_joints]) @ ibm_skin[s]
+            if not np.allclose(fix, fix[:1], atol=1e-4 * max(1.0, float(np.abs(fix).max()))):
+                raise InputError(f"{path}: skins {first} and {s} bind the same joints inconsistently")
+            per_skin[s] = skin_joints, fix[0]
+        skin_joints, M = per_skin[s]
         for prim in _mesh(doc, meshes, node["mesh"]):
             got = _primitive(doc, prim, materials)
             if got is None:
                 continue
             v, f, col, uv, tex = got
+            check_limit(f"{path}: the meshes have", offset + len(v), "max_vertices", " vertices")
             attrs = prim["attributes"]
             if "JOINTS_0" not in attrs or "WEIGHTS_0" not in attrs:
                 raise InputError(
@@ -566,26 +617,18 @@ def _load(path: Path, name: str, fps: float) -> RiggedAsset:
             offset += v.shape[0]
 
     # Rigid attachments: unskinned meshes under a joint follow that joint with weight 1.
+    anchor, below = _joint_anchors(parent, node_to_joint, rest_m)
     for i, node in enumerate(nodes):
-        if "mesh" not in node or "skin" in node:
+        if "mesh" not in node or "skin" in node or anchor[i] < 0:
             continue
-        p = int(parent[i])
-        while p >= 0 and p not in node_to_joint:
-            p = int(parent[p])
-        if p < 0:
-            continue
-        jj_i = node_to_joint[p]
-        below = rest_m[i]  # node i relative to joint p, without inverting p (it may have scale 0)
-        k = int(parent[i])
-        while k != p:
-            below = rest_m[k] @ below
-            k = int(parent[k])
-        to_bind = np.linalg.inv(ibm[jj_i]) @ below
+        jj_i = node_to_joint[int(anchor[i])]
+        to_bind = np.linalg.inv(ibm[jj_i]) @ below[i]
         for prim in _mesh(doc, meshes, node["mesh"]):
             got = _primitive(doc, prim, materials)
             if got is None:
                 continue
             v, f, col, uv, tex = got
+            check_limit(f"{path}: the meshes have", offset + len(v), "max_vertices", " vertices")
             v = v @ to_bind[:3, :3].T + to_bind[:3, 3]
             verts.append(v)
             faces.append(f + offset)
@@ -870,19 +913,18 @@ def _clips(doc: _Doc, nodes, node_to_joint, rest, order, fps: float) -> dict[str
         channels = anim.get("channels", [])
         if not isinstance(samplers, list) or not isinstance(channels, list):
             raise InputError(f"{doc.path}: animation {ai} samplers and channels must be arrays")
-        chans = []
-        t_lo, t_hi = np.inf, -np.inf
+        targeted: dict[tuple[int, str], dict[str, Any]] = {}
         for ch in channels:
             tgt = ch.get("target", {}) if isinstance(ch, dict) else None
             if not isinstance(tgt, dict):
                 raise InputError(f"{doc.path}: animation {ai} has a channel without a target")
             node, prop = tgt.get("node"), tgt.get("path")
-            if (
-                not isinstance(node, int)
-                or node not in node_to_joint
-                or not isinstance(prop, str)
-                or prop not in _WIDTH
-            ):
+            if isinstance(node, int) and isinstance(prop, str):
+                targeted[node, prop] = ch  # one channel per joint and property: the last one
+        chans = []
+        t_lo, t_hi = np.inf, -np.inf
+        for (node, prop), ch in targeted.items():
+            if node not in node_to_joint or prop not in _WIDTH:
                 continue
             times, vals, interp = _channel(doc, ai, samplers, ch, prop)
             if times.size == 0:

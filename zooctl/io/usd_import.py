@@ -255,9 +255,8 @@ def _meshes(path: Path, stage, queries, joints: list[str], world: np.ndarray):
         idx = mesh.GetFaceVertexIndicesAttr().Get()
         if pts is None or counts is None or idx is None or len(pts) == 0:
             continue
-        check_limit(
-            f"mesh {q.GetPrim().GetPath()} has", len(pts) + len(idx), "max_elements", " points and corners"
-        )
+        check_limit("the skinned meshes have", offset + len(pts), "max_vertices", " points")
+        check_limit(f"mesh {q.GetPrim().GetPath()} has", len(idx), "max_elements", " face corners")
         v = np.array(pts, dtype=np.float64)
         if not np.all(np.isfinite(v)):
             raise _bad(path, f"mesh {q.GetPrim().GetPath()} has points that are NaN or infinite")
