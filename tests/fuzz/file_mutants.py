@@ -159,6 +159,7 @@ def _json_mutation(rng, doc: dict, binary: bytearray) -> str:
             "key_times",
             "bin_values",
             "asset",
+            "amplify",
         ],
     )
     accs, views, nodes = _objects(doc, "accessors"), _objects(doc, "bufferViews"), _objects(doc, "nodes")
@@ -266,7 +267,41 @@ def _json_mutation(rng, doc: dict, binary: bytearray) -> str:
                 binary[off : off + 4] = np.float32(_pick(rng, [np.nan, np.inf, 1e30, -1e30, 0.0])).tobytes()
     elif kind == "asset":
         doc["asset"] = _pick(rng, [{}, {"version": "1.0"}, "2.0", None, {"version": 2}])
+    elif kind == "amplify":
+        _amplify(rng, doc)
     return kind
+
+
+def _amplify(rng, doc: dict) -> None:
+    """Many references to the same data: a small file asking for a lot of work or memory."""
+    k = int(_pick(rng, [1000, 5000, 20000]))
+    op = _pick(rng, ["primitives", "channels", "skinned_nodes", "attached_nodes", "deep_chain"])
+    nodes = doc["nodes"]
+    if op == "primitives":
+        doc["meshes"][0]["primitives"] = doc["meshes"][0]["primitives"] * (k // 10)
+    elif op == "channels":
+        for a in doc.get("animations", [])[:1]:
+            a["channels"] = a["channels"] * (k // max(1, len(a["channels"])))
+    elif op in ("skinned_nodes", "attached_nodes"):
+        skinned = next(n for n in nodes if "skin" in n and "mesh" in n)
+        joint = doc["skins"][0]["joints"][-1]
+        first = len(nodes)
+        if op == "skinned_nodes":
+            nodes += [{"mesh": skinned["mesh"], "skin": skinned["skin"]} for _ in range(k // 10)]
+        else:
+            nodes += [{"mesh": skinned["mesh"], "children": [first + i + 1]} for i in range(k // 10 - 1)]
+            nodes.append({"mesh": skinned["mesh"]})
+            nodes[joint].setdefault("children", []).append(first)
+    else:  # a chain of k ancestors above the skeleton's root
+        root = doc["skins"][0]["joints"][0]
+        parents = {c: i for i, n in enumerate(nodes) for c in n.get("children", [])}
+        while root in parents:
+            root = parents[root]
+        for n in nodes:  # detach the root from any scene-less parent
+            n["children"] = [c for c in n.get("children", []) if c != root]
+        first = len(nodes)
+        nodes += [{"name": f"up{i}", "children": [first + i + 1]} for i in range(k - 1)]
+        nodes.append({"name": f"up{k - 1}", "children": [root]})
 
 
 def _edit_key_times(rng, doc: dict, binary: bytearray) -> None:
