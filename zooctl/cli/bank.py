@@ -38,24 +38,27 @@ def add(
         show_default=False,
     ),
     max_clip_seconds: float = typer.Option(
-        None, "--max-clip-seconds", help="Refuse a clip longer than this [default: 600].", show_default=False
+        None,
+        "--max-clip-seconds",
+        help="Refuse a clip longer than this many seconds (default: 600).",
+        show_default=False,
     ),
     max_frames: int = typer.Option(
         None,
         "--max-frames",
-        help="Refuse an asset whose clips have more frames in all [default: 100000].",
+        help="Refuse an asset whose clips have more frames in all (default: 100000).",
         show_default=False,
     ),
     max_vertices: int = typer.Option(
         None,
         "--max-vertices",
-        help="Refuse an asset with more vertices [default: 500000].",
+        help="Refuse an asset with more vertices (default: 500000).",
         show_default=False,
     ),
     max_elements: int = typer.Option(
         None,
         "--max-elements",
-        help="Refuse larger arrays: one glTF accessor, or frames x joints of all clips [default: 5000000].",
+        help="Refuse larger arrays: one glTF accessor, or frames x joints of all clips (default: 5000000).",
         show_default=False,
     ),
     json_out: bool = JsonOpt,
