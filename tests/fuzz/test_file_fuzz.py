@@ -4,9 +4,13 @@ store's other files byte-identical."""
 
 from __future__ import annotations
 
-import file_mutants as fm
+import sys
+from pathlib import Path
 
-from zooctl.store.bank import Bank
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # file_mutants, however pytest imports us
+import file_mutants as fm  # noqa: E402
+
+from zooctl.store.bank import Bank  # noqa: E402
 
 QUICK_LIBRARY = 150
 QUICK_CLI = 6
