@@ -21,6 +21,9 @@ What becomes of a stage:
 
 from __future__ import annotations
 
+import os
+import re
+import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -75,8 +78,6 @@ _USD_HINT = "check the file is USD (.usda text, .usdc binary or a .usdz package)
 def _first_line(exc: BaseException) -> str:
     """The telling part of a pxr error: the commentary of its first (root-cause) error, without
     the C++ function and source location, on one line."""
-    import re
-
     for chunk in re.split(r"Error in '", str(exc)):
         m = re.search(r"in file \S+ : '(.*)", chunk, flags=re.S)
         if m:
@@ -89,16 +90,12 @@ def _first_line(exc: BaseException) -> str:
 def _trapped_diagnostics() -> Iterator[Any]:
     """Keep USD's C++ diagnostics off the terminal: Tf.DiagnosticTrap catches what goes through
     Tf's diagnostic manager, and fd 2 is pointed at /dev/null for anything printed directly."""
-    import os
-
     if os.environ.get("ZOOCTL_DEBUG", "") not in ("", "0"):
         yield None
         return
     from pxr import Tf
 
-    trap_cls = getattr(Tf, "DiagnosticTrap", None)
-    import sys
-
+    trap_cls = getattr(Tf, "DiagnosticTrap", None)  # newer USD releases; fd 2 alone otherwise
     sys.stderr.flush()
     saved = os.dup(2)
     devnull = os.open(os.devnull, os.O_WRONLY)
