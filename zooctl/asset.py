@@ -181,8 +181,13 @@ class RiggedAsset:
         sums = sw.sum(1)
         if np.any(np.abs(sums - 1) > 1e-3):
             raise bad(f"skin weights of {(np.abs(sums - 1) > 1e-3).sum()} vertices do not sum to 1")
-        lo, hi = self.bbox()
-        if not max(h - lo_ for lo_, h in zip(lo, hi)) > 0:
+        mats = self.skinning_matrices()
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for s in range(0, V, 65536):  # in chunks: skinning a whole large mesh at once takes ~2 kB a vertex
+            part = slice(s, s + 65536)
+            v = lbs(self.vertices[part], sj[part], sw[part], mats)
+            lo, hi = np.minimum(lo, v.min(0)), np.maximum(hi, v.max(0))
+        if not np.max(hi - lo) > 0:
             raise bad("the rest pose collapses to a single point (a joint with zero scale?)")
         for c in self.clips.values():
             T = c.num_frames

@@ -462,7 +462,7 @@ def load_gltf(path: str | Path, name: str, fps: float = 30.0) -> RiggedAsset:
     """Import a glTF 2.0 file as a validated `RiggedAsset` (see the module docstring)."""
     path = Path(path)
     try:
-        return _load(path, name, fps)
+        return _load(path, name, fps).validate()  # after _load's temporaries are gone
     except InputError as exc:
         if exc.hint is None:
             exc.hint = "the file is damaged or not glTF 2.0: re-export it, or check it with the Khronos glTF validator"
@@ -693,7 +693,7 @@ def _load(path: Path, name: str, fps: float) -> RiggedAsset:
             "import_warnings": warnings,
         },
     )
-    return asset.validate()
+    return asset
 
 
 MAX_REPAIRED_FRACTION = 0.05
