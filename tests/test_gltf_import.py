@@ -274,6 +274,7 @@ def _png() -> bytes:
         ("ABSOLUTE", "only relative file names and data URIs"),
         ("file:///etc/passwd", "only relative file names and data URIs"),
         ("https://example.com/x.bin", "only relative file names and data URIs"),
+        ("loop.bin", "cannot be resolved|missing"),  # a symlink to itself
     ],
 )
 def test_buffer_uri_cannot_leave_the_folder(tmp_path, uri, match):
@@ -282,6 +283,7 @@ def test_buffer_uri_cannot_leave_the_folder(tmp_path, uri, match):
     folder.mkdir()
     (tmp_path / "outside.bin").write_bytes(binary)  # a readable file the URI must not reach
     (folder / "link.bin").symlink_to(tmp_path / "outside.bin")
+    (folder / "loop.bin").symlink_to(folder / "loop.bin")
     doc["buffers"][0]["uri"] = str(tmp_path / "outside.bin") if uri == "ABSOLUTE" else uri
     (folder / "m.gltf").write_text(json.dumps(doc))
     with pytest.raises(InputError, match=match):

@@ -275,8 +275,12 @@ def _read_beside(path: Path, base: Path, uri: str, what: str) -> bytes:
         raise InputError(
             f"{path}: {what} refers to {uri!r}; only relative file names and data URIs are allowed", hint=hint
         )
-    folder = base.resolve()
-    target = (base / rel).resolve()
+    try:
+        folder, target = base.resolve(), (base / rel).resolve()
+    except (OSError, RuntimeError) as exc:  # a symlink loop
+        raise InputError(
+            f"{path}: {what} refers to {uri!r}, which cannot be resolved ({exc})", hint=hint
+        ) from None
     if not target.is_relative_to(folder) or len(scheme) == 1:
         raise InputError(
             f"{path}: {what} refers to {uri!r}, which is outside the glTF file's folder", hint=hint
