@@ -164,6 +164,9 @@ class RiggedAsset:
         for arr, nm in ((self.rest_local, "rest_local"), (self.inverse_bind, "inverse_bind")):
             if arr.shape != (J, 4, 4) or not np.all(np.isfinite(arr)):
                 raise bad(f"{nm} must be finite (J, 4, 4)")
+        sv = np.linalg.svd(self.inverse_bind[:, :3, :3], compute_uv=False)
+        if np.any(sv[:, -1] <= 1e-9 * sv[:, 0]):  # bind_joint_positions inverts them
+            raise bad("inverse_bind matrices must be invertible (a joint bound with zero scale?)")
         if not np.all(np.isfinite(self.vertices)):
             raise bad("vertices contain NaN or infinity")
         sj, sw = self.skin_joints, self.skin_weights
@@ -178,6 +181,14 @@ class RiggedAsset:
         sums = sw.sum(1)
         if np.any(np.abs(sums - 1) > 1e-3):
             raise bad(f"skin weights of {(np.abs(sums - 1) > 1e-3).sum()} vertices do not sum to 1")
+        mats = self.skinning_matrices()
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for s in range(0, V, 65536):  # in chunks: skinning a whole large mesh at once takes ~2 kB a vertex
+            part = slice(s, s + 65536)
+            v = lbs(self.vertices[part], sj[part], sw[part], mats)
+            lo, hi = np.minimum(lo, v.min(0)), np.maximum(hi, v.max(0))
+        if not np.max(hi - lo) > 0:
+            raise bad("the rest pose collapses to a single point (a joint with zero scale?)")
         for c in self.clips.values():
             T = c.num_frames
             if (

@@ -48,15 +48,49 @@ def add(
         "`bank reindex --missing` adds them later.",
         show_default=False,
     ),
+    max_clip_seconds: float = typer.Option(
+        None,
+        "--max-clip-seconds",
+        help="Refuse a clip longer than this many seconds (default: 600).",
+        show_default=False,
+    ),
+    max_frames: int = typer.Option(
+        None,
+        "--max-frames",
+        help="Refuse an asset whose clips have more frames in all (default: 100000).",
+        show_default=False,
+    ),
+    max_vertices: int = typer.Option(
+        None,
+        "--max-vertices",
+        help="Refuse an asset with more vertices (default: 500000).",
+        show_default=False,
+    ),
+    max_elements: int = typer.Option(
+        None,
+        "--max-elements",
+        help="Refuse larger arrays: one glTF accessor, or frames x joints of all clips (default: 5000000).",
+        show_default=False,
+    ),
     json_out: bool = JsonOpt,
 ) -> None:
-    """Import rigged assets into the bank (atomic: a failed import changes nothing)."""
+    """Import rigged assets into the bank (atomic: a failed import changes nothing).
+
+    Limits keep a small broken file from taking gigabytes (a keyframe at t = 1e5 s); raise them
+    with the --max-* options for a real asset that needs more."""
     from rich.markup import escape
 
     from ..errors import UsageError
+    from ..limits import import_limits
     from ..pipelines.ingest import add_files
 
-    with stage_progress(not json_out and len(paths) > 1) as progress:
+    limits = dict(
+        max_clip_seconds=max_clip_seconds,
+        max_frames=max_frames,
+        max_vertices=max_vertices,
+        max_elements=max_elements,
+    )
+    with import_limits(**limits), stage_progress(not json_out and len(paths) > 1) as progress:
         results = add_files(
             _bank(),
             paths,

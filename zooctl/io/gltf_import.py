@@ -31,6 +31,7 @@ import numpy as np
 from ..asset import Clip, RiggedAsset
 from ..errors import InputError
 from ..geometry import compose_trs, decompose_trs, quat_normalize, quat_slerp
+from ..limits import check as check_limit
 
 GLB_MAGIC = 0x46546C67
 _COMPONENT = {
@@ -43,6 +44,7 @@ _COMPONENT = {
 }
 _NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 MAX_INFLUENCES = 8
+READ_FACTOR = 4  # a file's readers may take its accessors' elements this many times --max-elements
 
 
 class _Doc:
@@ -58,9 +60,9 @@ class _Doc:
         else:
             try:
                 self.json = json.loads(data.decode("utf-8"))
-            except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
                 raise InputError(f"{path}: not a glTF JSON file ({exc})") from None
-        if not isinstance(self.json, dict) or "asset" not in self.json:
+        if not isinstance(self.json, dict) or not isinstance(self.json.get("asset"), dict):
             raise InputError(f"{path}: not a glTF 2.0 document (no 'asset' object)")
         version = str(self.json["asset"].get("version", ""))
         if not version.startswith("2"):
@@ -68,17 +70,28 @@ class _Doc:
                 f"{path}: glTF version {version!r} is not supported", hint="convert it to glTF 2.0"
             )
         self._buffers: dict[int, bytes] = {}
+        self._accessors: dict[int, np.ndarray] = {}
+        self._handed_out = 0  # elements returned by accessor(), cached or not
 
     def get(self, key: str) -> list[dict[str, Any]]:
         v = self.json.get(key, [])
-        return v if isinstance(v, list) else []
+        if not isinstance(v, list):
+            raise InputError(f"{self.path}: '{key}' must be an array")
+        for i, x in enumerate(v):
+            if not isinstance(x, dict):
+                raise InputError(f"{self.path}: {key}[{i}] must be an object")
+        return v
+
+    def index(self, value: Any, key: str, what: str) -> int:
+        """``value`` as an index into the top-level array ``key``, or a clear error."""
+        n = len(self.get(key))
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < n:
+            raise InputError(f"{self.path}: {what} refers to {key}[{value!r}], which does not exist")
+        return value
 
     def buffer(self, i: int) -> bytes:
         if i not in self._buffers:
-            buffers = self.get("buffers")
-            if i >= len(buffers):
-                raise InputError(f"{self.path}: buffer {i} does not exist")
-            b = buffers[i]
+            b = self.get("buffers")[self.index(i, "buffers", "a bufferView")]
             uri = b.get("uri")
             if uri is None:
                 if self.glb_bin is None:
@@ -86,108 +99,198 @@ class _Doc:
                 data = self.glb_bin
             else:
                 data = self._uri(uri, f"buffer {i}")
-            if len(data) < int(b.get("byteLength", 0)):
+            length = _count(self.path, b, "byteLength", f"buffer {i}")
+            if len(data) < length:
                 raise InputError(
-                    f"{self.path}: buffer {i} is truncated ({len(data)} of {b.get('byteLength')} bytes)",
+                    f"{self.path}: buffer {i} is truncated ({len(data)} of {length} bytes)",
                     hint="the file was cut short; re-export or re-download it",
                 )
             self._buffers[i] = data
         return self._buffers[i]
 
-    def _uri(self, uri: str, what: str) -> bytes:
+    def _uri(self, uri: Any, what: str) -> bytes:
+        if not isinstance(uri, str):
+            raise InputError(f"{self.path}: {what} has a uri that is not a string")
         if uri.startswith("data:"):
-            try:
-                return base64.b64decode(uri.split(",", 1)[1])
-            except Exception:
-                raise InputError(f"{self.path}: {what} has a malformed data URI") from None
-        from urllib.parse import unquote
+            return _data_uri(self.path, uri, what)
+        return _read_beside(self.path, self.base, uri, what)
 
-        p = self.base / unquote(uri)
-        if not p.is_file():
-            raise InputError(
-                f"{self.path}: {what} refers to {uri!r}, which is missing",
-                hint=f"put {uri} next to {self.path.name}, or export a self-contained .glb",
-            )
-        return p.read_bytes()
-
-    def view_bytes(self, vi: int) -> tuple[bytes, int, int | None]:
-        views = self.get("bufferViews")
-        if vi >= len(views):
-            raise InputError(f"{self.path}: bufferView {vi} does not exist")
-        v = views[vi]
-        buf = self.buffer(int(v["buffer"]))
-        off = int(v.get("byteOffset", 0))
-        length = int(v["byteLength"])
+    def view_bytes(self, vi: Any) -> tuple[bytes, int, int, int | None]:
+        """(buffer, offset, length, stride) of bufferView ``vi``, checked against its buffer."""
+        vi = self.index(vi, "bufferViews", "an accessor or image")
+        v = self.get("bufferViews")[vi]
+        what = f"bufferView {vi}"
+        buf = self.buffer(v.get("buffer"))
+        off = _count(self.path, v, "byteOffset", what, default=0)
+        length = _count(self.path, v, "byteLength", what)
+        stride = v.get("byteStride")
+        if stride is not None:
+            stride = _count(self.path, v, "byteStride", what)
+            if stride == 0:
+                raise InputError(f"{self.path}: {what} has byteStride 0")
         if off + length > len(buf):
-            raise InputError(
-                f"{self.path}: bufferView {vi} runs past the end of its buffer (truncated file?)"
-            )
-        return buf, off, v.get("byteStride")
+            raise InputError(f"{self.path}: {what} runs past the end of its buffer (truncated file?)")
+        return buf, off, length, stride
 
-    def accessor(self, ai: int) -> np.ndarray:
-        accs = self.get("accessors")
-        if not isinstance(ai, int) or ai >= len(accs):
-            raise InputError(f"{self.path}: accessor {ai} does not exist")
-        a = accs[ai]
-        dtype = np.dtype(
-            _COMPONENT.get(a.get("componentType"), None) or _bad(self.path, f"accessor {ai} component type")
+    def accessor(self, ai: Any) -> np.ndarray:
+        """Accessor ``ai`` as a read-only (count, components) array, decoded once.
+
+        Every call counts against a budget of a few times `--max-elements`: a small file whose
+        thousands of primitives, channels or skins name the same large accessor would otherwise
+        make its readers copy it thousands of times."""
+        ai = self.index(ai, "accessors", "a mesh, skin or animation")
+        if ai not in self._accessors:
+            out = self._decode(ai)
+            out.flags.writeable = False
+            self._accessors[ai] = out
+        out = self._accessors[ai]
+        self._handed_out += len(out)
+        check_limit(
+            f"{self.path}: its meshes, skins and animations read",
+            self._handed_out,
+            "max_elements",
+            " accessor elements",
+            factor=READ_FACTOR,
         )
-        nc = _NCOMP.get(a.get("type"), 0) or _bad(self.path, f"accessor {ai} type")
-        count = int(a["count"])
+        return out
+
+    def _decode(self, ai: int) -> np.ndarray:
+        a = self.get("accessors")[ai]
+        what = f"accessor {ai}"
+        ctype, atype = a.get("componentType"), a.get("type")
+        if not isinstance(ctype, int) or ctype not in _COMPONENT:
+            _bad(self.path, f"{what} component type {ctype!r}")
+        if not isinstance(atype, str) or atype not in _NCOMP:
+            _bad(self.path, f"{what} type {atype!r}")
+        dtype, nc = np.dtype(_COMPONENT[ctype]), _NCOMP[atype]
+        count = _count(self.path, a, "count", what)
+        check_limit(f"{self.path}: {what} has", count, "max_elements", " elements")
         if "bufferView" in a:
-            buf, off, stride = self.view_bytes(int(a["bufferView"]))
-            off += int(a.get("byteOffset", 0))
+            buf, off, vlen, stride = self.view_bytes(a["bufferView"])
+            start = off + _count(self.path, a, "byteOffset", what, default=0)
             elem = dtype.itemsize * nc
-            stride = int(stride or elem)
-            need = off + stride * (count - 1) + elem if count else off
-            if need > len(buf):
+            stride = stride or elem
+            if stride < elem:
                 raise InputError(
-                    f"{self.path}: accessor {ai} runs past the end of its buffer (truncated file?)"
+                    f"{self.path}: {what}'s bufferView stride {stride} is shorter than one element"
                 )
+            need = start + stride * (count - 1) + elem if count else start
+            if need > off + vlen:
+                raise InputError(f"{self.path}: {what} runs past the end of its bufferView (truncated file?)")
             if stride == elem:
-                out = np.frombuffer(buf, dtype=dtype, count=count * nc, offset=off).reshape(count, nc).copy()
-            else:
-                raw = np.frombuffer(buf, dtype=np.uint8, count=stride * (count - 1) + elem, offset=off)
+                out = (
+                    np.frombuffer(buf, dtype=dtype, count=count * nc, offset=start).reshape(count, nc).copy()
+                )
+            elif count:
+                raw = np.frombuffer(buf, dtype=np.uint8, count=stride * (count - 1) + elem, offset=start)
                 rows = np.lib.stride_tricks.as_strided(raw, shape=(count, elem), strides=(stride, 1))
                 out = rows.copy().view(dtype).reshape(count, nc)
+            else:
+                out = np.zeros((0, nc), dtype=dtype)
         else:
             out = np.zeros((count, nc), dtype=dtype)
         sparse = a.get("sparse")
-        if sparse:
-            n = int(sparse["count"])
-            idx_info, val_info = sparse["indices"], sparse["values"]
-            ib, io_, _ = self.view_bytes(int(idx_info["bufferView"]))
-            idx = np.frombuffer(
-                ib,
-                dtype=_COMPONENT[idx_info["componentType"]],
-                count=n,
-                offset=io_ + int(idx_info.get("byteOffset", 0)),
-            )
-            vb, vo, _ = self.view_bytes(int(val_info["bufferView"]))
-            vals = np.frombuffer(
-                vb, dtype=dtype, count=n * nc, offset=vo + int(val_info.get("byteOffset", 0))
-            ).reshape(n, nc)
-            out = out.copy()
-            if idx.size and idx.max() >= count:
-                raise InputError(f"{self.path}: sparse accessor {ai} has indices out of range")
-            out[idx.astype(np.int64)] = vals
+        if sparse is not None:
+            out = self._sparse(ai, sparse, out, dtype, nc)
         if a.get("normalized") and dtype.kind in "iu":
             info = np.iinfo(dtype)
             out = np.maximum(out.astype(np.float64) / info.max, -1.0)
         return out
 
-    def image_bytes(self, ii: int) -> bytes | None:
+    def _sparse(self, ai: int, sparse: Any, out: np.ndarray, dtype: np.dtype, nc: int) -> np.ndarray:
+        what = f"sparse accessor {ai}"
+        if not isinstance(sparse, dict):
+            raise InputError(f"{self.path}: {what} is not an object")
+        n = _count(self.path, sparse, "count", what)
+        if n > len(out):
+            raise InputError(f"{self.path}: {what} has more sparse values ({n}) than elements ({len(out)})")
+        idx_info, val_info = sparse.get("indices"), sparse.get("values")
+        if not isinstance(idx_info, dict) or not isinstance(val_info, dict):
+            raise InputError(f"{self.path}: {what} lacks its indices or values")
+        idx_type = idx_info.get("componentType")
+        if idx_type not in (5121, 5123, 5125):
+            raise InputError(f"{self.path}: {what} has an invalid index component type")
+        idx = self._view_array(idx_info, np.dtype(_COMPONENT[idx_type]), n, what)
+        vals = self._view_array(val_info, dtype, n * nc, what).reshape(n, nc)
+        if idx.size and idx.max() >= len(out):
+            raise InputError(f"{self.path}: {what} has indices out of range")
+        out = out.copy()
+        out[idx.astype(np.int64)] = vals
+        return out
+
+    def _view_array(self, info: dict[str, Any], dtype: np.dtype, n: int, what: str) -> np.ndarray:
+        buf, off, vlen, _ = self.view_bytes(info.get("bufferView"))
+        start = off + _count(self.path, info, "byteOffset", what, default=0)
+        if start + n * dtype.itemsize > off + vlen:
+            raise InputError(f"{self.path}: {what} runs past the end of its bufferView (truncated file?)")
+        return np.frombuffer(buf, dtype=dtype, count=n, offset=start)
+
+    def image_bytes(self, ii: Any) -> bytes | None:
         images = self.get("images")
-        if ii >= len(images):
+        if isinstance(ii, bool) or not isinstance(ii, int) or not 0 <= ii < len(images):
             return None
         im = images[ii]
         if "bufferView" in im:
-            buf, off, _ = self.view_bytes(int(im["bufferView"]))
-            length = int(self.get("bufferViews")[int(im["bufferView"])]["byteLength"])
+            buf, off, length, _ = self.view_bytes(im["bufferView"])
             return bytes(buf[off : off + length])
         if "uri" in im:
             return self._uri(im["uri"], f"image {ii}")
         return None
+
+
+def _count(path: Path, obj: dict[str, Any], key: str, what: str, default: int | None = None) -> int:
+    """A non-negative integer field (counts, offsets, lengths), or a clear error."""
+    v = obj.get(key, default)
+    if v is None:
+        raise InputError(f"{path}: {what} has no {key}")
+    if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+        raise InputError(f"{path}: {what} has {key} {v!r}; it must be a non-negative integer")
+    return v
+
+
+def _data_uri(path: Path, uri: str, what: str) -> bytes:
+    from urllib.parse import unquote_to_bytes
+
+    head, sep, body = uri.partition(",")
+    if not sep:
+        raise InputError(f"{path}: {what} has a malformed data URI")
+    if head.endswith(";base64"):
+        try:
+            return base64.b64decode(body, validate=True)
+        except ValueError:
+            raise InputError(f"{path}: {what} has a malformed base64 data URI") from None
+    return unquote_to_bytes(body)
+
+
+def _read_beside(path: Path, base: Path, uri: str, what: str) -> bytes:
+    """The file a relative URI names, which must lie inside the glTF file's folder (after
+    following symlinks): an absolute path, a ``..`` escape or a link out of the folder would let
+    a downloaded model read any file the user can."""
+    from urllib.parse import unquote, urlsplit
+
+    rel = unquote(uri)
+    scheme = urlsplit(uri).scheme
+    hint = f"keep the files it uses in {path.name}'s folder (or below), or export a self-contained .glb"
+    if (scheme and len(scheme) > 1) or Path(rel).is_absolute() or rel.startswith(("/", "\\")) or "\0" in rel:
+        raise InputError(
+            f"{path}: {what} refers to {uri!r}; only relative file names and data URIs are allowed", hint=hint
+        )
+    try:
+        folder, target = base.resolve(), (base / rel).resolve()
+    except (OSError, RuntimeError) as exc:  # a symlink loop
+        raise InputError(
+            f"{path}: {what} refers to {uri!r}, which cannot be resolved ({exc})", hint=hint
+        ) from None
+    if not target.is_relative_to(folder) or len(scheme) == 1:
+        raise InputError(
+            f"{path}: {what} refers to {uri!r}, which is outside the glTF file's folder", hint=hint
+        )
+    if not target.is_file():
+        raise InputError(
+            f"{path}: {what} refers to {uri!r}, which is missing",
+            hint=f"put {uri} next to {path.name}, or export a self-contained .glb",
+        )
+    return target.read_bytes()
 
 
 def _bad(path: Path, what: str) -> Any:
@@ -229,7 +332,7 @@ def _parse_glb(path: Path, data: bytes) -> tuple[dict[str, Any], bytes | None]:
         if ctype == 0x4E4F534A:
             try:
                 js = json.loads(chunk.decode("utf-8"))
-            except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
                 raise InputError(f"{path}: GLB JSON chunk is malformed ({exc})") from None
         elif ctype == 0x004E4942 and binary is None:
             binary = chunk
@@ -239,16 +342,39 @@ def _parse_glb(path: Path, data: bytes) -> tuple[dict[str, Any], bytes | None]:
     return js, binary
 
 
-def _node_local(node: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _node_local(path: Path, i: int, node: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rest TRS of a node (from its matrix when it has one)."""
     if "matrix" in node:
-        m = np.asarray(node["matrix"], dtype=np.float64).reshape(4, 4).T  # glTF stores column-major
-        return decompose_trs(m)
-    t = np.asarray(node.get("translation", [0, 0, 0]), dtype=np.float64)
-    x, y, z, w = node.get("rotation", [0, 0, 0, 1])
+        m = _floats(path, node["matrix"], 16, f"node {i} matrix").reshape(4, 4).T  # column-major
+        if not np.any(m[:3, :3]):  # scale 0, as a TRS node may have
+            return m[:3, 3].copy(), np.array([1.0, 0, 0, 0]), np.zeros(3)
+        t, q, s = decompose_trs(m)
+        back = compose_trs(t[None], q[None], s[None])[0]
+        if not np.allclose(back[:3, :3], m[:3, :3], atol=1e-4 * np.abs(m[:3, :3]).max()):
+            raise InputError(
+                f"{path}: node {i} matrix is singular or sheared; glTF node matrices must be "
+                "translation x rotation x scale"
+            )
+        return t, q, s
+    t = _floats(path, node.get("translation", [0, 0, 0]), 3, f"node {i} translation")
+    x, y, z, w = _floats(path, node.get("rotation", [0, 0, 0, 1]), 4, f"node {i} rotation")
+    if not (x or y or z or w):
+        raise InputError(f"{path}: node {i} has a zero rotation quaternion")
     q = quat_normalize(np.array([w, x, y, z], dtype=np.float64))
-    s = np.asarray(node.get("scale", [1, 1, 1]), dtype=np.float64)
+    s = _floats(path, node.get("scale", [1, 1, 1]), 3, f"node {i} scale")
     return t, q, s
+
+
+def _floats(path: Path, value: Any, n: int, what: str) -> np.ndarray:
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        a = None
+    if a is None or a.shape != (n,):
+        raise InputError(f"{path}: {what} must be {n} numbers")
+    if not np.all(np.isfinite(a)):
+        raise InputError(f"{path}: {what} contains NaN or infinity")
+    return a
 
 
 def _triangles(doc: _Doc, prim: dict[str, Any], nverts: int) -> np.ndarray:
@@ -259,15 +385,13 @@ def _triangles(doc: _Doc, prim: dict[str, Any], nverts: int) -> np.ndarray:
         idx = np.arange(nverts, dtype=np.int64)
     if mode == 4:
         tris = idx[: len(idx) // 3 * 3].reshape(-1, 3)
-    elif mode == 5:  # strip: alternate winding
-        tris = np.array(
-            [
-                (idx[i], idx[i + 1], idx[i + 2]) if i % 2 == 0 else (idx[i + 1], idx[i], idx[i + 2])
-                for i in range(len(idx) - 2)
-            ]
-        )
+    elif mode == 5:  # strip: every other triangle has its winding flipped
+        k = np.arange(max(len(idx) - 2, 0))
+        odd = k % 2 == 1
+        tris = np.stack([np.where(odd, idx[k + 1], idx[k]), np.where(odd, idx[k], idx[k + 1]), idx[k + 2]], 1)
     elif mode == 6:  # fan
-        tris = np.array([(idx[0], idx[i], idx[i + 1]) for i in range(1, len(idx) - 1)])
+        k = np.arange(1, max(len(idx) - 1, 1))
+        tris = np.stack([np.full(len(k), idx[0] if len(idx) else 0), idx[k], idx[k + 1]], 1)
     else:
         return np.zeros((0, 3), dtype=np.int64)
     tris = tris.reshape(-1, 3)
@@ -276,9 +400,88 @@ def _triangles(doc: _Doc, prim: dict[str, Any], nverts: int) -> np.ndarray:
     return tris
 
 
+def _hierarchy(path: Path, nodes: list[dict[str, Any]]) -> np.ndarray:
+    """Parent index of every node (-1 for roots); a node with two parents or a cycle is an error."""
+    parent = np.full(len(nodes), -1, dtype=np.int64)
+    for i, n in enumerate(nodes):
+        children = n.get("children", [])
+        if not isinstance(children, list):
+            raise InputError(f"{path}: node {i} children must be an array")
+        for c in children:
+            if isinstance(c, bool) or not isinstance(c, int) or not (0 <= c < len(nodes)) or parent[c] != -1:
+                raise InputError(f"{path}: node hierarchy is not a tree (node {c!r})")
+            parent[c] = i
+    # Every node must reach a root; a node on a cycle never does.
+    done = np.zeros(len(nodes), dtype=bool)
+    for i in range(len(nodes)):
+        chain = []
+        j = i
+        while j >= 0 and not done[j]:
+            if len(chain) > len(nodes):
+                raise InputError(f"{path}: node hierarchy has a cycle (through node {i})")
+            chain.append(j)
+            j = int(parent[j])
+        done[chain] = True
+    return parent
+
+
+def _joint_anchors(
+    parent: np.ndarray, node_to_joint: dict[int, int], rest_m: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each node's nearest skeleton ancestor (-1: none) and its transform relative to it, found
+    in one pass (no walk per node) and without inverting the joint (it may have scale 0)."""
+    n = len(parent)
+    anchor = np.full(n, -2, dtype=np.int64)
+    below = np.empty_like(rest_m)
+    for i in range(n):
+        chain = []
+        j = i
+        while j >= 0 and anchor[j] == -2:
+            chain.append(j)
+            j = int(parent[j])
+        for k in reversed(chain):
+            p = int(parent[k])
+            if p < 0 or p in node_to_joint:
+                anchor[k], below[k] = p, rest_m[k]
+            else:
+                anchor[k], below[k] = anchor[p], below[p] @ rest_m[k]
+    return anchor, below
+
+
+def _check_invertible(path: Path, m: np.ndarray, names: list[str], what: str) -> None:
+    """A rest-pose or bind matrix that cannot be inverted (a zero scale) is an input error."""
+    if not len(m):
+        return
+    sv = np.linalg.svd(m[:, :3, :3], compute_uv=False)
+    bad = ~np.all(np.isfinite(m), axis=(1, 2)) | (sv[:, -1] <= 1e-9 * np.maximum(sv[:, 0], 1e-30))
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise InputError(
+            f"{path}: {what} of {names[k]!r} is singular (a zero scale?)",
+            hint="give it a non-zero scale in the source file; zooctl needs an invertible rest pose",
+        )
+
+
 def load_gltf(path: str | Path, name: str, fps: float = 30.0) -> RiggedAsset:
     """Import a glTF 2.0 file as a validated `RiggedAsset` (see the module docstring)."""
     path = Path(path)
+    try:
+        return _load(path, name, fps).validate()  # after _load's temporaries are gone
+    except InputError as exc:
+        if exc.hint is None:
+            exc.hint = "the file is damaged or not glTF 2.0: re-export it, or check it with the Khronos glTF validator"
+        raise
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:
+        # The checks above name what they know; any other structural defect of the JSON (a
+        # string where an object belongs, a missing key) still gets one line, not a traceback.
+        what = f"{type(exc).__name__}: {str(exc).splitlines()[0][:200] if str(exc) else ''}"
+        raise InputError(
+            f"{path}: malformed glTF ({what})",
+            hint="check it with the Khronos glTF validator; ZOOCTL_DEBUG=1 shows where it failed",
+        ) from exc
+
+
+def _load(path: Path, name: str, fps: float) -> RiggedAsset:
     doc = _Doc(path)
     nodes = doc.get("nodes")
     skins = doc.get("skins")
@@ -286,13 +489,8 @@ def load_gltf(path: str | Path, name: str, fps: float = 30.0) -> RiggedAsset:
         raise InputError(
             f"{path}: the file has no skin (no rigged mesh)", hint="zooctl needs a skinned, rigged mesh"
         )
-    parent = np.full(len(nodes), -1, dtype=np.int64)
-    for i, n in enumerate(nodes):
-        for c in n.get("children", []):
-            if not (0 <= c < len(nodes)) or parent[c] != -1:
-                raise InputError(f"{path}: node hierarchy is not a tree (node {c})")
-            parent[c] = i
-    rest = [_node_local(n) for n in nodes]
+    parent = _hierarchy(path, nodes)
+    rest = [_node_local(path, i, n) for i, n in enumerate(nodes)]
     rest_m = (
         compose_trs(
             np.array([r[0] for r in rest]), np.array([r[1] for r in rest]), np.array([r[2] for r in rest])
@@ -307,18 +505,16 @@ def load_gltf(path: str | Path, name: str, fps: float = 30.0) -> RiggedAsset:
         raise InputError(
             f"{path}: no mesh node is bound to a skin", hint="zooctl needs a skinned, rigged mesh"
         )
-    used_skins = sorted({int(n["skin"]) for _, n in skinned})
-    for s in used_skins:
-        if s >= len(skins):
-            raise InputError(f"{path}: a mesh refers to skin {s}, which does not exist")
+    used_skins = sorted({doc.index(n["skin"], "skins", f"node {i}") for i, n in skinned})
 
     # Skeleton = skin joints of the used skins plus all their ancestors, in depth-first order.
     joint_nodes: set[int] = set()
     for s in used_skins:
-        for j in skins[s]["joints"]:
-            if not (0 <= j < len(nodes)):
-                raise InputError(f"{path}: skin {s} names node {j}, which does not exist")
-            joint_nodes.add(int(j))
+        sk_joints = skins[s].get("joints")
+        if not isinstance(sk_joints, list) or not sk_joints:
+            raise InputError(f"{path}: skin {s} has no joints")
+        for j in sk_joints:
+            joint_nodes.add(doc.index(j, "nodes", f"skin {s}"))
     keep = set(joint_nodes)
     for j in list(joint_nodes):
         p = parent[j]
@@ -334,9 +530,9 @@ def load_gltf(path: str | Path, name: str, fps: float = 30.0) -> RiggedAsset:
     node_to_joint = {n: k for k, n in enumerate(order)}
     J = len(order)
     parents = np.array([node_to_joint.get(int(parent[n]), -1) for n in order], dtype=np.int32)
-    names = _unique_names([nodes[n].get("name") or f"node{n}" for n in order])
+    names = _unique_names([str(nodes[n].get("name") or f"node{n}") for n in order])
     rest_local = rest_m[order]
-    ibm = np.linalg.inv(world[order])  # default for non-joint ancestors
+    ibm = np.tile(np.eye(4), (J, 1, 1))
     ibm_skin: dict[int, np.ndarray] = {}
     for s in used_skins:
         sk = skins[s]
@@ -349,6 +545,12 @@ def load_gltf(path: str | Path, name: str, fps: float = 30.0) -> RiggedAsset:
             raise InputError(
                 f"{path}: skin {s} has {m.shape[0]} inverse bind matrices for {len(sk['joints'])} joints"
             )
+        _check_invertible(
+            path,
+            m,
+            [str(nodes[j].get("name") or f"node{j}") for j in sk["joints"]],
+            "the inverse bind matrix",
+        )
         ibm_skin[s] = m
     first = used_skins[0]
     assigned = np.zeros(J, dtype=bool)
@@ -358,25 +560,33 @@ def load_gltf(path: str | Path, name: str, fps: float = 30.0) -> RiggedAsset:
             if not assigned[jj]:
                 ibm[jj] = ibm_skin[s][k]
                 assigned[jj] = True
+    # Ancestors that are not skin joints are bound where they rest.
+    free = np.flatnonzero(~assigned)
+    _check_invertible(path, world[np.array(order)[free]], [names[k] for k in free], "the rest transform")
+    ibm[free] = np.linalg.inv(world[np.array(order)[free]])
 
     verts, faces, sj, sw, cols, uvs, tex_ids = [], [], [], [], [], [], []
     warnings: list[str] = []
     offset = 0
     meshes = doc.get("meshes")
     materials = doc.get("materials")
+    per_skin: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     for node_i, node in skinned:
-        s = int(node["skin"])
-        skin_joints = np.array([node_to_joint[int(j)] for j in skins[s]["joints"]], dtype=np.int64)
-        # A skin whose bind matrices differ from the canonical ones by one transform M gets v -> M v.
-        fix = np.linalg.inv(ibm[skin_joints]) @ ibm_skin[s]
-        if not np.allclose(fix, fix[:1], atol=1e-4 * max(1.0, float(np.abs(fix).max()))):
-            raise InputError(f"{path}: skins {first} and {s} bind the same joints inconsistently")
-        M = fix[0]
-        for prim in _mesh(doc, meshes, node["mesh"])["primitives"]:
+        s = doc.index(node["skin"], "skins", f"node {node_i}")
+        if s not in per_skin:
+            skin_joints = np.array([node_to_joint[int(j)] for j in skins[s]["joints"]], dtype=np.int64)
+            # A skin whose bind matrices differ from the canonical ones by one transform M gets v -> M v.
+            fix = np.linalg.inv(ibm[skin_joints]) @ ibm_skin[s]
+            if not np.allclose(fix, fix[:1], atol=1e-4 * max(1.0, float(np.abs(fix).max()))):
+                raise InputError(f"{path}: skins {first} and {s} bind the same joints inconsistently")
+            per_skin[s] = skin_joints, fix[0]
+        skin_joints, M = per_skin[s]
+        for prim in _mesh(doc, meshes, node["mesh"]):
             got = _primitive(doc, prim, materials)
             if got is None:
                 continue
             v, f, col, uv, tex = got
+            check_limit(f"{path}: the meshes have", offset + len(v), "max_vertices", " vertices")
             attrs = prim["attributes"]
             if "JOINTS_0" not in attrs or "WEIGHTS_0" not in attrs:
                 raise InputError(
@@ -411,21 +621,18 @@ def load_gltf(path: str | Path, name: str, fps: float = 30.0) -> RiggedAsset:
             offset += v.shape[0]
 
     # Rigid attachments: unskinned meshes under a joint follow that joint with weight 1.
+    anchor, below = _joint_anchors(parent, node_to_joint, rest_m)
     for i, node in enumerate(nodes):
-        if "mesh" not in node or "skin" in node:
+        if "mesh" not in node or "skin" in node or anchor[i] < 0:
             continue
-        p = int(parent[i])
-        while p >= 0 and p not in node_to_joint:
-            p = int(parent[p])
-        if p < 0:
-            continue
-        jj_i = node_to_joint[p]
-        to_bind = np.linalg.inv(ibm[jj_i]) @ np.linalg.inv(world[p]) @ world[i]
-        for prim in _mesh(doc, meshes, node["mesh"])["primitives"]:
+        jj_i = node_to_joint[int(anchor[i])]
+        to_bind = np.linalg.inv(ibm[jj_i]) @ below[i]
+        for prim in _mesh(doc, meshes, node["mesh"]):
             got = _primitive(doc, prim, materials)
             if got is None:
                 continue
             v, f, col, uv, tex = got
+            check_limit(f"{path}: the meshes have", offset + len(v), "max_vertices", " vertices")
             v = v @ to_bind[:3, :3].T + to_bind[:3, 3]
             verts.append(v)
             faces.append(f + offset)
@@ -460,7 +667,7 @@ def load_gltf(path: str | Path, name: str, fps: float = 30.0) -> RiggedAsset:
     distinct_tex = {t for t in tex_ids if t is not None}
     if len(distinct_tex) == 1 and all(u is not None for u in uvs):
         uv_all = np.concatenate(uvs).astype(np.float32)
-        texture = _texture_png(doc, distinct_tex.pop())
+        texture = _texture_png(doc, distinct_tex.pop(), warnings)
         if texture is None:
             uv_all = None
 
@@ -490,7 +697,7 @@ def load_gltf(path: str | Path, name: str, fps: float = 30.0) -> RiggedAsset:
             "import_warnings": warnings,
         },
     )
-    return asset.validate()
+    return asset
 
 
 MAX_REPAIRED_FRACTION = 0.05
@@ -530,14 +737,18 @@ def _repair_unweighted(
     return ww
 
 
-def _mesh(doc: _Doc, meshes: list[dict[str, Any]], mi: int) -> dict[str, Any]:
-    if not (0 <= mi < len(meshes)):
-        raise InputError(f"{doc.path}: mesh {mi} does not exist")
-    return meshes[mi]
+def _mesh(doc: _Doc, meshes: list[dict[str, Any]], mi: Any) -> list[dict[str, Any]]:
+    """The primitives of mesh ``mi``."""
+    prims = meshes[doc.index(mi, "meshes", "a node")].get("primitives")
+    if not isinstance(prims, list) or not all(isinstance(x, dict) for x in prims):
+        raise InputError(f"{doc.path}: mesh {mi} primitives must be an array of objects")
+    return prims
 
 
 def _primitive(doc: _Doc, prim: dict[str, Any], materials: list[dict[str, Any]]):
     attrs = prim.get("attributes", {})
+    if not isinstance(attrs, dict):
+        raise InputError(f"{doc.path}: primitive attributes must be an object")
     if "POSITION" not in attrs or prim.get("mode", 4) not in (4, 5, 6):
         return None
     v = doc.accessor(attrs["POSITION"]).astype(np.float64)
@@ -546,34 +757,56 @@ def _primitive(doc: _Doc, prim: dict[str, Any], materials: list[dict[str, Any]])
     if not np.all(np.isfinite(v)):
         raise InputError(f"{doc.path}: vertex positions contain NaN or infinity")
     f = _triangles(doc, prim, v.shape[0])
-    mat = materials[prim["material"]] if "material" in prim and prim["material"] < len(materials) else {}
+    mat = materials[doc.index(prim["material"], "materials", "a primitive")] if "material" in prim else {}
     pbr = mat.get("pbrMetallicRoughness", {})
-    base = np.asarray(pbr.get("baseColorFactor", [1, 1, 1, 1]), dtype=np.float64)[:3]
+    pbr = pbr if isinstance(pbr, dict) else {}
+    base = _floats(doc.path, pbr.get("baseColorFactor", [1, 1, 1, 1]), 4, "baseColorFactor")[:3]
     col = np.tile(base, (v.shape[0], 1))
     if "COLOR_0" in attrs:
         c = doc.accessor(attrs["COLOR_0"]).astype(np.float64)
-        col = col * c[:, :3]
-    uv = doc.accessor(attrs["TEXCOORD_0"]).astype(np.float64) if "TEXCOORD_0" in attrs else None
-    tex = pbr.get("baseColorTexture", {}).get("index")
+        if c.shape[0] != v.shape[0] or c.shape[1] < 3:
+            raise InputError(f"{doc.path}: COLOR_0 does not match the vertices")
+        col = col * np.nan_to_num(c[:, :3])
+    uv = None
+    if "TEXCOORD_0" in attrs:
+        uv = doc.accessor(attrs["TEXCOORD_0"]).astype(np.float64)
+        if uv.shape != (v.shape[0], 2) or not np.all(np.isfinite(uv)):
+            uv = None  # unusable UVs: the mesh keeps its colours, without the texture
+    tex = pbr.get("baseColorTexture", {})
+    tex = tex.get("index") if isinstance(tex, dict) else None
+    tex = tex if isinstance(tex, int) and not isinstance(tex, bool) else None
     return v, f, np.clip(col, 0, 1), uv, tex
 
 
-def _texture_png(doc: _Doc, tex_index: int) -> bytes | None:
+MAX_TEXTURE_PIXELS = 8192 * 8192
+
+
+def _texture_png(doc: _Doc, tex_index: Any, warnings: list[str]) -> bytes | None:
     textures = doc.get("textures")
-    if tex_index >= len(textures) or "source" not in textures[tex_index]:
+    if isinstance(tex_index, bool) or not isinstance(tex_index, int) or not 0 <= tex_index < len(textures):
         return None
-    data = doc.image_bytes(int(textures[tex_index]["source"]))
+    data = doc.image_bytes(textures[tex_index].get("source"))
     if data is None:
         return None
-    if data[:8] == b"\x89PNG\r\n\x1a\n":
+    if data[:8] == b"\x89PNG\r\n\x1a\n" and data[12:16] == b"IHDR":
+        w, h = struct.unpack(">II", data[16:24])
+        if w * h > MAX_TEXTURE_PIXELS:
+            warnings.append(f"texture of {w}x{h} pixels dropped (more than {MAX_TEXTURE_PIXELS:,} pixels)")
+            return None
         return data
     try:
         from PIL import Image
 
+        im = Image.open(io.BytesIO(data))
+        if im.width * im.height > MAX_TEXTURE_PIXELS:
+            warnings.append(
+                f"texture of {im.width}x{im.height} pixels dropped (more than {MAX_TEXTURE_PIXELS:,} pixels)"
+            )
+            return None
         buf = io.BytesIO()
-        Image.open(io.BytesIO(data)).convert("RGBA").save(buf, format="PNG")
+        im.convert("RGBA").save(buf, format="PNG")
         return buf.getvalue()
-    except Exception:
+    except Exception:  # an undecodable image: the asset keeps its vertex colours
         return None
 
 
@@ -590,22 +823,20 @@ def _unique_names(names: list[str]) -> list[str]:
 
 
 def _world(local: np.ndarray, parent: np.ndarray) -> np.ndarray:
+    """World transforms of a forest given by ``parent`` (acyclic, see `_hierarchy`), without
+    recursion: a chain of thousands of nodes must not overflow the stack."""
     out = np.empty_like(local)
     done = np.zeros(len(local), dtype=bool)
-
-    def visit(i: int) -> None:
-        if done[i]:
-            return
-        p = parent[i]
-        if p >= 0:
-            visit(int(p))
-            out[i] = out[p] @ local[i]
-        else:
-            out[i] = local[i]
-        done[i] = True
-
     for i in range(len(local)):
-        visit(i)
+        chain = []
+        j = i
+        while j >= 0 and not done[j]:
+            chain.append(j)
+            j = int(parent[j])
+        for k in reversed(chain):
+            p = parent[k]
+            out[k] = out[p] @ local[k] if p >= 0 else local[k]
+            done[k] = True
     return out
 
 
@@ -645,58 +876,88 @@ def _sample(times: np.ndarray, values: np.ndarray, interp: str, t: np.ndarray, i
     return quat_normalize(out) if is_rot else out
 
 
+_WIDTH = {"translation": 3, "rotation": 4, "scale": 3}
+
+
+def _channel(doc: _Doc, ai: int, samplers: list[Any], ch: dict[str, Any], prop: str):
+    """(times, values, interpolation) of one channel, checked against the glTF rules."""
+    si = ch.get("sampler")
+    if isinstance(si, bool) or not isinstance(si, int) or not 0 <= si < len(samplers):
+        raise InputError(f"{doc.path}: animation {ai} refers to a missing sampler")
+    smp = samplers[si]
+    if not isinstance(smp, dict) or "input" not in smp or "output" not in smp:
+        raise InputError(f"{doc.path}: animation {ai} sampler {si} lacks its input or output")
+    interp = smp.get("interpolation", "LINEAR")
+    if interp not in ("LINEAR", "STEP", "CUBICSPLINE"):
+        raise InputError(f"{doc.path}: animation {ai} uses unknown interpolation {interp!r}")
+    times = doc.accessor(smp["input"]).reshape(-1).astype(np.float64)
+    vals = doc.accessor(smp["output"]).astype(np.float64)
+    per_key = 3 if interp == "CUBICSPLINE" else 1  # in-tangent, value, out-tangent
+    if vals.shape != (per_key * len(times), _WIDTH[prop]):
+        raise InputError(
+            f"{doc.path}: animation {ai} sampler {si} has {vals.shape[0]} {prop} values of "
+            f"{vals.shape[1]} components for {len(times)} {interp} keyframes "
+            f"(expected {per_key * len(times)} of {_WIDTH[prop]})"
+        )
+    if not (np.all(np.isfinite(times)) and np.all(np.isfinite(vals))):
+        raise InputError(f"{doc.path}: animation {ai} contains NaN or infinity")
+    if np.any(np.diff(times) < 0):
+        raise InputError(f"{doc.path}: animation {ai} sampler {si} has keyframe times that go backwards")
+    return times, vals, interp
+
+
 def _clips(doc: _Doc, nodes, node_to_joint, rest, order, fps: float) -> dict[str, Clip]:
     clips: dict[str, Clip] = {}
     rest_t = np.array([rest[n][0] for n in order])
     rest_q = np.array([rest[n][1] for n in order])
     rest_s = np.array([rest[n][2] for n in order])
+    total_frames = 0
     for ai, anim in enumerate(doc.get("animations")):
         samplers = anim.get("samplers", [])
+        channels = anim.get("channels", [])
+        if not isinstance(samplers, list) or not isinstance(channels, list):
+            raise InputError(f"{doc.path}: animation {ai} samplers and channels must be arrays")
+        targeted: dict[tuple[int, str], dict[str, Any]] = {}
+        for ch in channels:
+            tgt = ch.get("target", {}) if isinstance(ch, dict) else None
+            if not isinstance(tgt, dict):
+                raise InputError(f"{doc.path}: animation {ai} has a channel without a target")
+            node, prop = tgt.get("node"), tgt.get("path")
+            if isinstance(node, int) and isinstance(prop, str):
+                targeted[node, prop] = ch  # one channel per joint and property: the last one
         chans = []
         t_lo, t_hi = np.inf, -np.inf
-        for ch in anim.get("channels", []):
-            tgt = ch.get("target", {})
-            node, prop = tgt.get("node"), tgt.get("path")
-            if node not in node_to_joint or prop not in ("translation", "rotation", "scale"):
+        for (node, prop), ch in targeted.items():
+            if node not in node_to_joint or prop not in _WIDTH:
                 continue
-            si = ch.get("sampler")
-            if not isinstance(si, int) or si >= len(samplers):
-                raise InputError(f"{doc.path}: animation {ai} refers to a missing sampler")
-            smp = samplers[si]
-            times = doc.accessor(smp["input"]).reshape(-1).astype(np.float64)
-            vals = doc.accessor(smp["output"]).astype(np.float64)
+            times, vals, interp = _channel(doc, ai, samplers, ch, prop)
             if times.size == 0:
                 continue
-            if not (np.all(np.isfinite(times)) and np.all(np.isfinite(vals))):
-                raise InputError(f"{doc.path}: animation {ai} contains NaN or infinity")
-            interp = smp.get("interpolation", "LINEAR")
-            if interp not in ("LINEAR", "STEP", "CUBICSPLINE"):
-                raise InputError(f"{doc.path}: animation {ai} uses unknown interpolation {interp!r}")
             if prop == "rotation":
                 vals = vals[:, [3, 0, 1, 2]]  # xyzw -> wxyz
             chans.append((node_to_joint[node], prop, times, vals, interp))
             t_lo, t_hi = min(t_lo, times[0]), max(t_hi, times[-1])
         if not chans:
             continue
+        name = str(anim.get("name") or f"anim{ai}")
+        check_limit(f"{doc.path}: animation {name!r} lasts", t_hi - t_lo, "max_clip_seconds", " s")
         # Uniform samples from the first key; a partial last step shorter than 1/fps is dropped.
         n = max(1, int(np.floor((t_hi - t_lo) * fps + 1e-3)) + 1)  # float32 key times: 1e-3 frame slack
+        total_frames += n
+        check_limit(f"{doc.path}: the animations have", total_frames, "max_frames", " frames")
+        joint_frames = total_frames * len(order)
+        check_limit(f"{doc.path}: the animations have", joint_frames, "max_elements", " joint-frames")
         t = t_lo + np.arange(n) / fps
-        tr = np.repeat(rest_t[None], n, 0)
-        rq = np.repeat(rest_q[None], n, 0)
-        sc = np.repeat(rest_s[None], n, 0)
+        # float32 from the start: a long clip is not held twice
+        tr = np.repeat(rest_t[None].astype(np.float32), n, 0)
+        rq = np.repeat(rest_q[None].astype(np.float32), n, 0)
+        sc = np.repeat(rest_s[None].astype(np.float32), n, 0)
         for j, prop, times, vals, interp in chans:
             s = _sample(times, vals, interp, t, prop == "rotation")
             {"translation": tr, "rotation": rq, "scale": sc}[prop][:, j] = s
-        name = str(anim.get("name") or f"anim{ai}")
         base, k = name, 1
         while name in clips:
             k += 1
             name = f"{base}.{k}"
-        clips[name] = Clip(
-            name=name,
-            fps=float(fps),
-            rotations=rq.astype(np.float32),
-            translations=tr.astype(np.float32),
-            scales=sc.astype(np.float32),
-        )
+        clips[name] = Clip(name=name, fps=float(fps), rotations=rq, translations=tr, scales=sc)
     return clips

@@ -21,14 +21,20 @@ What becomes of a stage:
 
 from __future__ import annotations
 
+import os
+import re
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..asset import Clip, RiggedAsset, sparsify_weights
+from ..asset import Clip, RiggedAsset
 from ..errors import InputError
 from ..geometry import compose_trs, decompose_trs
+from ..limits import check as check_limit
 
 SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
 _Z_UP_TO_Y_UP = np.array([[1.0, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]])
@@ -47,28 +53,89 @@ def _np_matrices(arr) -> np.ndarray:
 
 
 def load_usd(path: str | Path, name: str) -> RiggedAsset:
-    """Read a UsdSkel asset into a validated `RiggedAsset` named ``name``."""
-    from pxr import Usd, UsdGeom, UsdSkel
+    """Read a UsdSkel asset into a validated `RiggedAsset` named ``name``.
 
+    USD's own warnings and errors (dozens of lines for a cyclic sublayer) are trapped, not printed;
+    a failure is one `InputError` line. ZOOCTL_DEBUG=1 lets them through."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"no such file: {path}")
+    with _trapped_diagnostics():
+        try:
+            return _load(path, name)
+        except InputError as exc:
+            if exc.message.startswith(path.name):
+                raise
+            hint = exc.hint or "export the file again as UsdSkel (SkelRoot, Skeleton, a bound Mesh)"
+            raise InputError(f"{path.name}: {exc.message}", hint=hint) from None
+        except Exception as exc:  # pxr raises Tf.ErrorException (RuntimeError) with many lines
+            raise _bad(path, f"USD could not read it ({_first_line(exc)})", _USD_HINT) from exc
+
+
+_USD_HINT = "check the file is USD (.usda text, .usdc binary or a .usdz package) that opens in usdview"
+
+
+def _first_line(exc: BaseException) -> str:
+    """The telling part of a pxr error: the commentary of its first (root-cause) error, without
+    the C++ function and source location, on one line."""
+    for chunk in re.split(r"Error in '", str(exc)):
+        m = re.search(r"in file \S+ : '(.*)", chunk, flags=re.S)
+        if m:
+            return " ".join(m.group(1).strip().rstrip("'").split())[:300]
+    lines = [ln.strip() for ln in str(exc).strip().splitlines() if ln.strip()]
+    return lines[0][:300] if lines else type(exc).__name__
+
+
+@contextmanager
+def _trapped_diagnostics() -> Iterator[Any]:
+    """Keep USD's C++ diagnostics off the terminal: Tf.DiagnosticTrap catches what goes through
+    Tf's diagnostic manager, and fd 2 is pointed at /dev/null for anything printed directly."""
+    if os.environ.get("ZOOCTL_DEBUG", "") not in ("", "0"):
+        yield None
+        return
+    from pxr import Tf
+
+    trap_cls = getattr(Tf, "DiagnosticTrap", None)  # newer USD releases; fd 2 alone otherwise
+    sys.stderr.flush()
+    saved = os.dup(2)
+    devnull = os.open(os.devnull, os.O_WRONLY)
     try:
-        stage = Usd.Stage.Open(str(path), Usd.Stage.LoadAll)
-    except Exception as exc:  # pxr raises Tf.ErrorException with a multi-line message
-        first = str(exc).strip().splitlines()
+        os.dup2(devnull, 2)
+        if trap_cls is None:
+            yield None
+        else:
+            with trap_cls() as trap:
+                try:
+                    yield trap
+                finally:
+                    trap.Clear()
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
+
+
+def _load(path: Path, name: str) -> RiggedAsset:
+    from pxr import Usd, UsdGeom, UsdSkel
+
+    stage = Usd.Stage.Open(str(path), Usd.Stage.LoadAll)
+    if stage is None:
+        raise _bad(path, "not a readable USD file", _USD_HINT)
+    errors = stage.GetCompositionErrors() if hasattr(stage, "GetCompositionErrors") else []
+    if errors:
         raise _bad(
             path,
-            f"not a readable USD file ({first[-1] if first else type(exc).__name__})",
-            "check the file is USD (.usda text, .usdc binary or a .usdz package)",
-        ) from None
-    if stage is None:
-        raise _bad(path, "not a readable USD file")
+            f"its layers do not compose: {str(errors[0]).split(' (instantiating', 1)[0][:300]}",
+            "fix the sublayers and references it names (a cycle, a missing file)",
+        )
     cache = UsdSkel.Cache()
     found = _find_binding(stage, cache)
     if found is None:
         raise _bad(path, "no UsdSkel skeleton with a bound mesh found")
     skel, skel_query, skinned = found
+    _check_joint_paths(path, skel)
+    if not skel_query:
+        raise _bad(path, f"the skeleton {skel.GetPath()} is invalid")
 
     topo_parents = np.array(skel_query.GetTopology().GetParentIndices(), dtype=np.int32)
     joints = [str(j) for j in skel_query.GetJointOrder()]
@@ -143,6 +210,23 @@ def _find_binding(stage, cache):
     return None
 
 
+def _check_joint_paths(path: Path, skel) -> None:
+    """Duplicate joints or a child listed before its parent make UsdSkel's query invalid with
+    a C++ error; say which joint is wrong instead."""
+    joints = [str(j) for j in (skel.GetJointsAttr().Get() or [])]
+    listed = set(joints)
+    seen: dict[str, int] = {}
+    for i, j in enumerate(joints):
+        if j in seen:
+            raise _bad(path, f"the skeleton lists joint {j!r} twice (joints {seen[j]} and {i})")
+        seen[j] = i
+        parent = j.rsplit("/", 1)[0] if "/" in j else None
+        while parent is not None and parent not in listed:
+            parent = parent.rsplit("/", 1)[0] if "/" in parent else None
+        if parent is not None and parent not in seen:
+            raise _bad(path, f"the skeleton lists joint {j!r} before its parent {parent!r}")
+
+
 def _joint_names(skel, joints: list[str]) -> list[str]:
     written = skel.GetPrim().GetCustomDataByKey("zooctl:jointNames")
     if written is not None and len(written) == len(joints) and len(set(written)) == len(joints):
@@ -168,7 +252,11 @@ def _meshes(path: Path, stage, queries, joints: list[str], world: np.ndarray):
         idx = mesh.GetFaceVertexIndicesAttr().Get()
         if pts is None or counts is None or idx is None or len(pts) == 0:
             continue
+        check_limit("the skinned meshes have", offset + len(pts), "max_vertices", " points")
+        check_limit(f"mesh {q.GetPrim().GetPath()} has", len(idx), "max_elements", " face corners")
         v = np.array(pts, dtype=np.float64)
+        if not np.all(np.isfinite(v)):
+            raise _bad(path, f"mesh {q.GetPrim().GetPath()} has points that are NaN or infinite")
         gb = _np_matrices([q.GetGeomBindTransform(Usd.TimeCode.Default())])[0]
         v = (world @ gb @ np.c_[v, np.ones(len(v))].T).T[:, :3]
         faces = _triangulate(path, np.array(counts, dtype=np.int64), np.array(idx, dtype=np.int64), len(v))
@@ -180,18 +268,17 @@ def _meshes(path: Path, stage, queries, joints: list[str], world: np.ndarray):
         all_w.append((jidx, jw))
         all_c.append(_vertex_primvar(mesh, "displayColor", len(v), 3))
         all_uv.append(_vertex_primvar(mesh, "st", len(v), 2))
-        texture = texture or _texture(q.GetPrim())
+        texture = texture or _texture(q.GetPrim(), path.resolve().parent)
         offset += len(v)
     if not all_v:
         raise _bad(path, "the skinned meshes have no points or faces")
     K = max(w.shape[1] for _, w in all_w)
     sj = np.concatenate([np.pad(j, ((0, 0), (0, K - j.shape[1]))) for j, _ in all_w])
     sw = np.concatenate([np.pad(w, ((0, 0), (0, K - w.shape[1]))) for _, w in all_w])
-    dense = np.zeros((len(sj), len(joints)))
-    np.add.at(dense, (np.arange(len(sj))[:, None], sj), sw)
-    if np.any(dense.sum(1) <= 0):
-        raise _bad(path, f"{int((dense.sum(1) <= 0).sum())} points have no skin weight")
-    sj, sw = sparsify_weights(dense, min(K, 8))
+    sj, sw = _merge_influences(sj, sw)
+    if np.any(sw.sum(1) <= 0):
+        raise _bad(path, f"{int((sw.sum(1) <= 0).sum())} points have no skin weight")
+    sj, sw = _strongest(sj, sw, min(K, 8))
     colors = None
     if all(c is not None for c in all_c):
         colors = np.clip(np.concatenate(all_c), 0, 1).astype(np.float32)
@@ -208,6 +295,34 @@ def _meshes(path: Path, stage, queries, joints: list[str], world: np.ndarray):
         uvs,
         texture if uvs is not None else None,
     )
+
+
+def _merge_influences(sj: np.ndarray, sw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sum the weights of a joint named twice in one point's influences, in (V, K) arrays: a
+    dense (points x joints) matrix would take gigabytes for a large mesh on a large skeleton."""
+    V, K = sj.shape
+    order = np.argsort(sj, axis=1, kind="stable")
+    j = np.take_along_axis(sj, order, 1)
+    w = np.take_along_axis(sw, order, 1)
+    first = np.ones((V, K), dtype=bool)
+    first[:, 1:] = j[:, 1:] != j[:, :-1]
+    group = np.cumsum(first, axis=1) - 1
+    rows = np.broadcast_to(np.arange(V)[:, None], (V, K))
+    merged_w = np.zeros((V, K))
+    np.add.at(merged_w, (rows, group), w)
+    merged_j = np.zeros((V, K), dtype=np.int64)
+    merged_j[rows[first], group[first]] = j[first]
+    return merged_j, merged_w
+
+
+def _strongest(sj: np.ndarray, sw: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The k strongest influences of each point, renormalised, sorted by decreasing weight."""
+    order = np.argsort(-sw, axis=1, kind="stable")[:, :k]
+    w = np.take_along_axis(sw, order, 1)
+    j = np.take_along_axis(sj, order, 1)
+    w = w / w.sum(1, keepdims=True)
+    j[w == 0] = 0
+    return j.astype(np.int32), w.astype(np.float32)
 
 
 def _triangulate(path: Path, counts: np.ndarray, idx: np.ndarray, nverts: int) -> np.ndarray:
@@ -284,8 +399,9 @@ def _vertex_primvar(mesh, name: str, nverts: int, width: int) -> np.ndarray | No
     return None
 
 
-def _texture(prim) -> bytes | None:
-    """The PNG/JPEG bytes of the diffuse UsdUVTexture of the prim's bound material, if any."""
+def _texture(prim, folder: Path) -> bytes | None:
+    """The PNG/JPEG bytes of the diffuse UsdUVTexture of the prim's bound material, if any; only
+    a file inside the USD file's folder (or its package) is read, as for glTF."""
     from pxr import Ar, Usd, UsdShade
 
     mat, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
@@ -298,7 +414,7 @@ def _texture(prim) -> bytes | None:
         f = shader.GetInput("file")
         asset_path = f.Get() if f else None
         resolved = getattr(asset_path, "resolvedPath", "") if asset_path is not None else ""
-        if not resolved:
+        if not resolved or not Path(resolved.split("[", 1)[0]).resolve().is_relative_to(folder):
             continue
         data = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(resolved))
         if data is None:
@@ -329,6 +445,9 @@ def _clips(
     from pxr import Usd, UsdSkel
 
     tcps = float(stage.GetTimeCodesPerSecond() or 24.0)
+    if not (np.isfinite(tcps) and tcps > 0):
+        raise InputError(f"the stage's timeCodesPerSecond is {tcps}; it must be positive")
+    total_frames = 0
     rest_t, rest_q, rest_s = decompose_trs(rest)
     index_of = {j: i for i, j in enumerate(joints)}
     out: list[Clip] = []
@@ -350,9 +469,17 @@ def _clips(
             name, k = f"{base}_{k}", k + 1
         taken.add(name)
         fps = float(prim.GetCustomDataByKey("zooctl:fps") or tcps)
+        if not (np.isfinite(fps) and fps > 0):
+            raise InputError(f"animation {name!r} has fps {fps}; it must be positive")
         samples = sorted(aq.GetJointTransformTimeSamples())
         if samples:
+            check_limit(
+                f"animation {name!r} lasts", (samples[-1] - samples[0]) / tcps, "max_clip_seconds", " s"
+            )
             n = int(round((samples[-1] - samples[0]) / tcps * fps)) + 1
+            total_frames += n
+            check_limit("the animations have", total_frames, "max_frames", " frames")
+            check_limit("the animations have", total_frames * len(joints), "max_elements", " joint-frames")
             times = [samples[0] + i * tcps / fps for i in range(n)]
         else:
             times = [Usd.TimeCode.Default()]
