@@ -8,41 +8,11 @@ import typer
 
 from ._common import JsonOpt, console, print_json, stage_progress, store_root
 
-FORMAT_SUFFIX = {"usd": ".usd", "usda": ".usda", "usdc": ".usdc", "usdz": ".usdz", "glb": ".glb"}
-
 
 def _bank():
     from ..store.bank import Bank
 
     return Bank.open(store_root())
-
-
-def _output_path(fmt: str | None, output: Path | None, name: str) -> tuple[str, Path]:
-    """Resolve --format and -o into (format, path); each defaults from the other."""
-    from ..errors import UsageError
-
-    if fmt is None and output is not None and output.suffix:
-        fmt = output.suffix.lower().lstrip(".")
-        if fmt not in FORMAT_SUFFIX:
-            raise UsageError(
-                f"cannot tell an export format from {output.name!r}",
-                hint=f"use --format with one of {', '.join(FORMAT_SUFFIX)}",
-            )
-    fmt = (fmt or "usdz").lower()
-    if fmt not in FORMAT_SUFFIX:
-        raise UsageError(f"unknown export format {fmt!r}", hint=f"formats: {', '.join(FORMAT_SUFFIX)}")
-    if output is None:
-        output = Path(name + FORMAT_SUFFIX[fmt])
-    elif output.suffix == "":
-        output = output.with_suffix(FORMAT_SUFFIX[fmt])
-    elif output.suffix.lower() != FORMAT_SUFFIX[fmt]:
-        raise UsageError(
-            f"--format {fmt} writes {FORMAT_SUFFIX[fmt]} files, but -o is {output.name!r}",
-            hint=f"name the output *{FORMAT_SUFFIX[fmt]} or pick the format that matches it",
-        )
-    if output.is_dir():
-        raise UsageError(f"-o {output} is a folder", hint="give a file name")
-    return fmt, output
 
 
 def export(
@@ -51,39 +21,40 @@ def export(
         None,
         "--format",
         "-f",
-        help="usd (binary), usda (text), usdc, usdz or glb. Default: from -o, else usdz.",
+        help="Any registered exporter's format: usd (binary), usda (text), usdc, usdz, glb, bvh, or a "
+        "plugin's (`zooctl plugins`). Default: from -o, else usdz.",
     ),
     clip: list[str] = typer.Option(None, "--clip", help="Export only this clip (repeatable)."),
     all_clips: bool = typer.Option(
         False, "--all-clips", help="Export every clip (the default when no --clip is given)."
     ),
     output: Path = typer.Option(
-        None, "--output", "-o", help="File to write. Default: NAME plus the format's suffix."
+        None,
+        "--output",
+        "-o",
+        help="File to write, or an existing folder to write NAME plus the format's suffix into. Default: NAME plus the suffix.",
     ),
     camera: bool = typer.Option(
         False, "--camera", help="USD only: add a camera (/Camera) framing the clips."
     ),
     json_out: bool = JsonOpt,
 ) -> None:
-    """Export a bank asset with its skeleton, skin and clips as USD (UsdSkel) or glTF (.glb)."""
+    """Export a bank asset with its skeleton, skin and clips through an exporter: USD (UsdSkel),
+    glTF (.glb), BVH (skeleton and motion) or a plugin's format."""
     import time
 
     from ..errors import UsageError
-    from ..plugins import get_registry
+    from ..io.export import check_writable, export_asset, resolve_export
 
     if clip and all_clips:
         raise UsageError("--clip and --all-clips cannot be used together", hint="drop one of them")
-    fmt, path = _output_path(fmt, output, name)
-    spec = get_registry().exporter_for(fmt)
-    if spec is None:
-        raise UsageError(f"no exporter for format {fmt!r}", hint="see `zooctl plugins`")
+    spec, fmt, path = resolve_export(output, fmt, name, default_format="usdz")
+    check_writable(path)
     asset = _bank().get(name)
-    if not path.parent.exists():
-        raise UsageError(f"the folder {path.parent} does not exist", hint="create it first")
     t0 = time.perf_counter()
     options = {}
     if camera:
-        if fmt == "glb":
+        if spec.name != "usd":
             raise UsageError("--camera is for USD exports", hint="drop --camera, or export usd/usda/usdz")
         import numpy as np
 
@@ -97,7 +68,7 @@ def export(
             if c in asset.clips
         ]
         options["camera"] = fit_camera(np.concatenate(pts), 720, 1280)
-    spec.save(asset, path, list(clip) if clip else None, **options)
+    path = export_asset(asset, path, fmt, list(clip) if clip else None, **options)
     seconds = time.perf_counter() - t0
     clips = list(clip) if clip else list(asset.clips)
     if json_out:

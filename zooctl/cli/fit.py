@@ -76,6 +76,16 @@ def fit(
         help="Retrieved templates to try with a short fit each; the best one's fit goes on in full (default 3; 1: the top result).",
     ),
     device: str = typer.Option(None, "--device", help="cpu or cuda."),
+    renderer: str = typer.Option(
+        None,
+        "--renderer",
+        help="Silhouette renderer of both stages, by its registered name: soft (default), fast, or a plugin's (`zooctl plugins`).",
+    ),
+    articulation: str = typer.Option(
+        None,
+        "--articulation",
+        help="Articulation model, by its registered name: casa (default), dqs, lbs, or a plugin's (`zooctl plugins`).",
+    ),
     focal: float = typer.Option(
         None, "--focal", help="Focal length in pixels of the input frames (default: estimated)."
     ),
@@ -108,6 +118,10 @@ def fit(
         cfg.trials.candidates = candidates
     if device is not None:
         cfg.device = device
+    if renderer is not None:
+        cfg.stage1.renderer = cfg.stage2.renderer = renderer
+    if articulation is not None:
+        cfg.articulation = articulation
     if focal is not None:
         cfg.camera.focal = focal
     if seed is not None:

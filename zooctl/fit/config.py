@@ -42,7 +42,7 @@ class StageConfig:
     lr: float = 5e-2  # rotations, root transforms, skinning logits
     lr_shape: float = 1e-3  # global scale, bone scales and the displacement field
     batch: int = 8  # frames per step (stage 2: a contiguous window, so flow sees frame pairs)
-    renderer: str = "soft"  # silhouette renderer: soft (SoftRas) or fast (splatting)
+    renderer: str = "soft"  # a registered silhouette renderer: soft (SoftRas), fast (splatting), plugins
     lr_final: float = 1.0  # learning rates decay (cosine) to this fraction of theirs by the last step
 
 
@@ -95,6 +95,7 @@ class FitConfig:
 
     preset: str = "fast"
     device: str = "cpu"
+    articulation: str = "casa"  # a registered articulation model (`zooctl plugins`): casa, dqs, lbs
     seed: int = 0
     fit_size: int = 128  # longest side (px) of the images the losses see
     max_frames: int | None = None
@@ -147,8 +148,8 @@ class FitConfig:
                 raise UsageError(f"{name}: iters >= 0, batch >= 1 and positive learning rates are required")
             if not 0 < st.lr_final <= 1:
                 raise UsageError(f"{name}: lr_final must be in (0, 1]")
-            if st.renderer not in ("soft", "fast"):
-                raise UsageError(f"{name}: renderer {st.renderer!r} is not soft or fast")
+            _check_registered("renderer", st.renderer, f"{name}.renderer")
+        _check_registered("articulation_model", self.articulation, "articulation")
         if self.camera.focal is not None and self.camera.focal <= 0:
             raise UsageError(f"--focal {self.camera.focal} must be positive (pixels)")
         if self.max_frames is not None and self.max_frames < 1:
@@ -158,6 +159,19 @@ class FitConfig:
                 "trials: candidates >= 1 and iters >= 0 are required", hint="e.g. --candidates 3"
             )
         return self
+
+
+def _check_registered(kind: str, name: Any, where: str) -> None:
+    """Names of components are checked against the plugin registry at run time (not the schema),
+    so a plugin's renderer or articulation model is accepted like a built-in one."""
+    from ..plugins import get_registry
+
+    known = get_registry().names(kind)
+    if name not in known:
+        raise UsageError(
+            f"{where}: no {kind.replace('_', ' ')} named {name!r}",
+            hint=f"registered: {', '.join(known) or 'none'} (see `zooctl plugins`)",
+        )
 
 
 def _merge(obj: Any, data: dict[str, Any], where: str) -> None:

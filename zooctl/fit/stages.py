@@ -25,9 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from ..render.fast import SplatSilhouette
-from ..render.raster import FlowRenderer
-from ..render.soft import SoftSilhouette
+from ..render.base import check_silhouette, get_renderer
 from .config import FitConfig, StageConfig
 from .losses import MaskTargets, contour_loss, flow_loss, root_smoothness, soft_iou_loss
 from .scene import FitScene
@@ -75,12 +73,10 @@ class StageRunner:
         self.scene, self.targets, self.cfg, self.stage = scene, targets, cfg, stage
         self.st = stage_config(cfg, stage)
         size = (scene.height, scene.width)
-        self.silhouette = (
-            SoftSilhouette(size, sigma=cfg.soft_sigma)
-            if self.st.renderer == "soft"
-            else SplatSilhouette(size)
-        )
-        self.flow_renderer = FlowRenderer()
+        # Renderers come from the registry (plugins included); soft_sigma is the soft renderer's.
+        options = {"sigma": cfg.soft_sigma} if self.st.renderer == "soft" else {}
+        self.silhouette = get_renderer(self.st.renderer, size, device=cfg.device, **options)
+        self.flow_renderer = get_renderer("flow", size, device=cfg.device)
         self.gen = np.random.default_rng([cfg.seed, stage])
         present = targets.masks.present.cpu().numpy()
         self.present_idx = np.nonzero(present)[0]
@@ -118,7 +114,9 @@ class StageRunner:
         cam = scene.camera(len(frames))
         weight = tg.masks.present[frames].to(verts.dtype)
         terms: dict[str, Tensor] = {}
-        sil = self.silhouette(verts, scene.faces, cam)
+        sil = check_silhouette(
+            self.st.renderer, self.silhouette(verts, scene.faces, cam), len(frames), scene.height, scene.width
+        )
         terms["mask"] = w.mask * soft_iou_loss(sil, tg.masks.coverage[frames], weight)
         xy, _ = cam.project(verts)
         terms["contour"] = w.dt * contour_loss(xy, frames, tg.masks, weight)
