@@ -123,7 +123,9 @@ def register_flow_estimators(register):
 
 @hookspec
 def register_executors(register):
-    """Register executors that run pipeline jobs (locally, in a pool, on a cluster).
+    """RESERVED, not called by any command yet: executors will run pipeline jobs (locally, in a
+    pool, on a cluster) when the scale-out work lands. zooctl ships no executor and nothing uses
+    one; implementing this hook today has no effect (`zooctl plugins` marks it unused).
 
     :param register: call ``register(ComponentSpec("executor", name, factory))``.
 
