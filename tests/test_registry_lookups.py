@@ -90,3 +90,11 @@ def test_plugin_renderer_passes_validation_and_the_schema_and_is_used(with_plugi
     before = CountingSoft.calls
     total, _ = runner.loss(torch.arange(2))
     assert CountingSoft.calls == before + 1 and torch.isfinite(total)
+
+
+def test_old_dt_weight_is_read_as_contour_with_a_warning():
+    with pytest.warns(FutureWarning, match="weights.dt is deprecated"):
+        cfg = FitConfig.from_dict({"weights": {"dt": 0.25}})
+    assert cfg.weights.contour == 0.25 and "dt" not in cfg.to_dict()["weights"]
+    with pytest.raises(UsageError, match="both 'dt' and its new name 'contour'"):
+        FitConfig.from_dict({"weights": {"dt": 0.25, "contour": 0.5}})

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -51,7 +52,7 @@ class LossWeights:
     """lambda1 E_cue (mask + beta * flow) + lambda2 E_smooth + lambda3 E_symm + regularisers."""
 
     mask: float = 1.0  # lambda1 (soft-silhouette IoU loss)
-    dt: float = 0.5  # contour term: distance transform of the mask (long-range gradient)
+    contour: float = 0.5  # `contour_loss`: vertices outside the mask, mask far from vertices (was ``dt``)
     flow: float = 0.05  # beta: mean |rendered flow - observed flow| in pixels of the fit image
     smooth: float = 10.0  # lambda2: CASA eq. 6 on joint rotations
     root_smooth: float = 10.0  # smoothness of the per-frame root transform
@@ -174,9 +175,25 @@ def _check_registered(kind: str, name: Any, where: str) -> None:
         )
 
 
+# Config keys renamed since fits were first stored: old name -> new name, per section.
+RENAMED = {LossWeights: {"dt": "contour"}}
+
+
 def _merge(obj: Any, data: dict[str, Any], where: str) -> None:
     if not isinstance(data, dict):
         raise InputError(f"{where} must be a JSON object")
+    for old, new in RENAMED.get(type(obj), {}).items():
+        if old in data:
+            if new in data:
+                raise InputError(
+                    f"{where}: both {old!r} and its new name {new!r} are given", hint=f"drop {old!r}"
+                )
+            warnings.warn(
+                f"{where}.{old} is deprecated: it is now {where}.{new} (read as that)",
+                FutureWarning,
+                stacklevel=3,
+            )
+            data = {new if k == old else k: v for k, v in data.items()}
     names = {f.name: f for f in dataclasses.fields(obj)}
     for key, value in data.items():
         if key not in names:
