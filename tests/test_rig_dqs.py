@@ -70,3 +70,20 @@ def test_no_candy_wrapper_at_a_180_degree_twist():
         radii[name] = float(v[joint_ring][:, 1:].norm(dim=-1).mean())
     assert radii["lbs"] < 0.05 * radius  # collapsed onto the bone
     assert abs(radii["dqs"] - radius) < 1e-4 * radius  # kept
+
+
+def test_dense_and_gathered_blends_agree(monkeypatch):
+    """Rigs of up to DENSE_MAX_JOINTS joints blend through dense weights, larger ones by gathering."""
+    import zooctl.rig.dqs as dqs
+
+    gen = torch.Generator().manual_seed(2)
+    pts = torch.randn(40, 3, generator=gen, dtype=torch.float64)
+    bones = torch.randint(0, 6, (40, 3), generator=gen)
+    w = torch.softmax(torch.randn(40, 3, generator=gen, dtype=torch.float64), -1)
+    mats = _rigid(
+        2 * torch.randn(4, 6, 3, generator=gen, dtype=torch.float64),
+        torch.randn(4, 6, 3, dtype=torch.float64),
+    )
+    dense = dqs.dual_quaternion_skinning(pts, mats, bones, w)
+    monkeypatch.setattr(dqs, "DENSE_MAX_JOINTS", 0)
+    torch.testing.assert_close(dqs.dual_quaternion_skinning(pts, mats, bones, w), dense, atol=1e-12, rtol=0)

@@ -19,7 +19,7 @@ import torch
 
 from .model import ArticulatedModel
 from .rotations import matrix_to_quat, quat_mul, quat_rotate
-from .skinning import stretch_offsets
+from .skinning import DENSE_MAX_JOINTS, stretch_offsets
 
 Tensor = torch.Tensor
 
@@ -54,18 +54,31 @@ def dual_quaternion_skinning(
     S = R.transpose(-1, -2) @ A  # (..., J, 3, 3): identity for rigid bones
     q = matrix_to_quat(R)  # (..., J, 4)
     qe = 0.5 * quat_mul(torch.cat((torch.zeros_like(t[..., :1]), t), -1), q)
-    qk, qek = q[..., bones, :], qe[..., bones, :]  # (..., V, K, 4)
-    # q and -q are one rotation: flip each candidate into the first candidate's hemisphere.
-    sign = torch.where((qk * qk[..., :1, :]).sum(-1, keepdim=True) < 0, -1.0, 1.0).to(q.dtype)
-    w = weights[..., None] * sign
-    b0, be = (w * qk).sum(-2), (w * qek).sum(-2)  # (..., V, 4)
+    with torch.no_grad():  # q and -q are one rotation: flip each candidate into the first one's hemisphere
+        qk = q[..., bones, :]  # (..., V, K, 4)
+        sign = torch.where((qk * qk[..., :1, :]).sum(-1) < 0, -1.0, 1.0).to(q.dtype)  # (..., V, K)
+    J = mats.shape[-3]
+    signed = weights * sign
+    if J <= DENSE_MAX_JOINTS:
+        # Blend through dense (..., V, J) weights and one matmul each, as linear_blend_skinning does.
+        idx = bones.expand(signed.shape)
+        dense_s = signed.new_zeros(signed.shape[:-1] + (J,)).scatter_add(-1, idx, signed)
+        b = dense_s @ torch.cat((q, qe), -1)  # (..., V, 8)
+        dense = weights.new_zeros(weights.shape[:-1] + (J,)).scatter_add(
+            -1, bones.expand(weights.shape), weights
+        )
+        Sb = (dense @ S.flatten(-2)).unflatten(-1, (3, 3))  # (..., V, 3, 3)
+        b0, be = b[..., :4], b[..., 4:]
+    else:
+        b0 = (signed[..., None] * q[..., bones, :]).sum(-2)
+        be = (signed[..., None] * qe[..., bones, :]).sum(-2)
+        Sb = (weights[..., None, None] * S[..., bones, :, :]).sum(-3)
     n = b0.norm(dim=-1, keepdim=True).clamp_min(eps)
     c0, ce = b0 / n, be / n
     w0, cv = c0[..., :1], c0[..., 1:]
     we, ev = ce[..., :1], ce[..., 1:]
     trans = 2.0 * (w0 * ev - we * cv + torch.linalg.cross(cv, ev))  # vec(2 ce conj(c0))
-    Sb = (weights[..., None, None] * S[..., bones, :, :]).sum(-3)  # (..., V, 3, 3)
-    p = (Sb @ points[..., None]).squeeze(-1)
+    p = (Sb * points[..., None, :]).sum(-1)  # S_b p, elementwise: a bmm of 3x3s is slower
     out = quat_rotate(c0, p) + trans
     if stretch is not None:
         out = out + stretch_offsets(mats, bones, weights, stretch, endpoint)
