@@ -104,11 +104,8 @@ class FitConfig:
     checkpoint_every: int = 25  # steps between saved states (for --resume)
     hidden: int = 64  # displacement MLP width
     camera: CameraConfig = field(default_factory=CameraConfig)
-    # Learning rates above CASA's (5e-2 / 4e-3) with a cosine decay: ~160 updates per frame instead
-    # of CASA's 200 epochs need larger early steps, and the decay settles them (bench: +0.1 mask IoU).
-    # Stage 2 keeps improving with steps (400 -> 800: mean mask IoU 0.792 -> 0.825 over the 28
-    # benchmark videos); 1,000 keeps a 60-frame, 4,000-vertex fit with the template trials well
-    # inside 3 minutes on a 2-core CPU (BENCHMARKS.md, Fit).
+    # Learning rates above CASA's with a cosine decay, and 1,000 stage-2 iterations: why and what
+    # they were measured to give is in BENCHMARKS.md ("Fit schedule").
     stage1: StageConfig = field(
         default_factory=lambda: StageConfig(
             iters=60, lr=5e-2, lr_shape=5e-2, batch=16, renderer="soft", lr_final=0.1

@@ -122,8 +122,9 @@ def linear_blend_skinning(
     A = mats[..., :3, :]  # (..., J, 3, 4): affine part only
     J = mats.shape[-3]
     if J <= DENSE_MAX_JOINTS:
-        # Scatter the K candidates into dense (V, J) weights and blend with one matmul: ~4x faster
-        # forward + backward than gathering (V, K, 3, 4) matrices (whose backward is a scatter-add).
+        # Scatter the K candidates into dense (V, J) weights and blend with one matmul: faster
+        # forward + backward than gathering (V, K, 3, 4) matrices, whose backward is a scatter-add
+        # (BENCHMARKS.md, "Measurements behind code choices").
         idx = bones.expand(weights.shape)
         dense = weights.new_zeros(weights.shape[:-1] + (J,)).scatter_add(-1, idx, weights)
         blended = (dense @ A.flatten(-2)).unflatten(-1, (3, 4))  # (..., V, 3, 4)
