@@ -34,20 +34,8 @@ def example(tmp_path_factory):
     assert zooctl("toyrig", "worm", "-o", str(toy), "--bones", "3", env=env).code == 0
     r = zooctl("bank", "add", str(toy), store=store, env=env)
     assert r.code == 0, r.err
-    r = zooctl(
-        "bench",
-        "make",
-        "--asset",
-        "worm",
-        "--out",
-        str(root / "videos"),
-        "--frames",
-        "6",
-        "--size",
-        "48",
-        store=store,
-        env=env,
-    )
+    make = f"bench make --asset worm --out {root / 'videos'} --frames 6 --size 48"
+    r = zooctl(*make.split(), store=store, env=env)
     assert r.code == 0, r.err
     return env, store, root
 

@@ -29,10 +29,7 @@ def export(
         False, "--all-clips", help="Export every clip (the default when no --clip is given)."
     ),
     output: Path = typer.Option(
-        None,
-        "--output",
-        "-o",
-        help="File to write, or an existing folder to write NAME plus the format's suffix into. Default: NAME plus the suffix.",
+        None, "--output", "-o", help="File or existing folder. Default: NAME.suffix here."
     ),
     camera: bool = typer.Option(
         False, "--camera", help="USD only: add a camera (/Camera) framing the clips."

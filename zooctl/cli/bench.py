@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import typer
 
-from ._common import JsonOpt, console, print_json
+from ._common import ArticulationOpt, JsonOpt, console, print_json
 
 app = typer.Typer(help="Benchmark renderers and the articulation model.", no_args_is_help=True)
 
@@ -39,9 +39,7 @@ def rig(
     vertices: int = typer.Option(4000, "--vertices", help="Vertices of the benchmark tube rig."),
     joints: int = typer.Option(50, "--joints", help="Joints in its chain."),
     frames: int = typer.Option(8, "--frames", help="Frames posed together."),
-    articulation: str = typer.Option(
-        "casa", "--articulation", help="A registered articulation model: casa, dqs, lbs or a plugin's."
-    ),
+    articulation: str = ArticulationOpt,
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     repeats: int = typer.Option(5, "--repeats", help="Timed runs (the median is reported)."),
     json_out: bool = JsonOpt,
@@ -49,14 +47,7 @@ def rig(
     """Milliseconds per frame of FK + skinning (casa: stretchable LBS), forward + backward."""
     from ..render.benchmark import bench_rig
 
-    res = bench_rig(
-        vertices=vertices,
-        joints=joints,
-        frames=frames,
-        device=device,
-        repeats=repeats,
-        articulation=articulation,
-    )
+    res = bench_rig(vertices, joints, frames, device, repeats, articulation=articulation or "casa")
     if json_out:
         print_json(res)
     else:

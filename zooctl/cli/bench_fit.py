@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from ._common import JsonOpt, console, err_console, print_json, store_root
+from ._common import ArticulationOpt, JsonOpt, RendererOpt, console, err_console, print_json, store_root
 
 
 def _assets(bank_path: Path | None, names: list[str] | None):
@@ -72,16 +72,8 @@ def run(
         "--known-camera",
         help="Give each fit its video's camera rotations (CASA's protocol on synthetic data) instead of estimating the camera's motion.",
     ),
-    renderer: str = typer.Option(
-        None,
-        "--renderer",
-        help="Silhouette renderer of both stages (a registered name; default: the preset's).",
-    ),
-    articulation: str = typer.Option(
-        None,
-        "--articulation",
-        help="Articulation model (a registered name: casa, dqs, lbs, plugins; default casa).",
-    ),
+    renderer: str = RendererOpt,
+    articulation: str = ArticulationOpt,
     report: Path = typer.Option(None, "--report", help="Also write the markdown table here."),
     json_out: bool = JsonOpt,
 ) -> None:

@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from ..fit.config import PRESETS
-from ._common import console, err_console, print_json, store_root
+from ._common import ArticulationOpt, RendererOpt, console, err_console, print_json, store_root
 
 PRESET_ITERS = {name: make().stage2.iters for name, make in PRESETS.items()}
 
@@ -76,16 +76,8 @@ def fit(
         help="Retrieved templates to try with a short fit each; the best one's fit goes on in full (default 3; 1: the top result).",
     ),
     device: str = typer.Option(None, "--device", help="cpu or cuda."),
-    renderer: str = typer.Option(
-        None,
-        "--renderer",
-        help="Silhouette renderer of both stages, by its registered name: soft (default), fast, or a plugin's (`zooctl plugins`).",
-    ),
-    articulation: str = typer.Option(
-        None,
-        "--articulation",
-        help="Articulation model, by its registered name: casa (default), dqs, lbs, or a plugin's (`zooctl plugins`).",
-    ),
+    renderer: str = RendererOpt,
+    articulation: str = ArticulationOpt,
     focal: float = typer.Option(
         None, "--focal", help="Focal length in pixels of the input frames (default: estimated)."
     ),

@@ -34,14 +34,9 @@ def orthonormalize(m: Tensor, eps: float = 1e-12) -> Tensor:
 
 
 def dual_quaternion_skinning(
-    points: Tensor,
-    mats: Tensor,
-    bones: Tensor,
-    weights: Tensor,
-    stretch: Tensor | None = None,
-    endpoint: Tensor | None = None,
-    eps: float = 1e-12,
-) -> Tensor:
+    points: Tensor, mats: Tensor, bones: Tensor, weights: Tensor,
+    stretch: Tensor | None = None, endpoint: Tensor | None = None,
+) -> Tensor:  # fmt: skip
     """Posed vertices by dual-quaternion blending (same signature as `linear_blend_skinning`).
 
     points (V, 3) or (..., V, 3) bind vertices; mats (..., J, 4, 4) skinning matrices
@@ -73,7 +68,7 @@ def dual_quaternion_skinning(
         b0 = (signed[..., None] * q[..., bones, :]).sum(-2)
         be = (signed[..., None] * qe[..., bones, :]).sum(-2)
         Sb = (weights[..., None, None] * S[..., bones, :, :]).sum(-3)
-    n = b0.norm(dim=-1, keepdim=True).clamp_min(eps)
+    n = b0.norm(dim=-1, keepdim=True).clamp_min(1e-12)
     c0, ce = b0 / n, be / n
     w0, cv = c0[..., :1], c0[..., 1:]
     we, ev = ce[..., :1], ce[..., 1:]
