@@ -98,3 +98,25 @@ def test_old_dt_weight_is_read_as_contour_with_a_warning():
     assert cfg.weights.contour == 0.25 and "dt" not in cfg.to_dict()["weights"]
     with pytest.raises(UsageError, match="both 'dt' and its new name 'contour'"):
         FitConfig.from_dict({"weights": {"dt": 0.25, "contour": 0.5}})
+
+
+def test_bench_takes_component_names(tmp_path):
+    r = zooctl("bench", "run", str(tmp_path), "--articulation", "nope", store=tmp_path / "s")
+    assert r.code == 2 and "no articulation model named 'nope'" in r.err and "Traceback" not in r.err
+    r = zooctl(
+        "bench",
+        "rig",
+        "--articulation",
+        "dqs",
+        "--vertices",
+        "200",
+        "--joints",
+        "4",
+        "--frames",
+        "2",
+        "--repeats",
+        "1",
+        "--json",
+    )
+    assert r.code == 0, r.err
+    assert r.json()["benchmark"] == "fk+dqs" and r.json()["ms_per_frame"] > 0
