@@ -16,8 +16,8 @@ from zooctl.render.preview import (
     contact_sheet,
     fit_camera,
     orbit_camera,
-    rasterize,
     render_asset,
+    zbuffer_mesh,
 )
 
 
@@ -34,7 +34,7 @@ def test_rasterizer_covers_the_projected_square_and_keeps_the_nearest():
     v = torch.tensor(np.concatenate([far_v, near_v]))
     f = torch.tensor(np.concatenate([far_f, near_f + 4]))
     xy, z = cam.project(v[None])
-    ids, bary = rasterize(xy[0], z[0], f, 64, 64)
+    ids, bary = zbuffer_mesh(xy[0], z[0], f, 64, 64)
     # Expected footprint of the far square: half-width 2 at distance 10, focal 32 / tan(15 deg).
     focal = 32 / np.tan(np.radians(15))
     half_px = 2 * focal / 10

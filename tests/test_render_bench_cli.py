@@ -46,7 +46,7 @@ def test_bench_rig_and_bad_options():
     assert res.code == 0, res.err
     assert res.json()["joints"] == 5
     bad = zooctl("bench", "render", "--renderer", "nope")
-    assert bad.code == 2 and "unknown renderer" in bad.err and "Traceback" not in bad.err
+    assert bad.code == 2 and "no renderer named" in bad.err and "Traceback" not in bad.err
     if not torch.cuda.is_available():
         nocuda = zooctl("bench", "render", "--device", "cuda")
         assert nocuda.code == 2 and "CUDA" in nocuda.err

@@ -15,9 +15,9 @@ import torch
 
 from zooctl.render import _kernels
 from zooctl.render.camera import look_at
-from zooctl.render.fast import SplatSilhouette, _SplatSilhouetteKernel, subdivision_barycentrics
 from zooctl.render.raster import FlowRenderer, interpolate, rasterize
 from zooctl.render.soft import SoftSilhouette, _SoftSilhouetteKernel
+from zooctl.render.splat import SplatSilhouette, _SplatSilhouetteKernel, subdivision_barycentrics
 from zooctl.render.windows import face_windows, project_faces
 from zooctl.rig.synthetic import uv_sphere
 

@@ -86,3 +86,31 @@ def test_export_through_the_console_script(store, tmp_path):
     r = zooctl("bank", "export", "snake", "-o", str(tmp_path / "snake.usd"))
     assert r.code == 0, r.err
     assert (tmp_path / "snake.usd").read_bytes()[:8] == b"PXR-USDC"
+
+
+def test_export_into_a_folder_and_unwritable_places(store, tmp_path, capsys):
+    """Issue 18 item 5: -o an existing folder writes NAME.suffix inside it; an unwritable -o is one
+    clear error (not a FileNotFoundError on the temporary)."""
+    import os
+    import stat
+
+    assert run_inprocess(capsys, "bank", "seed", "--plan", "fish", "--no-variants").code == 0
+    folder = tmp_path / "out"
+    folder.mkdir()
+    r = run_inprocess(capsys, "bank", "export", "fish", "--format", "glb", "-o", str(folder), "--json")
+    assert r.code == 0, r.err
+    assert r.json()["path"] == str(folder / "fish.glb") and (folder / "fish.glb").is_file()
+    assert not (tmp_path / "out.glb").exists()
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(stat.S_IRUSR | stat.S_IXUSR)
+    try:
+        targets = [str(locked / "x.glb"), "/proc/zooctl-export-test.glb"]
+        for target in targets:
+            if target.startswith(str(locked)) and os.access(locked, os.W_OK):
+                continue  # root writes anywhere: the /proc case still checks the error path
+            r = run_inprocess(capsys, "bank", "export", "fish", "-o", target)
+            assert r.code == 2 and "cannot write" in r.err and "Traceback" not in r.err, (target, r.err)
+    finally:
+        locked.chmod(stat.S_IRWXU)
+    assert list(locked.iterdir()) == []

@@ -50,14 +50,29 @@ class ExporterSpec:
 
     ``save(asset, path, clips, **options)`` writes ``path`` (choosing the container from its
     suffix where the format has several), with the named ``clips`` (``None``: all clips).
-    ``formats`` are the ``--format`` values it serves (``("usd", "usda", "usdz")``).
+    ``formats`` are the ``--format`` values it serves (``("usd", "usda", "usdz")``) and
+    ``suffixes`` the file suffix of each, in the same order (default: ``"." + format``); every
+    export command resolves paths and formats through them (`zooctl.io.export.export_asset`).
     """
 
     name: str
     formats: tuple[str, ...]
     save: Callable[..., None]
     description: str = ""
+    suffixes: tuple[str, ...] = ()
     kind: str = field(default="exporter", init=False)
+
+    def __post_init__(self) -> None:
+        formats = tuple(f.lower() for f in self.formats)
+        suffixes = tuple(s.lower() for s in self.suffixes) or tuple("." + f for f in formats)
+        if len(suffixes) != len(formats) or not all(s.startswith(".") for s in suffixes):
+            raise ValueError(f"exporter {self.name!r}: one suffix with a dot per format, got {suffixes}")
+        object.__setattr__(self, "formats", formats)
+        object.__setattr__(self, "suffixes", suffixes)
+
+    def suffix_for(self, fmt: str) -> str:
+        """The file suffix (with the dot) of one of this exporter's formats."""
+        return self.suffixes[self.formats.index(fmt.lower())]
 
 
 @dataclass(frozen=True)

@@ -43,7 +43,9 @@ def register_exporters(register):
     :param register: call ``register(ExporterSpec(name, formats, save))`` once per exporter.
 
     ``save(asset, path, clips=None, **options)`` writes the asset (and the named clips, or all) to
-    ``path``. It must write atomically: a temporary beside ``path``, then ``os.replace``.
+    ``path``. It must write atomically: a temporary beside ``path``, then ``os.replace``. The
+    spec's ``suffixes`` (one per format) let every export command resolve paths
+    (`zooctl.io.export.export_asset`).
     """
 
 
@@ -69,7 +71,9 @@ def register_renderers(register):
 
     ``factory(image_size, device="cpu", **options)`` returns a ``torch.nn.Module``-like object whose
     call maps batched posed vertices (B, V, 3), faces (F, 3) and a `zooctl.render.camera` camera
-    batch to the images it renders; its docstring states the outputs.
+    batch to the images it renders: (B, H, W) coverage for a silhouette renderer (what
+    ``zooctl fit --renderer NAME`` uses), a dict with ``flow`` for a flow renderer. The interfaces
+    are in `zooctl.render.base`.
     """
 
 
@@ -81,7 +85,8 @@ def register_articulation_models(register):
 
     ``factory(asset, device="cpu", **options)`` returns a ``torch.nn.Module`` that maps per-frame
     joint rotations and a root transform to posed vertices (T, V, 3) and joint positions (T, J, 3),
-    and owns its learnable shape parameters (bone scales, skinning, offsets).
+    and owns its learnable shape parameters (bone scales, skinning, offsets); ``zooctl fit
+    --articulation NAME`` uses it. The full interface is in `zooctl.rig.base`.
     """
 
 
@@ -123,7 +128,9 @@ def register_flow_estimators(register):
 
 @hookspec
 def register_executors(register):
-    """Register executors that run pipeline jobs (locally, in a pool, on a cluster).
+    """RESERVED, not called by any command yet: executors will run pipeline jobs (locally, in a
+    pool, on a cluster) when the scale-out work lands. zooctl ships no executor and nothing uses
+    one; implementing this hook today has no effect (`zooctl plugins` marks it unused).
 
     :param register: call ``register(ComponentSpec("executor", name, factory))``.
 

@@ -71,6 +71,8 @@ def run_benchmark(
     for a in abl:
         if a not in ABLATIONS:
             raise UsageError(f"unknown ablation {a!r}", hint=f"use {', '.join(ABLATIONS)}")
+    if overrides:  # a bad component name is one error up front, not one per video
+        FitConfig.from_dict(json.loads(json.dumps(overrides)), preset(preset_name))
     vids = bench_videos(folder)[: limit or None]
     bank = Bank.open(store_root)
     rows = []
@@ -119,6 +121,7 @@ def run_benchmark(
         "preset": preset_name,
         "known_camera": known_camera,
         "own_template": own_template,
+        "overrides": overrides or {},
     }
 
 
@@ -136,6 +139,8 @@ def markdown_table(res: dict[str, Any]) -> str:
     lines = [f"Camera motion: {camera}."]
     if res.get("own_template"):
         lines.append("Template: each video's own asset (no retrieval).")
+    if res.get("overrides"):
+        lines.append(f"Config overrides: {json.dumps(res['overrides'], sort_keys=True)}.")
     lines += ["", head, "|" + "---|" * 9]
     f = lambda x: "-" if x is None else f"{x:.3f}"  # noqa: E731
     for a, s in res["summary"].items():

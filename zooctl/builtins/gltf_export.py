@@ -1,4 +1,4 @@
-"""Built-in glTF binary exporter (``glb``)."""
+"""Built-in exporters: glTF binary (``glb``) and BVH (``bvh``, `zooctl.builtins.bvh`)."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ from pathlib import Path
 
 from ..components import ExporterSpec
 from ..plugins import hookimpl
+from .bvh import register_bvh
 
 
 def _save(asset, path: Path, clips=None, **options):
@@ -21,3 +22,4 @@ def register_exporters(register):
             "glb", ("glb",), _save, "glTF 2.0 binary: mesh, skin, inverse bind matrices, animations, texture"
         )
     )
+    register_bvh(register)

@@ -15,7 +15,7 @@ def _soft(image_size: Any, device: str = "cpu", **options: Any) -> Any:
 
 
 def _fast(image_size: Any, device: str = "cpu", **options: Any) -> Any:
-    from ..render.fast import SplatSilhouette
+    from ..render.splat import SplatSilhouette
 
     return SplatSilhouette(image_size, device=device, **options)
 

@@ -1,4 +1,5 @@
-"""Built-in articulation models: ``casa`` (stretchable bones + displacement field) and ``lbs``."""
+"""Built-in articulation models: ``casa`` (stretchable bones + displacement field), ``dqs`` (the same
+with dual-quaternion skinning) and ``lbs``."""
 
 from __future__ import annotations
 
@@ -14,11 +15,17 @@ def _casa(asset: Any, device: str = "cpu", **options: Any) -> Any:
     return ArticulatedModel(asset, device=device, **options)
 
 
+def _dqs(asset: Any, device: str = "cpu", **options: Any) -> Any:
+    from ..rig.dqs import DualQuaternionModel
+
+    return DualQuaternionModel(asset, device=device, **options)
+
+
 def _lbs(asset: Any, device: str = "cpu", **options: Any) -> Any:
     from ..rig.model import ArticulatedModel
 
-    options.setdefault("stretch", False)
-    options.setdefault("displacement", False)
+    # plain LBS whatever the fit's ablation switches say
+    options.update(stretch=False, displacement=False)
     return ArticulatedModel(asset, device=device, **options)
 
 
@@ -30,6 +37,14 @@ def register_articulation_models(register):
             "casa",
             _casa,
             "CASA: FK with per-bone length scales, stretchable bones, softmax skinning, displacement MLP",
+        )
+    )
+    register(
+        ComponentSpec(
+            "articulation_model",
+            "dqs",
+            _dqs,
+            "CASA's model with dual-quaternion skinning (Kavan 2007): no candy-wrapper collapse at twists",
         )
     )
     register(

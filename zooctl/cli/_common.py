@@ -46,6 +46,11 @@ def _default(o: Any) -> Any:
 
 
 JsonOpt = typer.Option(False, "--json", help="Print JSON instead of a table (for scripts).")
+# Components by registered name (`zooctl plugins`): checked when the fit config is validated.
+RendererOpt = typer.Option(None, "--renderer", help="Silhouette renderer: soft (default), fast, a plugin's.")
+ArticulationOpt = typer.Option(
+    None, "--articulation", help="Articulation model: casa (default), dqs, lbs, a plugin's."
+)
 
 
 def print_table(columns: list[tuple[str, str]], rows: list[list[str]], title: str | None = None) -> None:

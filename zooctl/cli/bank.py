@@ -260,9 +260,10 @@ def repair(json_out: bool = JsonOpt) -> None:
         print_repair(report, "assets")
 
 
-from . import bank_rig  # noqa: E402  (export, seed, render live in their own module)
+from . import bank_export, bank_preview, bank_seed  # noqa: E402  (one module per command)
 
-bank_rig.register(app)
+for _mod in (bank_export, bank_seed, bank_preview):
+    _mod.register(app)
 
 from . import bank_search  # noqa: E402  (search, reindex: retrieval lives in its own module)
 

@@ -4,14 +4,16 @@ from __future__ import annotations
 
 import typer
 
-from ._common import JsonOpt, console, print_json
+from ._common import ArticulationOpt, JsonOpt, console, print_json
 
 app = typer.Typer(help="Benchmark renderers and the articulation model.", no_args_is_help=True)
 
 
 @app.command("render")
 def render(
-    renderer: str = typer.Option("soft", "--renderer", help="soft, fast or flow."),
+    renderer: str = typer.Option(
+        "soft", "--renderer", help="A registered renderer: soft, fast, flow or a plugin's (`zooctl plugins`)."
+    ),
     faces: int = typer.Option(2000, "--faces", help="Triangles in the benchmark sphere."),
     size: int = typer.Option(128, "--size", help="Image size in pixels (square)."),
     batch: int = typer.Option(8, "--batch", help="Frames rendered together."),
@@ -37,19 +39,20 @@ def rig(
     vertices: int = typer.Option(4000, "--vertices", help="Vertices of the benchmark tube rig."),
     joints: int = typer.Option(50, "--joints", help="Joints in its chain."),
     frames: int = typer.Option(8, "--frames", help="Frames posed together."),
+    articulation: str = ArticulationOpt,
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     repeats: int = typer.Option(5, "--repeats", help="Timed runs (the median is reported)."),
     json_out: bool = JsonOpt,
 ) -> None:
-    """Milliseconds per frame of FK + stretchable LBS, forward + backward."""
+    """Milliseconds per frame of FK + skinning (casa: stretchable LBS), forward + backward."""
     from ..render.benchmark import bench_rig
 
-    res = bench_rig(vertices=vertices, joints=joints, frames=frames, device=device, repeats=repeats)
+    res = bench_rig(vertices, joints, frames, device, repeats, articulation=articulation or "casa")
     if json_out:
         print_json(res)
     else:
         console.print(
-            f"fk+lbs: {res['ms_per_frame']:.2f} ms/frame ({res['vertices']} vertices, {joints} joints, {device})"
+            f"{res['benchmark']}: {res['ms_per_frame']:.2f} ms/frame ({res['vertices']} vertices, {joints} joints, {device})"
         )
 
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from ._common import JsonOpt, console, err_console, print_json, store_root
+from ._common import ArticulationOpt, JsonOpt, RendererOpt, console, err_console, print_json, store_root
 
 
 def _assets(bank_path: Path | None, names: list[str] | None):
@@ -72,6 +72,8 @@ def run(
         "--known-camera",
         help="Give each fit its video's camera rotations (CASA's protocol on synthetic data) instead of estimating the camera's motion.",
     ),
+    renderer: str = RendererOpt,
+    articulation: str = ArticulationOpt,
     report: Path = typer.Option(None, "--report", help="Also write the markdown table here."),
     json_out: bool = JsonOpt,
 ) -> None:
@@ -101,6 +103,7 @@ def run(
         progress=progress,
         known_camera=known_camera,
         own_template=own_template,
+        overrides=component_overrides(renderer, articulation),
     )
     table = markdown_table(res)
     if report is not None:
@@ -109,6 +112,17 @@ def run(
         print_json(res)
     else:
         console.file.write(table)
+
+
+def component_overrides(renderer: str | None, articulation: str | None) -> dict | None:
+    """Config overrides naming registered components (checked when the config is validated)."""
+    out: dict = {}
+    if renderer is not None:
+        out["stage1"] = {"renderer": renderer}
+        out["stage2"] = {"renderer": renderer}
+    if articulation is not None:
+        out["articulation"] = articulation
+    return out or None
 
 
 def register(app: typer.Typer) -> None:

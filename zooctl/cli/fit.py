@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from ..fit.config import PRESETS
-from ._common import console, err_console, print_json, store_root
+from ._common import ArticulationOpt, RendererOpt, console, err_console, print_json, store_root
 
 PRESET_ITERS = {name: make().stage2.iters for name, make in PRESETS.items()}
 
@@ -76,6 +76,8 @@ def fit(
         help="Retrieved templates to try with a short fit each; the best one's fit goes on in full (default 3; 1: the top result).",
     ),
     device: str = typer.Option(None, "--device", help="cpu or cuda."),
+    renderer: str = RendererOpt,
+    articulation: str = ArticulationOpt,
     focal: float = typer.Option(
         None, "--focal", help="Focal length in pixels of the input frames (default: estimated)."
     ),
@@ -108,6 +110,10 @@ def fit(
         cfg.trials.candidates = candidates
     if device is not None:
         cfg.device = device
+    if renderer is not None:
+        cfg.stage1.renderer = cfg.stage2.renderer = renderer
+    if articulation is not None:
+        cfg.articulation = articulation
     if focal is not None:
         cfg.camera.focal = focal
     if seed is not None:

@@ -73,23 +73,22 @@ def show(name: str = typer.Argument(...), json_out: bool = JsonOpt) -> None:
 def export(
     name: str = typer.Argument(...),
     out: Path = typer.Option(
-        ..., "--out", help="File to write; its suffix picks the format unless --format."
+        ...,
+        "--out",
+        help="File to write (its suffix picks the format unless --format), or an existing folder.",
     ),
-    fmt: str = typer.Option(None, "--format", help="usd, usda, usdz, glb (default: from the suffix)."),
+    fmt: str = typer.Option(
+        None, "--format", help="Any registered exporter's format: usd, usda, usdz, glb, bvh, a plugin's."
+    ),
 ) -> None:
     """Export a fitted character (rig, skin and the per-frame animation) through an exporter."""
-    from ..errors import UsageError
-    from ..plugins import get_registry
+    from ..io.export import check_writable, export_asset, resolve_export
 
-    fits = _fits()
-    asset = fits.character(name)
-    f = (fmt or out.suffix.lstrip(".")).lower()
-    spec = get_registry().exporter_for(f)
-    if spec is None:
-        raise UsageError(f"no exporter for {f!r}", hint="see `zooctl plugins` for the formats")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    spec.save(asset, out, None)
-    console.print(f"wrote {out}", highlight=False, markup=False)
+    _, fmt, path = resolve_export(out, fmt, name)
+    check_writable(path)
+    asset = _fits().character(name)
+    path = export_asset(asset, path, fmt)
+    console.print(f"wrote {path}", highlight=False, markup=False)
 
 
 @app.command("rm")

@@ -14,8 +14,8 @@ from .. import __version__
 from ..errors import ZooctlError
 from ._common import err_console, state
 
-# Before torch is imported anywhere: a spinning OpenMP pool made every render ~4x slower on a
-# busy 2-core machine (measured with bench/render.py); passive waiting costs nothing when idle.
+# Before torch is imported anywhere: a spinning OpenMP pool slows every render on a busy machine
+# (BENCHMARKS.md, "Differentiable renderers"); passive waiting costs nothing when idle.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 app = typer.Typer(

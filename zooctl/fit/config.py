@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -42,7 +43,7 @@ class StageConfig:
     lr: float = 5e-2  # rotations, root transforms, skinning logits
     lr_shape: float = 1e-3  # global scale, bone scales and the displacement field
     batch: int = 8  # frames per step (stage 2: a contiguous window, so flow sees frame pairs)
-    renderer: str = "soft"  # silhouette renderer: soft (SoftRas) or fast (splatting)
+    renderer: str = "soft"  # a registered silhouette renderer: soft (SoftRas), fast (splatting), plugins
     lr_final: float = 1.0  # learning rates decay (cosine) to this fraction of theirs by the last step
 
 
@@ -51,7 +52,7 @@ class LossWeights:
     """lambda1 E_cue (mask + beta * flow) + lambda2 E_smooth + lambda3 E_symm + regularisers."""
 
     mask: float = 1.0  # lambda1 (soft-silhouette IoU loss)
-    dt: float = 0.5  # contour term: distance transform of the mask (long-range gradient)
+    contour: float = 0.5  # `contour_loss`: vertices outside the mask, mask far from vertices (was ``dt``)
     flow: float = 0.05  # beta: mean |rendered flow - observed flow| in pixels of the fit image
     smooth: float = 10.0  # lambda2: CASA eq. 6 on joint rotations
     root_smooth: float = 10.0  # smoothness of the per-frame root transform
@@ -95,6 +96,7 @@ class FitConfig:
 
     preset: str = "fast"
     device: str = "cpu"
+    articulation: str = "casa"  # a registered articulation model (`zooctl plugins`): casa, dqs, lbs
     seed: int = 0
     fit_size: int = 128  # longest side (px) of the images the losses see
     max_frames: int | None = None
@@ -102,11 +104,8 @@ class FitConfig:
     checkpoint_every: int = 25  # steps between saved states (for --resume)
     hidden: int = 64  # displacement MLP width
     camera: CameraConfig = field(default_factory=CameraConfig)
-    # Learning rates above CASA's (5e-2 / 4e-3) with a cosine decay: ~160 updates per frame instead
-    # of CASA's 200 epochs need larger early steps, and the decay settles them (bench: +0.1 mask IoU).
-    # Stage 2 keeps improving with steps (400 -> 800: mean mask IoU 0.792 -> 0.825 over the 28
-    # benchmark videos); 1,000 keeps a 60-frame, 4,000-vertex fit with the template trials well
-    # inside 3 minutes on a 2-core CPU (BENCHMARKS.md, Fit).
+    # Learning rates above CASA's with a cosine decay, and 1,000 stage-2 iterations: why and what
+    # they were measured to give is in BENCHMARKS.md ("Fit schedule").
     stage1: StageConfig = field(
         default_factory=lambda: StageConfig(
             iters=60, lr=5e-2, lr_shape=5e-2, batch=16, renderer="soft", lr_final=0.1
@@ -147,8 +146,8 @@ class FitConfig:
                 raise UsageError(f"{name}: iters >= 0, batch >= 1 and positive learning rates are required")
             if not 0 < st.lr_final <= 1:
                 raise UsageError(f"{name}: lr_final must be in (0, 1]")
-            if st.renderer not in ("soft", "fast"):
-                raise UsageError(f"{name}: renderer {st.renderer!r} is not soft or fast")
+            _check_registered("renderer", st.renderer, f"{name}.renderer")
+        _check_registered("articulation_model", self.articulation, "articulation")
         if self.camera.focal is not None and self.camera.focal <= 0:
             raise UsageError(f"--focal {self.camera.focal} must be positive (pixels)")
         if self.max_frames is not None and self.max_frames < 1:
@@ -160,9 +159,38 @@ class FitConfig:
         return self
 
 
+def _check_registered(kind: str, name: Any, where: str) -> None:
+    """Names of components are checked against the plugin registry at run time (not the schema),
+    so a plugin's renderer or articulation model is accepted like a built-in one."""
+    from ..plugins import get_registry
+
+    known = get_registry().names(kind)
+    if name not in known:
+        raise UsageError(
+            f"{where}: no {kind.replace('_', ' ')} named {name!r}",
+            hint=f"registered: {', '.join(known) or 'none'} (see `zooctl plugins`)",
+        )
+
+
+# Config keys renamed since fits were first stored: old name -> new name, per section.
+RENAMED = {LossWeights: {"dt": "contour"}}
+
+
 def _merge(obj: Any, data: dict[str, Any], where: str) -> None:
     if not isinstance(data, dict):
         raise InputError(f"{where} must be a JSON object")
+    for old, new in RENAMED.get(type(obj), {}).items():
+        if old in data:
+            if new in data:
+                raise InputError(
+                    f"{where}: both {old!r} and its new name {new!r} are given", hint=f"drop {old!r}"
+                )
+            warnings.warn(
+                f"{where}.{old} is deprecated: it is now {where}.{new} (read as that)",
+                FutureWarning,
+                stacklevel=3,
+            )
+            data = {new if k == old else k: v for k, v in data.items()}
     names = {f.name: f for f in dataclasses.fields(obj)}
     for key, value in data.items():
         if key not in names:

@@ -1,4 +1,19 @@
-"""The image terms of E_cue: silhouette IoU, a mask-contour distance term and optical flow.
+"""Every loss term of a fit, by the name it has in the loss history and in ``LossWeights``.
+
+| term | function | weight (``weights.*``) |
+|---|---|---|
+| mask | `soft_iou_loss` | ``mask`` (lambda1) |
+| contour | `contour_loss` | ``contour`` (``dt`` in older configs: still read, with a warning) |
+| flow | `flow_loss` | ``flow`` (beta) |
+| root_smooth | `root_smoothness` | ``root_smooth`` |
+| scale | `scale_prior` | ``scale_prior`` |
+| skin | `skin_prior` | ``skin_prior`` |
+| displacement | `displacement_prior` | ``displacement`` |
+| pose | `pose_prior` | ``pose_prior`` |
+| smooth, symmetry, bone_length | the articulation model's ``smoothness_loss``, ``symmetry_loss``, ``bone_length_loss`` (CASA eq. 6, 7; `zooctl.rig.priors`, since they belong to the model) | ``smooth`` (lambda2), ``symmetry`` (lambda3), ``bone_length`` |
+
+`zooctl.fit.stages.StageRunner.loss` weights and sums them; change a weight's default in
+`zooctl.fit.config.LossWeights` (and its preset), or per run with a ``--config`` file.
 
 Targets live at the fit resolution (h, w). ``MaskTargets`` precomputes, per frame, the coverage
 (T, h, w) in [0, 1], the distance from every pixel to the mask (for vertices that fall outside
@@ -94,7 +109,7 @@ def contour_loss(
     # The nearest vertex of each sample without autograd (the backward of a full cdist costs
     # more than the rest of a fit step), then the distance to it with autograd.
     with torch.no_grad():
-        # |x|^2 - 2 p.x ranks vertices like the distance (|p|^2 is constant per sample), 2x cdist's speed
+        # |x|^2 - 2 p.x ranks vertices like the distance (|p|^2 is constant per sample), faster than cdist
         nearest = (xy.square().sum(-1)[:, None] - 2.0 * torch.bmm(pts, xy.transpose(1, 2))).argmin(-1)
     closest = xy.gather(1, nearest[..., None].expand(-1, -1, 2))  # (B, S, 2)
     near = (pts - closest).square().sum(-1).add(1e-12).sqrt() / max(h, w)  # (B, S)
@@ -125,3 +140,26 @@ def root_smoothness(root_rotation: Tensor, root_translation: Tensor, size: float
         return rot
     acc = root_translation[2:] - 2 * root_translation[1:-1] + root_translation[:-2]
     return rot + (acc**2).sum(-1).mean() / size**2
+
+
+def scale_prior(log_scale: Tensor) -> Tensor:
+    """The log global scale near 0 (the template's size): ``log_scale**2``, a scalar."""
+    return log_scale**2
+
+
+def skin_prior(logits: Tensor, init_logits: Tensor) -> Tensor:
+    """KL(template weights || current weights) per vertex, averaged; logits (V, K)."""
+    cur = torch.log_softmax(logits, -1)
+    init = torch.log_softmax(init_logits, -1)
+    return (init.exp() * (init - cur)).sum(-1).mean()
+
+
+def displacement_prior(disp: Tensor, size: float) -> Tensor:
+    """Mean squared displacement (V, 3) relative to the template size squared."""
+    return (disp**2).sum(-1).mean() / size**2
+
+
+def pose_prior(rotations: Tensor, rest: Tensor) -> Tensor:
+    """Joint rotations (T, J, 4) near the rest pose (J, 4): mean of ``1 - <q, q_rest>^2``."""
+    q = rotations / rotations.norm(dim=-1, keepdim=True)
+    return (1.0 - (q * rest).sum(-1) ** 2).mean()

@@ -19,7 +19,6 @@ import numpy as np
 import torch
 
 from ..asset import RiggedAsset
-from ..errors import MissingDependencyError
 from ..store.fs import write_bytes_atomic, write_json_atomic
 
 
@@ -58,16 +57,9 @@ def write_usd(asset: RiggedAsset, camera, path: Path) -> Path:
 
 def write_glb(asset: RiggedAsset, path: Path) -> Path:
     """The fitted character as glTF binary, through the registered ``glb`` exporter."""
-    from ..plugins import get_registry
+    from ..io.export import export_asset
 
-    spec = get_registry().exporter_for("glb")
-    if spec is None:
-        raise MissingDependencyError(
-            "no glTF exporter is registered",
-            hint="see `zooctl plugins`; the glb exporter ships with zooctl's rig export",
-        )
-    spec.save(asset, Path(path), ["fit"])
-    return Path(path)
+    return export_asset(asset, Path(path), "glb", ["fit"])
 
 
 # -- overlay video -------------------------------------------------------------------------------

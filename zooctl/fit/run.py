@@ -145,6 +145,7 @@ def fit_video(
         hidden=cfg.hidden,
         device=dev,
         principal=((W / 2 - x0) * s, (H / 2 - y0) * s),
+        articulation=cfg.articulation,
     )
     if resume is None:
         rep.message("searching the camera and viewpoint")

@@ -1,7 +1,8 @@
 """`FitScene`: everything a fit optimises, as one ``nn.Module``.
 
-- the articulated template (`zooctl.rig.model.ArticulatedModel`): global scale u, bone length
-  scales, skinning logits, displacement MLP (per animal);
+- the articulated template: the articulation model registered as ``articulation`` (default
+  ``casa``: `zooctl.rig.model.ArticulatedModel`; interface in `zooctl.rig.base`): global scale u,
+  bone length scales, skinning logits, displacement MLP (per animal);
 - per-frame motion: local joint quaternions (T, J, 4), root rotation (T, 4) and root
   translation (T, 3) in world space;
 - a fixed camera at the world origin looking down world -Z (OpenCV frame: ``R = diag(1, -1, -1)``,
@@ -22,7 +23,8 @@ from torch import nn
 
 from ..asset import RiggedAsset
 from ..render.camera import Camera
-from ..rig.model import ArticulatedModel, Pose
+from ..rig.base import get_articulation_model
+from ..rig.model import Pose
 
 Tensor = torch.Tensor
 CAMERA_ROTATION = np.diag([1.0, -1.0, -1.0])  # world -> OpenCV camera frame (looks down world -Z)
@@ -31,8 +33,8 @@ CAMERA_ROTATION = np.diag([1.0, -1.0, -1.0])  # world -> OpenCV camera frame (lo
 class FitScene(nn.Module):
     """An asset fitted to a T-frame video seen in (h, w) images.
 
-    ``stretch``/``displacement`` switch the CASA articulation parts (ablations); ``hidden`` is the
-    displacement MLP width.
+    ``articulation`` names a registered articulation model; ``stretch``/``displacement`` switch
+    the CASA articulation parts (ablations); ``hidden`` is the displacement MLP width.
     """
 
     def __init__(
@@ -47,13 +49,14 @@ class FitScene(nn.Module):
         hidden: int = 64,
         device: str = "cpu",
         principal: tuple[float, float] | None = None,
+        articulation: str = "casa",
     ):
         super().__init__()
         self.height, self.width = int(height), int(width)
         # Principal point in fit pixels: the image centre, or where it falls in a crop.
         self.principal = principal if principal is not None else (width / 2.0, height / 2.0)
-        self.model = ArticulatedModel(
-            asset, stretch=stretch, displacement=displacement, hidden=hidden, device=device
+        self.model = get_articulation_model(
+            articulation, asset, device=device, stretch=stretch, displacement=displacement, hidden=hidden
         )
         T, J = int(num_frames), self.model.num_joints
         rest_q = self.model.rest_rotation.detach().clone()

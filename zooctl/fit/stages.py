@@ -10,7 +10,7 @@ transforms, the displacement MLP and the skinning weights, minimising
     lambda1 E_cue + lambda2 E_smooth + lambda3 E_symm + regularisers,
     E_cue = E_mask + beta E_flow,
 
-with regularisers (weights in `zooctl.fit.config.LossWeights`): the contour term, root
+with regularisers (every term in `zooctl.fit.losses`, weights in `zooctl.fit.config.LossWeights`): the contour term, root
 smoothness, bone lengths near the template's and left/right equal, skinning weights near the
 template's (KL), small displacements, joint rotations near the rest pose and the global scale
 near the template's. Each step sees a contiguous window of ``batch`` frames (so flow has its
@@ -25,11 +25,19 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from ..render.fast import SplatSilhouette
-from ..render.raster import FlowRenderer
-from ..render.soft import SoftSilhouette
+from ..render.base import check_silhouette, get_renderer
 from .config import FitConfig, StageConfig
-from .losses import MaskTargets, contour_loss, flow_loss, root_smoothness, soft_iou_loss
+from .losses import (
+    MaskTargets,
+    contour_loss,
+    displacement_prior,
+    flow_loss,
+    pose_prior,
+    root_smoothness,
+    scale_prior,
+    skin_prior,
+    soft_iou_loss,
+)
 from .scene import FitScene
 
 Tensor = torch.Tensor
@@ -75,12 +83,10 @@ class StageRunner:
         self.scene, self.targets, self.cfg, self.stage = scene, targets, cfg, stage
         self.st = stage_config(cfg, stage)
         size = (scene.height, scene.width)
-        self.silhouette = (
-            SoftSilhouette(size, sigma=cfg.soft_sigma)
-            if self.st.renderer == "soft"
-            else SplatSilhouette(size)
-        )
-        self.flow_renderer = FlowRenderer()
+        # Renderers come from the registry (plugins included); soft_sigma is the soft renderer's.
+        options = {"sigma": cfg.soft_sigma} if self.st.renderer == "soft" else {}
+        self.silhouette = get_renderer(self.st.renderer, size, device=cfg.device, **options)
+        self.flow_renderer = get_renderer("flow", size, device=cfg.device)
         self.gen = np.random.default_rng([cfg.seed, stage])
         present = targets.masks.present.cpu().numpy()
         self.present_idx = np.nonzero(present)[0]
@@ -118,14 +124,16 @@ class StageRunner:
         cam = scene.camera(len(frames))
         weight = tg.masks.present[frames].to(verts.dtype)
         terms: dict[str, Tensor] = {}
-        sil = self.silhouette(verts, scene.faces, cam)
+        sil = check_silhouette(
+            self.st.renderer, self.silhouette(verts, scene.faces, cam), len(frames), scene.height, scene.width
+        )
         terms["mask"] = w.mask * soft_iou_loss(sil, tg.masks.coverage[frames], weight)
         xy, _ = cam.project(verts)
-        terms["contour"] = w.dt * contour_loss(xy, frames, tg.masks, weight)
+        terms["contour"] = w.contour * contour_loss(xy, frames, tg.masks, weight)
         terms["root_smooth"] = w.root_smooth * root_smoothness(
             scene.root_rotation, scene.root_translation, scene.size
         )
-        terms["scale"] = w.scale_prior * scene.model.log_scale**2
+        terms["scale"] = w.scale_prior * scale_prior(scene.model.log_scale)
         if self.stage == 2:
             if ab.flow and tg.flow is not None and len(frames) > 1 and w.flow > 0:
                 out = self.flow_renderer(verts[:-1], scene.faces, scene.camera(len(frames) - 1), verts[1:])
@@ -141,16 +149,12 @@ class StageRunner:
             if ab.stretch:
                 terms["bone_length"] = w.bone_length * scene.model.bone_length_loss()
             if ab.learn_skinning:
-                cur = torch.log_softmax(scene.model.skin.logits, -1)
-                init = torch.log_softmax(scene.init_logits, -1)
-                terms["skin"] = w.skin_prior * (init.exp() * (init - cur)).sum(-1).mean()
+                terms["skin"] = w.skin_prior * skin_prior(scene.model.skin.logits, scene.init_logits)
             if scene.model.displacement is not None:
                 u = scene.model.global_scale()
                 disp = scene.model.displacement(u * scene.model.points)
-                terms["displacement"] = w.displacement * (disp**2).sum(-1).mean() / scene.size**2
-            q = scene.rotations / scene.rotations.norm(dim=-1, keepdim=True)
-            rest = scene.model.rest_rotation
-            terms["pose"] = w.pose_prior * (1.0 - (q * rest).sum(-1) ** 2).mean()
+                terms["displacement"] = w.displacement * displacement_prior(disp, scene.size)
+            terms["pose"] = w.pose_prior * pose_prior(scene.rotations, scene.model.rest_rotation)
         total = sum(terms.values())
         return total, {k: float(v.detach()) for k, v in terms.items()}
 

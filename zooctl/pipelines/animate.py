@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import MissingDependencyError, NotFoundError, UsageError
+from ..errors import NotFoundError, UsageError
 
 FIT_PREFIX = "fit:"
 
@@ -87,8 +87,8 @@ def sample_and_export(
 ) -> dict[str, Any]:
     """Sample ``opts.sample`` motions for ``asset``, write one file per motion and format, the
     preview video and contact sheet, and ``animate.json``; returns that manifest."""
+    from ..io.export import export_asset, resolve_export
     from ..motion.prior import motion_clip
-    from ..plugins import get_registry
     from ..store.fs import write_bytes_atomic
     from ..store.motion_store import MotionStore
 
@@ -96,15 +96,8 @@ def sample_and_export(
     store = MotionStore.open(store_root)
     prior_name = opts.prior or store.latest()
     prior = store.load(prior_name, device=opts.device)
-    registry = get_registry()
-    exporters = {}
-    for f in opts.formats:
-        spec = registry.exporter_for(f)
-        if spec is None:
-            raise MissingDependencyError(
-                f"no exporter for format {f!r}", hint="see `zooctl plugins` for the formats available"
-            )
-        exporters[f] = spec
+    # Every format resolved before any sampling: an unknown one is an error up front.
+    suffixes = {f: resolve_export(None, f, label)[0].suffix_for(f) for f in opts.formats}
     # Not every prior plugin takes a temperature: pass it only when asked for.
     options = {"temperature": opts.temperature} if opts.temperature is not None else {}
     rots = prior.sample(asset, n=opts.sample, frames=opts.frames, seed=opts.seed, **options)  # (n, T, J, 4)
@@ -117,9 +110,8 @@ def sample_and_export(
     out.mkdir(parents=True, exist_ok=True)
     files: dict[str, list[str]] = {f: [] for f in opts.formats}
     for n in names:
-        for f, spec in exporters.items():
-            path = out / f"{label}_{n}.{f}"
-            spec.save(animated, path, clips=[n])
+        for f, suffix in suffixes.items():
+            path = export_asset(animated, out / f"{label}_{n}{suffix}", f, clips=[n])
             files[f].append(str(path))
     t_export = time.perf_counter() - t0
     if opts.preview:

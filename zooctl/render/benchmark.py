@@ -16,8 +16,6 @@ import torch
 
 from ..errors import MissingDependencyError, UsageError
 
-RENDERERS = ("soft", "fast", "flow")
-
 
 def _device(name: str) -> torch.device:
     if name not in ("cpu", "cuda"):
@@ -65,13 +63,9 @@ def bench_render(
 ) -> dict[str, Any]:
     """Median milliseconds per frame of forward + backward for one renderer (module docstring)."""
     from ..rig.synthetic import uv_sphere
+    from .base import get_renderer, renders_flow
     from .camera import look_at
-    from .fast import SplatSilhouette
-    from .raster import FlowRenderer
-    from .soft import SoftSilhouette
 
-    if renderer not in RENDERERS:
-        raise UsageError(f"unknown renderer {renderer!r}", hint=f"use one of {', '.join(RENDERERS)}")
     if faces < 8 or size < 8 or batch < 1 or repeats < 1:
         raise UsageError("need --faces >= 8, --size >= 8, --batch >= 1, --repeats >= 1")
     dev = _device(device)
@@ -81,20 +75,13 @@ def bench_render(
     verts = base.to(dev).requires_grad_(True)
     tri = torch.as_tensor(f, device=dev)
     cam = look_at([0.0, 0.0, 4.0], [0.0, 0.0, 0.0], size, size, fov_y_degrees=40.0, device=dev)
-    if renderer == "soft":
-        mod = SoftSilhouette(size, **options)
-
-        def step() -> None:
-            verts.grad = None
-            mod(verts, tri, cam).sum().backward()
-    elif renderer == "fast":
-        mod = SplatSilhouette(size, **options)
+    mod = get_renderer(renderer, size, device=device, **options)  # any registered renderer
+    if not renders_flow(mod):
 
         def step() -> None:
             verts.grad = None
             mod(verts, tri, cam).sum().backward()
     else:
-        mod = FlowRenderer(size)
         moved = (base + torch.tensor([0.03, 0.01, 0.0])).to(dev)
 
         def step() -> None:
@@ -124,9 +111,11 @@ def bench_rig(
     device: str = "cpu",
     repeats: int = 5,
     warmup: int = 1,
+    articulation: str = "casa",
 ) -> dict[str, Any]:
-    """Median ms per frame of FK + stretchable LBS, forward + backward, on a tube rig."""
-    from ..rig.model import ArticulatedModel
+    """Median ms per frame of FK + skinning (the registered ``articulation`` model; casa: stretchable
+    LBS), forward + backward, on a tube rig."""
+    from ..rig.base import get_articulation_model
     from ..rig.rotations import axis_angle_to_quat
     from ..rig.synthetic import tube_asset
 
@@ -136,7 +125,7 @@ def bench_rig(
     segments = 16
     rings = max(1, round((vertices / segments - 1) / joints))
     asset = tube_asset(bones=joints, rings_per_bone=rings, segments=segments, bone_length=0.2, radius=0.05)
-    model = ArticulatedModel(asset, displacement=False, device=dev)
+    model = get_articulation_model(articulation, asset, device=dev, displacement=False)
     gen = torch.Generator().manual_seed(0)
     aa = (0.2 * torch.randn(frames, joints, 3, generator=gen)).to(dev).requires_grad_(True)
 
@@ -148,7 +137,8 @@ def bench_rig(
     times = _time(step, dev, repeats, warmup)
     med = statistics.median(times)
     return {
-        "benchmark": "fk+lbs",
+        "benchmark": "fk+lbs" if articulation == "casa" else f"fk+{articulation}",
+        "articulation": articulation,
         "vertices": asset.num_vertices,
         "joints": joints,
         "frames": frames,

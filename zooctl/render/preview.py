@@ -206,7 +206,7 @@ class PreviewRenderer:
             tri = v[f]
             fn = torch.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], dim=-1)
             skip = (fn * (tri[:, 0] - cam.centers()[0][b])).sum(-1) > 0
-        face_ids, bary = rasterize(xy, z, f, H, W, cam.near, skip)
+        face_ids, bary = zbuffer_mesh(xy, z, f, H, W, cam.near, skip)
         bg = _background(H, W, self.device)
         hit = face_ids >= 0
         if not bool(hit.any()):
@@ -227,7 +227,7 @@ class PreviewRenderer:
         return img
 
 
-def rasterize(
+def zbuffer_mesh(
     xy: torch.Tensor,
     z: torch.Tensor,
     faces: torch.Tensor,
@@ -237,7 +237,8 @@ def rasterize(
     skip: torch.Tensor | None = None,
     max_candidates: int = 1 << 21,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Z-buffer rasterisation of one mesh.
+    """Z-buffer rasterisation of one mesh for previews (no gradients; the differentiable one is
+    `zooctl.render.raster.rasterize`).
 
     xy (V, 2) pixel positions (pixel (i, j) is centred at (j + 0.5, i + 0.5)), z (V,) camera
     depths, faces (F, 3); ``skip`` (F,) bool marks faces not to draw (culled back faces). Returns

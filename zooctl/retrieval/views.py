@@ -134,7 +134,7 @@ def shade_frames(
     """
     import torch  # here, not at module level: `bank search` imports this module and rarely renders
 
-    from ..render.preview import rasterize, vertex_normals
+    from ..render.preview import vertex_normals, zbuffer_mesh
 
     dev = torch.device(device)
     N = len(posed)
@@ -155,7 +155,9 @@ def shade_frames(
         z_all.append(pc[:, 2])
     nv = verts.shape[1]
     all_faces = torch.cat([f + i * nv for i in range(N)])
-    face_ids, bary = rasterize(torch.cat(xy_all), torch.cat(z_all), all_faces, R, step * N, cameras[0].near)
+    face_ids, bary = zbuffer_mesh(
+        torch.cat(xy_all), torch.cat(z_all), all_faces, R, step * N, cameras[0].near
+    )
     rgb = np.empty((N, R, R, 3), np.uint8)
     sil = np.empty((N, R, R), bool)
     for i, cam in enumerate(cameras):

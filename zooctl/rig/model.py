@@ -64,7 +64,11 @@ class ArticulatedModel(nn.Module):
     Options: ``num_candidates`` K bones per vertex for the skinning softmax; ``stretch`` enables
     stretchable bones (else plain LBS with bone scales ignored); ``displacement`` adds the MLP
     field (``hidden`` width, ``num_freqs`` positional-encoding octaves); ``dtype``/``device``.
+    ``skinning`` (a class attribute) blends the bone transforms: a subclass replaces it (the
+    interface is in `zooctl.rig.base`).
     """
+
+    skinning = staticmethod(linear_blend_skinning)
 
     def __init__(
         self,
@@ -181,7 +185,7 @@ class ArticulatedModel(nn.Module):
             trans = trans + child_offset_shift(s, self.parents, self.child_e, self.inverse_bind)
         G = forward_kinematics(compose_trs(trans, rot, scl), self.tree)
         mats = G @ self.inverse_bind
-        v = linear_blend_skinning(
+        v = self.skinning(
             self.points, mats, self.skin.bones, self.skin(), s, self.endpoint if s is not None else None
         )
         u = self.global_scale()

@@ -122,8 +122,9 @@ def linear_blend_skinning(
     A = mats[..., :3, :]  # (..., J, 3, 4): affine part only
     J = mats.shape[-3]
     if J <= DENSE_MAX_JOINTS:
-        # Scatter the K candidates into dense (V, J) weights and blend with one matmul: ~4x faster
-        # forward + backward than gathering (V, K, 3, 4) matrices (whose backward is a scatter-add).
+        # Scatter the K candidates into dense (V, J) weights and blend with one matmul: faster
+        # forward + backward than gathering (V, K, 3, 4) matrices, whose backward is a scatter-add
+        # (BENCHMARKS.md, "Measurements behind code choices").
         idx = bones.expand(weights.shape)
         dense = weights.new_zeros(weights.shape[:-1] + (J,)).scatter_add(-1, idx, weights)
         blended = (dense @ A.flatten(-2)).unflatten(-1, (3, 4))  # (..., V, 3, 4)
@@ -131,14 +132,26 @@ def linear_blend_skinning(
         blended = torch.einsum("...vk,...vkij->...vij", weights, A[..., bones, :, :])
     out = (blended[..., :3] @ points[..., None]).squeeze(-1) + blended[..., 3]
     if stretch is not None:
-        moved = (A[..., :3] @ stretch[..., None]).squeeze(-1)  # (..., J, 3): L_k s_k
-        we = weights * endpoint
-        if J <= DENSE_MAX_JOINTS:
-            dense_e = we.new_zeros(we.shape[:-1] + (J,)).scatter_add(-1, bones.expand(we.shape), we)
-            out = out + dense_e @ moved
-        else:
-            out = out + torch.einsum("...vk,...vkc->...vc", we, moved[..., bones, :])
+        out = out + stretch_offsets(mats, bones, weights, stretch, endpoint)
     return out
+
+
+def stretch_offsets(
+    mats: Tensor, bones: Tensor, weights: Tensor, stretch: Tensor, endpoint: Tensor
+) -> Tensor:
+    """The stretch part of skinning, ``sum_k w_k L_k e_k s_k`` (linear in the stretch vectors).
+
+    mats (..., J, 4, 4), bones (V, K), weights (V, K) or (..., V, K), stretch (..., J, 3),
+    endpoint (V, K) -> (..., V, 3).
+    """
+    A = mats[..., :3, :]
+    J = mats.shape[-3]
+    moved = (A[..., :3] @ stretch[..., None]).squeeze(-1)  # (..., J, 3): L_k s_k
+    we = weights * endpoint
+    if J <= DENSE_MAX_JOINTS:
+        dense_e = we.new_zeros(we.shape[:-1] + (J,)).scatter_add(-1, bones.expand(we.shape), we)
+        return dense_e @ moved
+    return torch.einsum("...vk,...vkc->...vc", we, moved[..., bones, :])
 
 
 def candidate_bones(

@@ -1,7 +1,17 @@
-"""The `.toyrig` format: ``{"bones": N, "length": L, "radius": R, "fps": F}`` in JSON.
+"""An example of every component kind a third party can add to zooctl, each small but real:
 
-The importer builds a tube of ``N`` bones along +Y with smooth two-bone skinning weights and a
-``wiggle`` clip (each joint swings about Z, phase-shifted along the chain).
+- importer ``toyrig``: the `.toyrig` format, ``{"bones": N, "length": L, "radius": R, "fps": F}`` in
+  JSON. It builds a tube of ``N`` bones along +Y with smooth two-bone skinning weights and a
+  ``wiggle`` clip (each joint swings about Z, phase-shifted along the chain);
+- renderer ``pointsplat``: a differentiable silhouette made of one Gaussian splat per vertex
+  (``zooctl fit --renderer pointsplat``);
+- articulation model ``rigid``: rigid skinning, every vertex follows its strongest bone only
+  (``zooctl fit --articulation rigid``);
+- exporter ``ply``: the mesh, posed at the first frame of the first clip, as ASCII PLY
+  (``zooctl bank export NAME --format ply``);
+- a command, ``zooctl toyrig``.
+
+Heavy imports (torch, zooctl's model code) stay inside the factories, so ``zooctl --help`` stays fast.
 """
 
 from __future__ import annotations
@@ -12,7 +22,7 @@ from pathlib import Path
 
 import typer
 
-from zooctl.components import ImporterSpec
+from zooctl.components import ComponentSpec, ExporterSpec, ImporterSpec
 from zooctl.errors import InputError
 from zooctl.plugins import hookimpl
 
@@ -93,6 +103,79 @@ def load_toyrig(path: Path, name: str):
             "up_axis": "Y",
         },
     ).validate()
+
+
+def pointsplat(image_size, device="cpu", sigma=1.0, opacity=0.5, **options):
+    """A silhouette renderer: vertices (B, V, 3), faces (F, 3), camera -> (B, H, W) in [0, 1].
+
+    Each vertex projects to a Gaussian of ``sigma`` pixels with peak ``opacity``; a pixel's
+    coverage is ``1 - prod_i (1 - a_i)``. Faces are unused: dense meshes need no triangles here.
+    """
+    import torch
+
+    def render(vertices, faces, camera):
+        H, W = camera.height, camera.width
+        xy, _ = camera.project(vertices)  # (B, V, 2) pixels
+        ys = torch.arange(H, dtype=xy.dtype, device=xy.device) + 0.5
+        xs = torch.arange(W, dtype=xy.dtype, device=xy.device) + 0.5
+        dx = (xs[None, None, :] - xy[..., 0:1]) ** 2  # (B, V, W)
+        dy = (ys[None, None, :] - xy[..., 1:2]) ** 2  # (B, V, H)
+        a = opacity * torch.exp(-(dy[..., :, None] + dx[..., None, :]) / (2 * sigma**2))  # (B, V, H, W)
+        return 1.0 - torch.exp(torch.log1p(-a.clamp(max=0.999)).sum(1))
+
+    return render
+
+
+def rigid_model(asset, device="cpu", **options):
+    """`ArticulatedModel` with rigid skinning: each vertex moves with its strongest bone only."""
+    import torch
+
+    from zooctl.rig.model import ArticulatedModel
+    from zooctl.rig.skinning import linear_blend_skinning
+
+    def rigid_skinning(points, mats, bones, weights, stretch=None, endpoint=None):
+        hard = torch.nn.functional.one_hot(weights.argmax(-1), weights.shape[-1]).to(weights.dtype)
+        return linear_blend_skinning(points, mats, bones, hard, stretch, endpoint)
+
+    class RigidModel(ArticulatedModel):
+        skinning = staticmethod(rigid_skinning)
+
+    return RigidModel(asset, device=device, **options)
+
+
+def save_ply(asset, path, clips=None, **options):
+    """The mesh posed at the first frame of the first chosen clip (rest pose without clips)."""
+    from zooctl.store.fs import write_bytes_atomic
+
+    names = list(asset.clips) if clips is None else list(clips)
+    verts = asset.pose(names[0], 0) if names else asset.pose()
+    lines = ["ply", "format ascii 1.0", f"element vertex {len(verts)}", "property float x"]
+    lines += ["property float y", "property float z", f"element face {len(asset.faces)}"]
+    lines += ["property list uchar int vertex_indices", "end_header"]
+    lines += [f"{x:.6f} {y:.6f} {z:.6f}" for x, y, z in verts]
+    lines += [f"3 {a} {b} {c}" for a, b, c in asset.faces]
+    write_bytes_atomic(Path(path), ("\n".join(lines) + "\n").encode())  # temporary, then os.replace
+
+
+@hookimpl
+def register_renderers(register):
+    register(
+        ComponentSpec("renderer", "pointsplat", pointsplat, "Gaussian splat per vertex (example plugin)")
+    )
+
+
+@hookimpl
+def register_articulation_models(register):
+    register(
+        ComponentSpec(
+            "articulation_model", "rigid", rigid_model, "rigid skinning: one bone per vertex (example)"
+        )
+    )
+
+
+@hookimpl
+def register_exporters(register):
+    register(ExporterSpec("ply", ("ply",), save_ply, "posed mesh as ASCII PLY (example plugin)", (".ply",)))
 
 
 @hookimpl

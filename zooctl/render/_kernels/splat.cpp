@@ -1,4 +1,4 @@
-// Area-weighted bilinear point splatting (zooctl.render.fast) on the CPU: forward and backward.
+// Area-weighted bilinear point splatting (zooctl.render.splat) on the CPU: forward and backward.
 //
 // Face n puts S samples p_s = sum_k bary[s, k] v_k - 0.5 (pixel-centre coordinates), each of mass
 // area_n / S with area_n = |cross(v1 - v0, v2 - v0)| / 2 (0 for invalid faces), bilinearly into a

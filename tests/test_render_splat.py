@@ -4,8 +4,8 @@ import pytest
 import torch
 
 from zooctl.render.camera import look_at
-from zooctl.render.fast import SplatSilhouette, subdivision_barycentrics
 from zooctl.render.raster import rasterize
+from zooctl.render.splat import SplatSilhouette, subdivision_barycentrics
 from zooctl.rig.synthetic import uv_sphere
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # see conftest

@@ -1,0 +1,90 @@
+"""`zooctl bank export`: a bank asset through any registered exporter (`zooctl.io.export`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from ._common import JsonOpt, console, print_json, store_root
+
+
+def _bank():
+    from ..store.bank import Bank
+
+    return Bank.open(store_root())
+
+
+def export(
+    name: str = typer.Argument(..., help="Asset name in the bank."),
+    fmt: str = typer.Option(
+        None,
+        "--format",
+        "-f",
+        help="Any registered exporter's format: usd (binary), usda (text), usdc, usdz, glb, bvh, or a "
+        "plugin's (`zooctl plugins`). Default: from -o, else usdz.",
+    ),
+    clip: list[str] = typer.Option(None, "--clip", help="Export only this clip (repeatable)."),
+    all_clips: bool = typer.Option(
+        False, "--all-clips", help="Export every clip (the default when no --clip is given)."
+    ),
+    output: Path = typer.Option(
+        None, "--output", "-o", help="File or existing folder. Default: NAME.suffix here."
+    ),
+    camera: bool = typer.Option(
+        False, "--camera", help="USD only: add a camera (/Camera) framing the clips."
+    ),
+    json_out: bool = JsonOpt,
+) -> None:
+    """Export a bank asset (skeleton, skin, clips) as USD, glTF (.glb), BVH or a plugin's format."""
+    import time
+
+    from ..errors import UsageError
+    from ..io.export import check_writable, export_asset, resolve_export
+
+    if clip and all_clips:
+        raise UsageError("--clip and --all-clips cannot be used together", hint="drop one of them")
+    spec, fmt, path = resolve_export(output, fmt, name, default_format="usdz")
+    check_writable(path)
+    asset = _bank().get(name)
+    t0 = time.perf_counter()
+    options = {}
+    if camera:
+        if spec.name != "usd":
+            raise UsageError("--camera is for USD exports", hint="drop --camera, or export usd/usda/usdz")
+        import numpy as np
+
+        from ..render.preview import fit_camera
+
+        names = list(clip) if clip else list(asset.clips)
+        pts = [asset.pose(None)]
+        pts += [
+            asset.pose(c, np.arange(asset.clips[c].num_frames)).reshape(-1, 3)
+            for c in names
+            if c in asset.clips
+        ]
+        options["camera"] = fit_camera(np.concatenate(pts), 720, 1280)
+    path = export_asset(asset, path, fmt, list(clip) if clip else None, **options)
+    seconds = time.perf_counter() - t0
+    clips = list(clip) if clip else list(asset.clips)
+    if json_out:
+        print_json(
+            {
+                "name": name,
+                "format": fmt,
+                "path": str(path),
+                "clips": clips,
+                "bytes": path.stat().st_size,
+                "seconds": round(seconds, 3),
+            }
+        )
+    else:
+        console.print(
+            f"wrote {path} ({fmt}, {len(clips)} clips, {path.stat().st_size / 1e6:.2f} MB)",
+            highlight=False,
+            markup=False,
+        )
+
+
+def register(app: typer.Typer) -> None:
+    app.command("export")(export)

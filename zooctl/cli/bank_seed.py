@@ -1,0 +1,59 @@
+"""`zooctl bank seed`: the procedural starter animals."""
+
+from __future__ import annotations
+
+import typer
+
+from ._common import JsonOpt, console, print_json, stage_progress
+
+
+def seed(
+    seed_value: int = typer.Option(
+        0, "--seed", help="Random seed for proportions and colours (same seed, same animals)."
+    ),
+    plan: list[str] = typer.Option(
+        None,
+        "--plan",
+        help="Only this body plan (repeatable): quadruped, biped, bird, fish, snake, insect, spider.",
+    ),
+    no_variants: bool = typer.Option(
+        False, "--no-variants", help="One animal per plan, without the proportion variants."
+    ),
+    replace: bool = typer.Option(False, "--replace", help="Overwrite starter animals already in the bank."),
+    views: bool = typer.Option(
+        None,
+        "--views/--no-views",
+        help="Render and embed retrieval views of the added animals (default: on; ZOOCTL_VIEWS=0 turns "
+        "the default off).",
+        show_default=False,
+    ),
+    json_out: bool = JsonOpt,
+) -> None:
+    """Add the procedural starter animals (rigged, skinned, animated; generated, nothing downloaded)."""
+    from ..pipelines.ingest import seed_starter
+    from .bank_export import _bank
+
+    bank = _bank()
+    with stage_progress(not json_out) as progress:
+        added = seed_starter(
+            bank,
+            seed=seed_value,
+            plans=list(plan) if plan else None,
+            variants=not no_variants,
+            replace=replace,
+            views=views,
+            progress=progress,
+        )
+    if json_out:
+        print_json({"added": added, "bank_size": len(bank.names())})
+    else:
+        console.print(
+            f"added {len(added)} starter animals"
+            + (f": {', '.join(added)}" if added else " (all present; --replace to rebuild)"),
+            highlight=False,
+            markup=False,
+        )
+
+
+def register(app: typer.Typer) -> None:
+    app.command("seed")(seed)

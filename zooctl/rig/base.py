@@ -1,0 +1,70 @@
+"""The articulation-model interface, and the one way the rest of zooctl builds one: by its name in
+the plugin registry (`zooctl.hookspecs.register_articulation_models`).
+
+A factory is called as ``factory(asset, device="cpu", **options)``; the fit passes the options
+``stretch``, ``displacement`` (its ablation switches) and ``hidden`` (displacement MLP width),
+which a model may ignore. The object is a ``torch.nn.Module`` with:
+
+- ``forward(rotations (..., J, 4) wxyz, root_rotation (..., 4), root_translation (..., 3))`` ->
+  `zooctl.rig.model.Pose` with ``vertices`` (..., V, 3), ``joints`` (..., J, 3) and ``transforms``
+  (..., J, 4, 4); ``...`` is the frame batch (T,). All arguments default to the rest pose.
+- buffers ``points`` (V, 3) bind vertices, ``faces`` (F, 3) long, ``rest_rotation`` (J, 4);
+  ``num_joints``, ``num_vertices``;
+- learnable shape: ``log_scale`` () (``global_scale()`` = its exp), ``log_bone_scales`` (J,),
+  ``skin.logits`` (V, K) and ``displacement`` (an ``nn.Module`` of (V, 3) points, or None);
+- the priors the fit weights: ``symmetry_loss(sample)``, ``bone_length_loss()``,
+  ``smoothness_loss(rotations)`` (scalars), and ``canonical_vertices()`` (V, 3).
+
+`zooctl.rig.model.ArticulatedModel` implements all of it; a new model usually subclasses it and
+replaces ``skinning`` (a function with `zooctl.rig.skinning.linear_blend_skinning`'s signature),
+as `zooctl.rig.dqs.DualQuaternionModel` does.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol, runtime_checkable
+
+import torch
+
+Tensor = torch.Tensor
+
+
+@runtime_checkable
+class ArticulationModel(Protocol):
+    points: Tensor
+    faces: Tensor
+    rest_rotation: Tensor
+
+    @property
+    def num_joints(self) -> int: ...
+
+    def __call__(
+        self,
+        rotations: Tensor | None = None,
+        root_rotation: Tensor | None = None,
+        root_translation: Tensor | None = None,
+    ) -> Any: ...
+
+    def global_scale(self) -> Tensor: ...
+
+    def canonical_vertices(self) -> Tensor: ...
+
+    def symmetry_loss(self, sample: int | None = 2000) -> Tensor: ...
+
+    def bone_length_loss(self) -> Tensor: ...
+
+    def smoothness_loss(self, rotations: Tensor) -> Tensor: ...
+
+
+def articulation_names() -> list[str]:
+    """Every registered articulation model (built in or from a plugin)."""
+    from ..plugins import get_registry
+
+    return get_registry().names("articulation_model")
+
+
+def get_articulation_model(name: str, asset: Any, device: str = "cpu", **options: Any) -> Any:
+    """Build the articulation model registered as ``name`` for ``asset``."""
+    from ..plugins import get_registry
+
+    return get_registry().get("articulation_model", name).create(asset=asset, device=device, **options)
