@@ -6,6 +6,7 @@ from pathlib import Path
 
 import typer
 
+from . import batch_opts
 from ._common import JsonOpt, console, err_console, print_json, print_table, stage_progress, store_root
 
 app = typer.Typer(
@@ -38,12 +39,27 @@ def add(
         show_default=False,
     ),
     json_out: bool = JsonOpt,
+    executor: str = batch_opts.ExecutorOpt,
+    jobs: int = batch_opts.JobsOpt,
+    address: str = batch_opts.AddressOpt,
+    cpus_per_task: float = batch_opts.CpusOpt,
+    gpus_per_task: float = batch_opts.GpusOpt,
+    resume: bool = typer.Option(
+        False, "--resume", help="With --executor: skip files whose asset (and views) the bank holds already."
+    ),
 ) -> None:
     """Import rigged assets into the bank (atomic: a failed import changes nothing)."""
     from rich.markup import escape
 
     from ..errors import UsageError
     from ..pipelines.ingest import add_files
+
+    if executor is not None or resume:  # a batch: import and views in workers, stored here
+        from .bank_batch import add_many
+
+        opts = dict(name=name, tags=tag, license=license, replace=replace, views=views, resume=resume)
+        run = dict(executor=executor, jobs=jobs, address=address, cpus=cpus_per_task, gpus=gpus_per_task)
+        return add_many(paths, json_out=json_out, **opts, **run)
 
     with stage_progress(not json_out and len(paths) > 1) as progress:
         results = add_files(
