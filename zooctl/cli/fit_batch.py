@@ -34,7 +34,14 @@ def fit_many(
     cpus: float,
     gpus: float | None,
 ) -> None:
-    from ..pipelines.batch_fit import commit_fit, expand_inputs, fit_task, plan_fits, skip_finished
+    from ..pipelines.batch_fit import (
+        commit_fit,
+        expand_inputs,
+        fit_task,
+        plan_fits,
+        refresh_search_packs,
+        skip_finished,
+    )
 
     if name is not None or box is not None:
         raise UsageError("--name and --box are for one video", hint="a batch names each fit after its video")
@@ -50,7 +57,7 @@ def fit_many(
         cameras=cameras,
     )
     if template is None:
-        _refresh_search_packs()
+        refresh_search_packs(store_root())
     ex = make_executor(executor, jobs, address, cpus, gpus, cfg.device)
     report = run_cli_batch(ex, fit_task, items, commit_fit, skip_finished if resume else None, json_out)
 
@@ -66,15 +73,3 @@ def fit_many(
 
     cols = [("template", "left"), ("mask IoU", "right"), ("fit s", "right"), ("outputs", "left")]
     report_batch(report, json_out, "fits", cols, row)
-
-
-def _refresh_search_packs() -> None:
-    """Retrieval reads each embedder's search pack, rebuilt when stale: rebuild it here, once,
-    so that workers only read the store."""
-    from ..retrieval.index import current_pack, enabled_embedders
-    from ..store.bank import Bank
-
-    bank = Bank.open(store_root())
-    rows = bank.list()
-    for e in enabled_embedders():
-        current_pack(bank, e, rows)

@@ -118,6 +118,18 @@ def _bench_name(p: Path) -> str:
     return p.name if p.is_dir() else p.stem
 
 
+def refresh_search_packs(store_root: Path) -> None:
+    """Retrieval reads each embedder's search pack, which it rebuilds when stale: rebuild it
+    here, once, in the driver, so that workers only read the store."""
+    from ..retrieval.index import current_pack, enabled_embedders
+    from ..store.bank import Bank
+
+    bank = Bank.open(store_root)
+    rows = bank.list()
+    for e in enabled_embedders():
+        current_pack(bank, e, rows)
+
+
 class _StageReporter:
     """`zooctl.fit.run.Reporter` that passes each stage's name to the batch's progress."""
 
