@@ -20,7 +20,7 @@ $(STAMP): pyproject.toml Makefile
 	touch $(STAMP)
 
 # Blender as a Python module, only for the tests that open our exports in Blender (~350 MB).
-# The ray executor plugin (pulls ray, ~70 MB) after torch, so torch's pin stands.
+# The ray executor plugin (pulls ray, ~200 MB installed) after torch, so torch's pin stands.
 $(TEST_STAMP): $(STAMP) plugins/zooctl-ray/pyproject.toml
 	$(BIN)/pip install -q --disable-pip-version-check bpy==4.2.0 || echo "bpy unavailable: Blender tests will skip"
 	$(BIN)/pip install -q --disable-pip-version-check -e plugins/zooctl-ray || echo "ray unavailable: Ray tests will skip"
