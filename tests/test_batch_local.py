@@ -119,5 +119,7 @@ def test_cli_fit_batch_lists_failures_and_bank_add_batch(tmp_path, store):
     assert r.code == 2 and "2 assets done" in r.out and "does not exist" in r.out
     r = zooctl("bank", "add", *map(str, glbs), "--resume", "--json", store=store)
     assert r.code == 0 and [i["status"] for i in r.json()["items"]] == ["skipped", "skipped"]
+    r = zooctl("fit", str(tmp_path / "nowhere" / "*.mp4"), store=store)
+    assert r.code == 2 and "no file matches" in r.err
     r = zooctl("fit", *videos, "--executor", "nope", store=store)
     assert r.code == 2 and "no executor named 'nope'" in r.err and "Traceback" not in r.err

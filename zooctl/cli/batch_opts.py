@@ -28,11 +28,18 @@ AddressOpt = typer.Option(
     None, "--address", help="Ray cluster to join (HOST:PORT; or RAY_ADDRESS). Default: start Ray here."
 )
 CpusOpt = typer.Option(1.0, "--cpus-per-task", help="CPUs each task asks for (and its torch threads).")
-GpusOpt = typer.Option(None, "--gpus-per-task", help="GPUs each task asks for (default: 1 with --device cuda).")
+GpusOpt = typer.Option(
+    None, "--gpus-per-task", help="GPUs each task asks for (default: 1 with --device cuda)."
+)
 
 
 def make_executor(
-    name: str | None, jobs: int | None, address: str | None, cpus: float, gpus: float | None, device: str | None
+    name: str | None,
+    jobs: int | None,
+    address: str | None,
+    cpus: float,
+    gpus: float | None,
+    device: str | None,
 ):
     from ..executors import get_executor
 
@@ -86,7 +93,9 @@ class RichBatchProgress(Progress):
         self.bar.update(self.task, advance=1)
         self._show()
         if result.status == "failed" and self.enabled:
-            self.bar.console.print(f"[red]failed[/] {result.key}: {result.error}", highlight=False, markup=True)
+            self.bar.console.print(
+                f"[red]failed[/] {result.key}: {result.error}", highlight=False, markup=True
+            )
 
 
 def run_cli_batch(executor, fn, items, commit, skip, json_out: bool) -> BatchReport:

@@ -65,7 +65,9 @@ def fit(
         help="x,y,w,h around the animal in the first frame (original pixels): seeds --masks auto.",
     ),
     out: Path = typer.Option(
-        None, "--out", help="Output folder (default: fits/NAME in the current folder; a batch: OUT/NAME per video)."
+        None,
+        "--out",
+        help="Output folder (default: fits/NAME in the current folder; a batch: OUT/NAME per video).",
     ),
     name: str = typer.Option(None, "--name", help="Fit name (default: the video's name)."),
     preset_name: str = typer.Option("fast", "--preset", help="fast or quality."),
@@ -98,7 +100,9 @@ def fit(
         "--resume",
         help="Continue the interrupted fit --name from its saved state; in a batch: skip the videos whose fit finished.",
     ),
-    json_out: bool = typer.Option(False, "--json", help="Print the fit record (a batch: its report) as JSON."),
+    json_out: bool = typer.Option(
+        False, "--json", help="Print the fit record (a batch: its report) as JSON."
+    ),
     executor: str = batch_opts.ExecutorOpt,
     jobs: int = batch_opts.JobsOpt,
     address: str = batch_opts.AddressOpt,

@@ -63,7 +63,9 @@ def plan_add(
         task.license, task.replace, task.device = license, replace, device
         item = BatchItem(key, task, str(p))
         if key in seen:
-            item.error = UsageError(f"two files in this batch would be named {key!r}", hint="add it alone with --name")
+            item.error = UsageError(
+                f"two files in this batch would be named {key!r}", hint="add it alone with --name"
+            )
         elif bank.exists(key) and not replace:
             if not resume:
                 item.error = bank.exists_error(key)

@@ -214,11 +214,13 @@ def commit_fit(item: BatchItem, value: dict[str, Any]) -> dict[str, Any]:
             vs.add(video)
     out = Path(task.out) if task.out is not None else fits.path(task.name).resolve()
     record = _rebase(value["record"], value["scratch_out"], str(out))
-    for rel, data in value["out_files"].items():
-        if rel == "fit.json":
-            data = json.dumps(_rebase(json.loads(data), value["scratch_out"], str(out)), indent=2).encode()
-        write_bytes_atomic(out / rel, data)
-    with store_lock(store):
+    with store_lock(store):  # the outputs may be in the store (the fit's folder): all under the lock
+        for rel, data in value["out_files"].items():
+            if rel == "fit.json":
+                data = json.dumps(
+                    _rebase(json.loads(data), value["scratch_out"], str(out)), indent=2
+                ).encode()
+            write_bytes_atomic(out / rel, data)
         for rel, data in value["fit_files"].items():
             if rel != "record.json":
                 write_bytes_atomic(fits.path(task.name) / rel, data)
