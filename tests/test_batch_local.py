@@ -123,3 +123,31 @@ def test_cli_fit_batch_lists_failures_and_bank_add_batch(tmp_path, store):
     assert r.code == 2 and "no file matches" in r.err
     r = zooctl("fit", *videos, "--executor", "nope", store=store)
     assert r.code == 2 and "no executor named 'nope'" in r.err and "Traceback" not in r.err
+
+
+def test_a_video_folder_is_decoded_in_the_worker_and_stored_once_by_the_driver(tmp_path, store):
+    """A DAVIS folder: the worker decodes it and computes its flow; the driver stores the video,
+    and the next batch fits the stored video instead of decoding the folder again."""
+    import numpy as np
+    from PIL import Image
+
+    from zooctl.fit.inputs import load_bench_video
+    from zooctl.store.videos import VideoStore
+
+    videos = fit_inputs(tmp_path, store, 1)
+    bench = load_bench_video(Path(videos[0]))
+    folder = tmp_path / "tubecam"
+    (folder / "JPEGImages").mkdir(parents=True)
+    (folder / "Annotations").mkdir()
+    for i, (f, m) in enumerate(zip(bench.frames, bench.masks, strict=True)):
+        Image.fromarray(f).save(folder / "JPEGImages" / f"{i:05d}.jpg", quality=95)
+        Image.fromarray((m * 255).astype(np.uint8)).save(folder / "Annotations" / f"{i:05d}.png")
+    items = plan_fits([str(folder)], store, tiny_config(), template="a0", out_root=tmp_path / "out")
+    assert items[0].key == "tubecam" and items[0].payload.ingest is not None
+    report = run_batch(get_executor("local"), fit_task, items, commit_fit)
+    assert report.count("done") == 1, report.to_json()
+    vs = VideoStore(store)
+    assert vs.names() == ["tubecam"] and fit_records(store)["tubecam"]["stored_video"] == "tubecam"
+    assert np.array_equal(vs.get("tubecam").masks, bench.masks)
+    again = plan_fits([str(folder)], store, tiny_config(), template="a0", out_root=tmp_path / "out")
+    assert again[0].payload.ingest is None and again[0].payload.source == "tubecam"  # reused
