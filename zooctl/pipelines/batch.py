@@ -126,11 +126,16 @@ def run_batch(
             results[i] = ItemResult(it.key, it.label, "skipped", summary=done)
         else:
             todo.append(i)
-    report = BatchReport(executor.name, executor.slots, [])
+    # Only a batch with work asks for slots: a cluster executor may connect (start Ray) to say.
+    report = BatchReport(executor.name, executor.slots if todo else 0, [])
     progress.start(len(items), len(items) - len(todo))
     for r in results:
         if r is not None:
             progress.finished(r)
+    if not todo:
+        report.results = [r for r in results if r is not None]
+        report.wall_s = time.perf_counter() - t0
+        return report
 
     def on_stage(j: int, stage: str) -> None:
         progress.stage(items[todo[j]].key, stage)

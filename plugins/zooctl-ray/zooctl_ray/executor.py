@@ -6,7 +6,8 @@ attempts, a crash and a lost node follow the same bound, and an item's result re
 (and so the store) once, whatever happened to the attempts that did not return.
 
 The executor joins a running Ray (``--address``, ``RAY_ADDRESS``, or one this process started
-already) or starts one on this machine sized for ``--jobs`` and stops it when the batch ends.
+already) or starts one on this machine sized for ``--jobs`` and stops it when the batch ends;
+it connects when the first task is submitted.
 """
 
 from __future__ import annotations
@@ -67,41 +68,56 @@ class RayExecutor:
         retries: int = 2,
         env: dict[str, str] | None = None,
     ) -> None:
-        ray = _ray()
+        _ray()  # fail now, in one line, when ray is not installed
+        self.jobs, self.address = jobs, address
         self.cpus, self.gpus, self.retries = cpus_per_task, gpus_per_task, retries
         self.threads = max(1, math.floor(cpus_per_task))
         self.env = {**task_env(), **(env or {})}
         self.owned = False
+        self._slots: int | None = None
+
+    @property
+    def slots(self) -> int:
+        """Tasks at once: ``--jobs``, else the cluster's CPUs over ``--cpus-per-task``. Asking
+        connects to Ray: a batch with nothing left to run (``--resume``) never starts it."""
+        if self._slots is None:
+            self._connect()
+        return self._slots
+
+    def _connect(self) -> None:
+        ray = _ray()
         if not ray.is_initialized():
             common = {"include_dashboard": False, "log_to_driver": False, "logging_level": "WARNING"}
-            if address or os.environ.get("RAY_ADDRESS"):
+            address = self.address or os.environ.get("RAY_ADDRESS")
+            if address:
                 try:
                     ray.init(address=address, **common)
                 except (ConnectionError, RuntimeError, ValueError) as exc:
                     raise UsageError(
-                        f"cannot reach the Ray cluster at {address or os.environ['RAY_ADDRESS']}: {exc}",
+                        f"cannot reach the Ray cluster at {address}: {exc}",
                         hint="start it with `ray start --head` and give its address (HOST:6379)",
                     ) from None
             else:
                 ray.init(
-                    num_cpus=math.ceil((jobs or os.cpu_count() or 1) * cpus_per_task),
+                    num_cpus=math.ceil((self.jobs or os.cpu_count() or 1) * self.cpus),
                     object_store_memory=OBJECT_STORE_MB * 1024 * 1024,
                     **common,
                 )
             self.owned = True
         res = ray.cluster_resources()
-        if gpus_per_task > res.get("GPU", 0):
+        if self.gpus > res.get("GPU", 0):
             self.close()
             raise UsageError(
-                f"the Ray cluster has {res.get('GPU', 0):g} GPUs; a task asks for {gpus_per_task:g}",
+                f"the Ray cluster has {res.get('GPU', 0):g} GPUs; a task asks for {self.gpus:g}",
                 hint="start Ray on GPU nodes, or run on the CPU (--device cpu, --gpus-per-task 0)",
             )
-        self.slots = jobs or max(1, int(res.get("CPU", 1) // cpus_per_task))
+        self._slots = self.jobs or max(1, int(res.get("CPU", 1) // self.cpus))
 
     def map(self, fn: Task, items: list[Any], on_stage: StageCallback | None = None) -> Iterator[TaskOutcome]:
         ray = _ray()
         from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
+        slots = self.slots  # connects
         items = list(items)
         board = None
         if on_stage is not None:  # on the driver's node: a killed worker node must not take it along
@@ -113,7 +129,7 @@ class RayExecutor:
         running: dict[Any, int] = {}
         try:
             while todo or running:
-                while todo and len(running) < self.slots:
+                while todo and len(running) < slots:
                     i = todo.pop()
                     attempts[i] += 1
                     ref = remote.remote(fn, items[i], i, board, self.env, self.threads)
@@ -174,3 +190,4 @@ class RayExecutor:
         if self.owned:
             _ray().shutdown()
             self.owned = False
+        self._slots = None
