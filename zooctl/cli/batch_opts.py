@@ -106,15 +106,19 @@ def run_cli_batch(executor, fn, items, commit, skip, json_out: bool) -> BatchRep
         with RichBatchProgress(enabled=not json_out) as prog:
             return run_batch(executor, fn, items, commit, skip=skip, progress=prog)
     except BatchInterrupted as exc:
-        rep = exc.report
-        err_console.print(
-            f"interrupted: {rep.count('done')} done, {rep.count('skipped')} skipped, "
-            f"{len(items) - len(rep.results)} not finished; run the same command with --resume to finish",
-            highlight=False,
-        )
+        say_interrupted(exc.report, len(items))
         raise typer.Exit(130) from None
     finally:
         executor.close()
+
+
+def say_interrupted(report: BatchReport, total: int | None) -> None:
+    left = f", {total - len(report.results)} not finished" if total is not None else ""
+    err_console.print(
+        f"interrupted: {report.count('done')} done, {report.count('skipped')} skipped{left}; "
+        "run the same command with --resume to finish",
+        highlight=False,
+    )
 
 
 def report_batch(

@@ -104,9 +104,14 @@ def run(
     opts = dict(known_camera=known_camera, own_template=own_template)
     if executor is not None or resume:  # a batch: each fit one task
         ex = batch_opts.make_executor(executor, jobs, address, cpus_per_task, gpus_per_task, None)
+        from ..pipelines.batch import BatchInterrupted
+
         try:
             with batch_opts.RichBatchProgress(enabled=not json_out) as prog:
                 res = run_benchmark(*args, executor=ex, resume=resume, batch_progress=prog, **opts)
+        except BatchInterrupted as exc:
+            batch_opts.say_interrupted(exc.report, None)
+            raise typer.Exit(130) from None
         finally:
             ex.close()
     else:
