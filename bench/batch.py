@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -101,12 +102,15 @@ def main() -> None:
     for label, extra in runs:
         before = load()
         wall, rep = zooctl(store, "fit", *common, *extra, "--out", str(work / "out"))
-        fit_s = [i["fit_s"] for i in rep["items"] if i["status"] == "done"]
+        done = [i for i in rep["items"] if i["status"] == "done"]
+        fit_s = [i["fit_s"] for i in done]
         res["runs"][label] = {
             "wall_s": round(wall, 2),
             "done": rep["done"],
             "skipped": rep["skipped"],
             "sum_fit_s": round(sum(fit_s), 2),
+            "commit_s_median": statistics.median([i["commit_s"] for i in done]) if done else None,
+            "result_bytes_median": statistics.median([i["result_bytes"] for i in done]) if done else None,
             "load_before": before,
             "load_after": load(),
         }

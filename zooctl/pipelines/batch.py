@@ -40,6 +40,7 @@ class ItemResult:
     hint: str | None = None
     attempts: int = 0
     where: str = ""
+    commit_s: float = 0.0  # the driver's time storing it (the one writer's cost per item)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -50,6 +51,7 @@ class ItemResult:
             "hint": self.hint,
             "attempts": self.attempts,
             "where": self.where,
+            "commit_s": round(self.commit_s, 4),
             **self.summary,
         }
 
@@ -149,10 +151,12 @@ def run_batch(
             it = items[i]
             res = ItemResult(it.key, it.label, "done", attempts=out.attempts, where=out.where)
             if out.ok:
+                t = time.perf_counter()
                 try:
                     res.summary = commit(it, out.value)
                 except ZooctlError as exc:
                     res.status, res.error, res.hint = "failed", exc.message, exc.hint
+                res.commit_s = time.perf_counter() - t
             else:
                 res.status, res.error, res.hint = "failed", out.error, out.hint
             results[i] = res

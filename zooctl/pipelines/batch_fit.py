@@ -225,7 +225,8 @@ def commit_fit(item: BatchItem, value: dict[str, Any]) -> dict[str, Any]:
             if rel != "record.json":
                 write_bytes_atomic(fits.path(task.name) / rel, data)
         write_json_atomic(fits.record_path(task.name), dict(record, schema_version=RECORD_VERSION))
-    return fit_summary(record)
+    sent = sum(len(b) for b in value["out_files"].values()) + sum(len(b) for b in value["fit_files"].values())
+    return fit_summary(record) | {"result_bytes": sent}
 
 
 def fit_summary(record: dict[str, Any]) -> dict[str, Any]:
