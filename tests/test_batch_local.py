@@ -119,6 +119,10 @@ def test_cli_fit_batch_lists_failures_and_bank_add_batch(tmp_path, store):
     assert r.code == 2 and "2 assets done" in r.out and "does not exist" in r.out
     r = zooctl("bank", "add", *map(str, glbs), "--resume", "--json", store=store)
     assert r.code == 0 and [i["status"] for i in r.json()["items"]] == ["skipped", "skipped"]
+    r = zooctl("bank", "reindex", "m0", "m1", "nosuch", "--executor", "local", "--embedder", "silhouette",
+               "--views", "4", "--size", "48", "--json", store=store)  # fmt: skip
+    assert r.code == 2 and [i["status"] for i in r.json()["items"]] == ["done", "done", "failed"]
+    assert r.json()["items"][0]["views"] == 4 and r.json()["items"][0]["embedders"] == ["silhouette"]
     r = zooctl("fit", str(tmp_path / "nowhere" / "*.mp4"), store=store)
     assert r.code == 2 and "no file matches" in r.err
     r = zooctl("fit", *videos, "--executor", "nope", store=store)
