@@ -43,28 +43,44 @@ def cluster():
     c.shutdown()
 
 
+def fit_saying_where(task, report):
+    """`fit_task` that first names its node, so the test can kill a node while it fits. The
+    driver shows each task's latest stage (polled twice a second): the name stays a second."""
+    import time
+
+    report("node " + ray.get_runtime_context().get_node_id())
+    time.sleep(1.0)
+    return fit_task(task, report)
+
+
 def test_a_node_killed_mid_batch_loses_and_duplicates_nothing(tmp_path, store, cluster):
+    import sys
+
+    ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])  # workers cannot import tests/
     c, workers = cluster
+    doomed = workers[1].node_id
     videos = fit_inputs(tmp_path, store, 6)
     items = plan_fits(videos, store, tiny_config(), template="a0", out_root=tmp_path / "out")
     commits: list[str] = []
+    killed: list[str] = []
 
     def commit(item, value):
         commits.append(item.key)
         return commit_fit(item, value)
 
     class KillANode(Progress):
-        """Once the first fit is stored, kill a worker node: both are busy (4 tasks in flight)."""
+        """Once a fit has been stored, kill the node of the next fit that says it runs there."""
 
-        def finished(self, result):
-            if len(commits) == 1 and workers[1] in c.worker_nodes:
+        def stage(self, key, stage):
+            if commits and not killed and stage == f"node {doomed}":
+                killed.append(key)
                 c.remove_node(workers[1], allow_graceful=False)
 
-    ex = get_executor("ray", jobs=4)
-    report = run_batch(ex, fit_task, items, commit, progress=KillANode())
-    assert workers[1] not in c.worker_nodes
+    report = run_batch(get_executor("ray", jobs=4), fit_saying_where, items, commit, progress=KillANode())
+    assert killed and workers[1] not in c.worker_nodes
     assert report.count("done") == 6, report.to_json()
-    assert max(r.attempts for r in report.results) >= 2, report.to_json()  # the dead node's task ran again
+    by = {r.key: r for r in report.results}
+    assert by[killed[0]].attempts >= 2, report.to_json()  # the fit it was running ran again
     assert sorted(commits) == sorted(it.key for it in items)  # once each: none lost, none twice
     recs = fit_records(store)
     assert sorted(recs) == sorted(commits) and {r["status"] for r in recs.values()} == {"done"}
