@@ -5,7 +5,8 @@ Ray's overhead per task; with the load average before each run (the machine is s
     PYTHONPATH=... python bench/batch.py [--videos 8] [--iters 60] [--out bench/out/batch.json]
 
 Each command is the real CLI (`python -m zooctl fit DIR/* ...`, a new process, Ray start-up
-included), one run each: the fits are synthetic tube animals (`bench make`), 8 frames of 64 px.
+included), one run each: the fits are synthetic tube animals (`bench make`), by default 8 frames
+of 64 px.
 """
 
 from __future__ import annotations
@@ -66,6 +67,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--videos", type=int, default=8)
     ap.add_argument("--iters", type=int, default=60, help="stage-2 iterations of each fit")
+    ap.add_argument("--frames", type=int, default=8, help="frames per video")
+    ap.add_argument("--size", type=int, default=64, help="video size in pixels (and the fit's)")
+    ap.add_argument("--no-local2", action="store_true", help="skip the `local --jobs 2` run")
     ap.add_argument("--work", type=Path, default=None, help="scratch folder (default: a temporary one)")
     ap.add_argument("--out", type=Path, default=None, help="write the results as JSON here")
     args = ap.parse_args()
@@ -79,12 +83,12 @@ def main() -> None:
     for i in range(args.videos):
         asset = tube_asset(bones=3 + i % 3, name=f"t{i}")
         Bank(store).add(asset, replace=True)
-        make_video(asset, videos, frames=8, size=64, seed=i)
+        make_video(asset, videos, frames=args.frames, size=args.size, seed=i)
     cfg = work / "config.json"
     cfg.write_text(
         json.dumps(
             {
-                "fit_size": 64,
+                "fit_size": args.size,
                 "stage1": {"iters": 20, "batch": 8},
                 "stage2": {"iters": args.iters, "batch": 4},
                 "camera": {"azimuths": 8, "elevations": [10.0], "search_size": 48},
@@ -92,13 +96,14 @@ def main() -> None:
         )
     )
     common = [str(p) for p in sorted(videos.iterdir())] + ["--template", "t0", "--config", str(cfg)]
-    res: dict = {"machine": machine(), "videos": args.videos, "stage2_iters": args.iters, "runs": {}}
+    res: dict = {"machine": machine(), "videos": args.videos, "runs": {}}
+    res |= {"stage2_iters": args.iters, "frames": args.frames, "size": args.size}
     runs = [
         ("local --jobs 1", ["--executor", "local", "--jobs", "1"]),
         ("ray --jobs 2", ["--executor", "ray", "--jobs", "2"]),
         ("ray --jobs 2 --resume (all finished)", ["--executor", "ray", "--jobs", "2", "--resume"]),
         ("local --jobs 2", ["--executor", "local", "--jobs", "2"]),
-    ]
+    ][: 3 if args.no_local2 else 4]
     for label, extra in runs:
         before = load()
         wall, rep = zooctl(store, "fit", *common, *extra, "--out", str(work / "out"))
