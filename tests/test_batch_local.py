@@ -155,3 +155,26 @@ def test_a_video_folder_is_decoded_in_the_worker_and_stored_once_by_the_driver(t
     assert np.array_equal(vs.get("tubecam").masks, bench.masks)
     again = plan_fits([str(folder)], store, tiny_config(), template="a0", out_root=tmp_path / "out")
     assert again[0].payload.ingest is None and again[0].payload.source == "tubecam"  # reused
+
+
+def test_bench_run_on_an_executor_keeps_the_row_order_and_resumes(tmp_path, store):
+    from batch_helpers import TINY
+
+    from zooctl.benchdata.run import run_benchmark
+
+    fit_inputs(tmp_path, store, 2)
+    folder = tmp_path / "videos"
+    kw = {"ablations": ["full", "no-flow"], "template": "a0", "overrides": TINY}
+    res = run_benchmark(folder, store, executor=get_executor("local", jobs=2), **kw)
+    assert [(r["video"], r["ablation"]) for r in res["rows"]] == [
+        ("a0", "full"), ("a1", "full"), ("a0", "no-flow"), ("a1", "no-flow"),
+    ]  # fmt: skip
+    assert all("error" not in r and 0 <= r["mask_iou"] <= 1 for r in res["rows"]), res["rows"]
+    assert sorted(fit_records(store)) == [
+        "bench-a0-full",
+        "bench-a0-no-flow",
+        "bench-a1-full",
+        "bench-a1-no-flow",
+    ]
+    again = run_benchmark(folder, store, executor=get_executor("local"), resume=True, **kw)
+    assert [r["mask_iou"] for r in again["rows"]] == [r["mask_iou"] for r in res["rows"]]  # from the records
