@@ -45,7 +45,7 @@ def add(
     cpus_per_task: float = batch_opts.CpusOpt,
     gpus_per_task: float = batch_opts.GpusOpt,
     resume: bool = typer.Option(
-        False, "--resume", help="With --executor: skip files whose asset (and views) the bank holds already."
+        False, "--resume", help="Skip files whose asset (and views) the bank holds already (runs as a batch)."
     ),
 ) -> None:
     """Import rigged assets into the bank (atomic: a failed import changes nothing)."""

@@ -81,7 +81,7 @@ def run(
     cpus_per_task: float = batch_opts.CpusOpt,
     gpus_per_task: float = batch_opts.GpusOpt,
     resume: bool = typer.Option(
-        False, "--resume", help="With --executor: keep the fits a previous run of this benchmark finished."
+        False, "--resume", help="Keep the fits a previous run of this benchmark finished (runs as a batch)."
     ),
 ) -> None:
     """Fit every benchmark video (its own asset excluded from retrieval) and report CASA's metrics."""
