@@ -20,8 +20,10 @@ $(STAMP): pyproject.toml Makefile
 	touch $(STAMP)
 
 # Blender as a Python module, only for the tests that open our exports in Blender (~350 MB).
-$(TEST_STAMP): $(STAMP)
+# The ray executor plugin (pulls ray, ~200 MB installed) after torch, so torch's pin stands.
+$(TEST_STAMP): $(STAMP) plugins/zooctl-ray/pyproject.toml
 	$(BIN)/pip install -q --disable-pip-version-check bpy==4.2.0 || echo "bpy unavailable: Blender tests will skip"
+	$(BIN)/pip install -q --disable-pip-version-check -e plugins/zooctl-ray || echo "ray unavailable: Ray tests will skip"
 	touch $(TEST_STAMP)
 
 install: $(STAMP)

@@ -128,13 +128,30 @@ def register_flow_estimators(register):
 
 @hookspec
 def register_executors(register):
-    """RESERVED, not called by any command yet: executors will run pipeline jobs (locally, in a
-    pool, on a cluster) when the scale-out work lands. zooctl ships no executor and nothing uses
-    one; implementing this hook today has no effect (`zooctl plugins` marks it unused).
+    """Register executors: where the tasks of a batch run (``--executor NAME``).
 
     :param register: call ``register(ComponentSpec("executor", name, factory))``.
 
-    ``factory(**options)`` returns an object with ``map(fn, items) -> iterator of results``.
+    Built in: ``local`` (this process, or ``--jobs N`` processes); the first-party distribution
+    ``plugins/zooctl-ray`` adds ``ray``. Batch commands (``zooctl fit VIDEO...``, ``bank add
+    FILES... --executor``, ``bank reindex --executor``, ``bench run --executor``) build one with
+    ``factory(jobs=None, address=None, cpus_per_task=1.0, gpus_per_task=0.0, retries=2, env={})``
+    (`zooctl.executors.base.ExecutorOptions`; a factory raises `zooctl.errors.UsageError` for an
+    option it cannot honour, e.g. ``local`` and ``--address``). The object has:
+
+    - ``name: str`` and ``slots: int`` (how many tasks run at once);
+    - ``map(fn, items, on_stage=None)``: run ``fn(item, report)`` on every item and yield one
+      `zooctl.executors.base.TaskOutcome` per item (its index, value or error, attempts) as each
+      finishes, in any order. Run each task through `zooctl.executors.base.call_task`, which
+      turns a `zooctl.errors.ZooctlError` into the item's error (bad input: never retried) and
+      applies ``env`` and the thread count in the worker. Any other exception, or a worker or
+      node that dies, is retried at most ``retries`` more times, then reported as the item's
+      error. ``report(stage)`` in the task must reach ``on_stage(index, stage)`` on the driver
+      (best effort). Closing the iterator (Ctrl-C) cancels the tasks still running;
+    - ``close()``: release what the executor started (pools, a Ray instance it started).
+
+    ``fn`` is a module-level function and ``items`` are picklable; an executor must never write
+    the store: `zooctl.pipelines.batch` commits each returned value once, on the driver.
     """
 
 

@@ -41,15 +41,21 @@ def current() -> ImportLimits:
     return _current.get()
 
 
-@contextmanager
-def import_limits(**changes: float | int | None) -> Iterator[ImportLimits]:
-    """Raise (or lower) limits for the imports in this block; ``None`` keeps a limit's value."""
+def limits_with(**changes: float | int | None) -> ImportLimits:
+    """The current limits with ``changes`` applied (``None`` keeps a value); bad values are an
+    `InputError` naming the option."""
     for key, value in changes.items():
         if key not in OPTION:
             raise TypeError(f"unknown import limit {key!r}")
         if value is not None and not value > 0:
             raise InputError(f"{OPTION[key]} must be positive, got {value}")
-    lim = replace(current(), **{k: v for k, v in changes.items() if v is not None})
+    return replace(current(), **{k: v for k, v in changes.items() if v is not None})
+
+
+@contextmanager
+def import_limits(**changes: float | int | None) -> Iterator[ImportLimits]:
+    """Raise (or lower) limits for the imports in this block; ``None`` keeps a limit's value."""
+    lim = limits_with(**changes)
     token = _current.set(lim)
     try:
         yield lim

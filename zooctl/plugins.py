@@ -36,8 +36,6 @@ _HOOK_FOR_KIND = {
     "flow_estimator": "register_flow_estimators",
     "executor": "register_executors",
 }
-# Kinds with a hook but no caller yet (scale-out): listed as unused, never advertised.
-RESERVED_KINDS = ("executor",)
 
 
 @dataclass

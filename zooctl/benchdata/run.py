@@ -57,12 +57,16 @@ def run_benchmark(
     progress=None,
     known_camera: bool = False,
     own_template: bool = False,
+    executor: Any = None,
+    resume: bool = False,
+    batch_progress: Any = None,
 ) -> dict[str, Any]:
     """Fit every video under every ablation; returns {"rows": [...], "summary": {ablation: means}}.
 
     ``known_camera``: each fit is given the video's own camera rotations (CASA's protocol on
-    synthetic data) instead of estimating the camera's motion from the masks."""
-    from ..fit.job import fit_job
+    synthetic data) instead of estimating the camera's motion from the masks. ``executor``
+    (`zooctl.executors`): each fit is a task of a batch (`zooctl.pipelines.batch_fit`);
+    ``resume`` then keeps the fits that finished before (``batch_progress``: its progress)."""
     from ..store.bank import Bank
 
     abl = ablations or ["full"]
@@ -75,14 +79,46 @@ def run_benchmark(
         FitConfig.from_dict(json.loads(json.dumps(overrides)), preset(preset_name))
     vids = bench_videos(folder)[: limit or None]
     bank = Bank.open(store_root)
+    args = (vids, abl, store_root, preset_name, overrides, template, own_template, known_camera)
+    if executor is not None:
+        rows = _run_batch(*args, executor, resume, batch_progress)
+    else:
+        rows = _run_inline(*args, bank, progress)
+    summary = {}
+    for a in abl:
+        rs = [r for r in rows if r["ablation"] == a and "error" not in r]
+        summary[a] = {k: _mean([r.get(k) for r in rs]) for k in COLUMNS}
+        summary[a]["videos"] = len(rs)
+    return {
+        "rows": rows,
+        "summary": summary,
+        "preset": preset_name,
+        "known_camera": known_camera,
+        "own_template": own_template,
+        "overrides": overrides or {},
+    }
+
+
+def _config(a: str, preset_name: str, overrides: dict[str, Any] | None) -> FitConfig:
+    cfg = FitConfig.from_dict(json.loads(json.dumps(ABLATIONS[a])), preset(preset_name))
+    return FitConfig.from_dict(overrides, cfg) if overrides else cfg
+
+
+def _own_asset(v: Path) -> str:
+    meta = json.loads((v / "meta.json").read_text()) if (v / "meta.json").is_file() else {}
+    return meta.get("asset", v.name)
+
+
+def _run_inline(
+    vids, abl, store_root, preset_name, overrides, template, own_template, known_camera, bank, progress
+):
+    from ..fit.job import fit_job
+
     rows = []
     for a in abl:
         for v in vids:
-            cfg = FitConfig.from_dict(json.loads(json.dumps(ABLATIONS[a])), preset(preset_name))
-            if overrides:
-                cfg = FitConfig.from_dict(overrides, cfg)
-            meta = json.loads((v / "meta.json").read_text()) if (v / "meta.json").is_file() else {}
-            asset = meta.get("asset", v.name)
+            cfg = _config(a, preset_name, overrides)
+            asset = _own_asset(v)
             t = time.perf_counter()
             name = f"bench-{v.name}-{a}".lower()
             try:
@@ -110,19 +146,57 @@ def run_benchmark(
             rows.append(row)
             if progress:
                 progress(row)
-    summary = {}
+    return rows
+
+
+def _run_batch(
+    vids,
+    abl,
+    store_root,
+    preset_name,
+    overrides,
+    template,
+    own_template,
+    known_camera,
+    executor,
+    resume,
+    progress,
+):
+    """Every (ablation, video) fit one task; rows in the inline order, failures as error rows."""
+    from ..pipelines.batch import BatchItem, run_batch
+    from ..pipelines.batch_fit import FitTask, commit_fit, fit_task, refresh_search_packs, skip_finished
+
+    items = []
     for a in abl:
-        rs = [r for r in rows if r["ablation"] == a and "error" not in r]
-        summary[a] = {k: _mean([r.get(k) for r in rs]) for k in COLUMNS}
-        summary[a]["videos"] = len(rs)
-    return {
-        "rows": rows,
-        "summary": summary,
-        "preset": preset_name,
-        "known_camera": known_camera,
-        "own_template": own_template,
-        "overrides": overrides or {},
-    }
+        cfg = _config(a, preset_name, overrides).to_dict()
+        for v in vids:
+            asset, name = _own_asset(v), f"bench-{v.name}-{a}".lower()
+            task = FitTask(
+                str(store_root),
+                str(v.resolve()),
+                name,
+                cfg,
+                template=asset if own_template else template,
+                exclude=() if own_template else (asset,),
+                outputs=("loss",),
+                cameras="gt" if known_camera else None,
+            )
+            items.append(BatchItem(name, task, f"{v.name} [{a}]"))
+    if template is None and not own_template:
+        refresh_search_packs(store_root)
+    report = run_batch(executor, fit_task, items, commit_fit, skip_finished if resume else None, progress)
+    by_key = {r.key: r for r in report.results}
+    rows = []
+    for it in items:
+        r = by_key[it.key]
+        v, a = Path(it.payload.source).name, it.label.rsplit(" [", 1)[1][:-1]
+        if r.status == "failed":
+            rows.append({"video": v, "ablation": a, "error": r.error})
+            continue
+        m = r.summary.get("metrics", {})
+        row = {"video": v, "ablation": a, "template": r.summary["template"], "wall_s": r.summary.get("fit_s")}
+        rows.append(row | {k: m.get(k) for k in COLUMNS if k != "wall_s"})
+    return rows
 
 
 def _mean(vals: list) -> float | None:

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import typer
 
+from . import batch_opts
 from ._common import (
     JsonOpt,
     console,
@@ -73,6 +74,14 @@ def add(
         show_default=False,
     ),
     json_out: bool = JsonOpt,
+    executor: str = batch_opts.ExecutorOpt,
+    jobs: int = batch_opts.JobsOpt,
+    address: str = batch_opts.AddressOpt,
+    cpus_per_task: float = batch_opts.CpusOpt,
+    gpus_per_task: float = batch_opts.GpusOpt,
+    resume: bool = typer.Option(
+        False, "--resume", help="Skip files whose asset (and views) the bank holds already (runs as a batch)."
+    ),
 ) -> None:
     """Import rigged assets into the bank (atomic: a failed import changes nothing).
 
@@ -81,7 +90,7 @@ def add(
     from rich.markup import escape
 
     from ..errors import UsageError
-    from ..limits import import_limits
+    from ..limits import import_limits, limits_with
     from ..pipelines.ingest import add_files
 
     limits = dict(
@@ -90,6 +99,14 @@ def add(
         max_vertices=max_vertices,
         max_elements=max_elements,
     )
+    if executor is not None or resume:  # a batch: import and views in workers, stored here
+        from .bank_batch import add_many
+
+        opts = dict(name=name, tags=tag, license=license, replace=replace, views=views, resume=resume)
+        run = dict(executor=executor, jobs=jobs, address=address, cpus=cpus_per_task, gpus=gpus_per_task)
+        limits_with(**limits)  # a bad value is one error here; the workers apply them
+        return add_many(paths, json_out=json_out, limits=limits, **opts, **run)
+
     with import_limits(**limits), stage_progress(not json_out and len(paths) > 1) as progress:
         results = add_files(
             _bank(),

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import typer
 
+from . import batch_opts
 from ._common import JsonOpt, console, err_console, print_json, print_table, store_root
 
 
@@ -102,6 +103,11 @@ def reindex(
     ),
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     json_out: bool = JsonOpt,
+    executor: str = batch_opts.ExecutorOpt,
+    jobs: int = batch_opts.JobsOpt,
+    address: str = batch_opts.AddressOpt,
+    cpus_per_task: float = batch_opts.CpusOpt,
+    gpus_per_task: float = batch_opts.GpusOpt,
 ) -> None:
     """Render and embed the retrieval views of bank assets (done by `bank add` for new ones)."""
     from rich.markup import escape
@@ -115,6 +121,11 @@ def reindex(
     if missing:
         have = views_entries(bank)
         targets = [n for n in targets if n not in have or not set(embs) <= set(have[n].get("embedders", {}))]
+    if executor is not None:  # a batch: render and embed in workers, stored here
+        from .bank_batch import reindex_many
+
+        run = dict(executor=executor, jobs=jobs, address=address, cpus=cpus_per_task, gpus=gpus_per_task)
+        return reindex_many(targets, embs, views, size, device, json_out=json_out, **run)
     report, failed = [], []
     for n in targets:
         try:

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import typer
 
+from . import batch_opts
 from ._common import ArticulationOpt, JsonOpt, RendererOpt, console, err_console, print_json, store_root
 
 
@@ -76,6 +77,14 @@ def run(
     articulation: str = ArticulationOpt,
     report: Path = typer.Option(None, "--report", help="Also write the markdown table here."),
     json_out: bool = JsonOpt,
+    executor: str = batch_opts.ExecutorOpt,
+    jobs: int = batch_opts.JobsOpt,
+    address: str = batch_opts.AddressOpt,
+    cpus_per_task: float = batch_opts.CpusOpt,
+    gpus_per_task: float = batch_opts.GpusOpt,
+    resume: bool = typer.Option(
+        False, "--resume", help="Keep the fits a previous run of this benchmark finished (runs as a batch)."
+    ),
 ) -> None:
     """Fit every benchmark video (its own asset excluded from retrieval) and report CASA's metrics."""
     from ..benchdata.run import markdown_table, run_benchmark
@@ -93,18 +102,26 @@ def run(
                 markup=False,
             )
 
-    res = run_benchmark(
-        folder,
-        store_root(),
-        preset_name,
-        list(ablation) if ablation else None,
-        template,
-        limit,
-        progress=progress,
+    args = (folder, store_root(), preset_name, list(ablation) if ablation else None, template, limit)
+    opts = dict(
         known_camera=known_camera,
         own_template=own_template,
         overrides=component_overrides(renderer, articulation),
     )
+    if executor is not None or resume:  # a batch: each fit one task
+        ex = batch_opts.make_executor(executor, jobs, address, cpus_per_task, gpus_per_task, None)
+        from ..pipelines.batch import BatchInterrupted
+
+        try:
+            with batch_opts.RichBatchProgress(enabled=not json_out) as prog:
+                res = run_benchmark(*args, executor=ex, resume=resume, batch_progress=prog, **opts)
+        except BatchInterrupted as exc:
+            batch_opts.say_interrupted(exc.report, None)
+            raise typer.Exit(130) from None
+        finally:
+            ex.close()
+    else:
+        res = run_benchmark(*args, progress=progress, **opts)
     table = markdown_table(res)
     if report is not None:
         write_bytes_atomic(report, table.encode())
@@ -112,6 +129,14 @@ def run(
         print_json(res)
     else:
         console.file.write(table)
+    failed = [r for r in res["rows"] if "error" in r]
+    if failed and (executor is not None or resume):
+        from ..errors import UsageError
+
+        raise UsageError(
+            f"{len(failed)} of {len(res['rows'])} benchmark fits failed (see the table)",
+            hint="run again with --resume to redo only those",
+        )
 
 
 def component_overrides(renderer: str | None, articulation: str | None) -> dict | None:

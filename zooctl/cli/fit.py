@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from ..fit.config import PRESETS
+from . import batch_opts, fit_batch
 from ._common import ArticulationOpt, RendererOpt, console, err_console, print_json, store_root
 
 PRESET_ITERS = {name: make().stage2.iters for name, make in PRESETS.items()}
@@ -49,9 +50,10 @@ class RichReporter:
 
 
 def fit(
-    video: str = typer.Argument(
+    videos: list[str] = typer.Argument(
         ...,
-        help="Video file, image or DAVIS folder (added to the video store first), `bench make` folder, or a stored video name.",
+        help="Video file, image or DAVIS folder (added to the video store first), `bench make` folder, or a stored video name. "
+        "Several (or a quoted glob): a batch, one task per video (see --executor).",
     ),
     template: str = typer.Option(None, "--template", help="Bank asset to fit (default: template retrieval)."),
     masks: str = typer.Option(
@@ -62,7 +64,11 @@ def fit(
         "--box",
         help="x,y,w,h around the animal in the first frame (original pixels): seeds --masks auto.",
     ),
-    out: Path = typer.Option(None, "--out", help="Output folder (default: fits/NAME in the current folder)."),
+    out: Path = typer.Option(
+        None,
+        "--out",
+        help="Output folder (default: fits/NAME in the current folder; a batch: OUT/NAME per video).",
+    ),
     name: str = typer.Option(None, "--name", help="Fit name (default: the video's name)."),
     preset_name: str = typer.Option("fast", "--preset", help="fast or quality."),
     iters: int = typer.Option(
@@ -92,9 +98,18 @@ def fit(
     seed: int = typer.Option(None, "--seed", help="Random seed."),
     max_frames: int = typer.Option(None, "--max-frames", help="Fit only the first N frames."),
     resume: bool = typer.Option(
-        False, "--resume", help="Continue the interrupted fit --name from its saved state."
+        False,
+        "--resume",
+        help="Continue the interrupted fit --name from its saved state; in a batch: skip the videos whose fit finished.",
     ),
-    json_out: bool = typer.Option(False, "--json", help="Print the fit record as JSON."),
+    json_out: bool = typer.Option(
+        False, "--json", help="Print the fit record (a batch: its report) as JSON."
+    ),
+    executor: str = batch_opts.ExecutorOpt,
+    jobs: int = batch_opts.JobsOpt,
+    address: str = batch_opts.AddressOpt,
+    cpus_per_task: float = batch_opts.CpusOpt,
+    gpus_per_task: float = batch_opts.GpusOpt,
 ) -> None:
     """Fit a rigged template to a video (CASA): camera search, global placement, articulation."""
     from rich.markup import escape
@@ -121,6 +136,11 @@ def fit(
     if max_frames is not None:
         cfg.max_frames = max_frames
     cfg.validate()
+    if fit_batch.wants_batch(videos, executor):
+        opts = dict(template=template, masks=masks, box=box, out=out, name=name, cameras=cameras)
+        batch = dict(executor=executor, jobs=jobs, address=address, cpus=cpus_per_task, gpus=gpus_per_task)
+        return fit_batch.fit_many(videos, cfg, resume=resume, json_out=json_out, **opts, **batch)
+    video = videos[0]
     with RichReporter() as rep:
         rec = fit_job(
             video,

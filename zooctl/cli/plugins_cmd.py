@@ -7,7 +7,7 @@ from ._common import JsonOpt, console, print_json
 
 def plugins(json_out: bool = JsonOpt) -> None:
     """List every plugin with its distribution, version and what it registers."""
-    from ..plugins import RESERVED_KINDS, get_plugin_manager
+    from ..plugins import get_plugin_manager
 
     pm = get_plugin_manager()
     registry = pm.registry
@@ -22,10 +22,7 @@ def plugins(json_out: bool = JsonOpt) -> None:
     for col in ("name", "distribution", "version", "status", "registers"):
         table.add_column(col)
     for i in infos:
-        regs = "; ".join(
-            f"{k.replace('_', ' ')}{' (reserved: unused)' if k in RESERVED_KINDS else ''}: {', '.join(v)}"
-            for k, v in sorted(i.registers.items())
-        )
+        regs = "; ".join(f"{k.replace('_', ' ')}: {', '.join(v)}" for k, v in sorted(i.registers.items()))
         if "register_commands" in i.hooks:
             regs = (regs + "; " if regs else "") + "commands"
         status = {"loaded": "[green]loaded[/]", "failed": "[red]failed[/]", "skipped": "[dim]skipped[/]"}[

@@ -98,7 +98,31 @@ def store_video(
     name from another source or with other masks is kept, and this one gets a free name beside it.
     """
     from ..store.videos import VideoStore
-    from ..video.ingest import AddOptions, add_video, default_name
+    from ..video.ingest import add_video
+
+    name, reused, opts = plan_stored_video(path, store_root, masks, box)
+    if reused:
+        if reporter is not None:
+            reporter.message(f"using the stored video {name!r}")
+        return name
+    if reporter is not None:
+        reporter.message(f"adding {path.name} to the video store as {name!r} (decode, flow, masks)")
+    add_video(VideoStore.open(store_root), path, opts)
+    return name
+
+
+def plan_stored_video(
+    path: Path,
+    store_root: Path,
+    masks: str | None,
+    box: tuple[float, float, float, float] | None = None,
+    taken: set[str] | None = None,
+) -> tuple[str, bool, Any]:
+    """The stored name of the video at ``path``: ``(name, True, opts)`` for a video stored
+    already from the same file with the same masks, else ``(a free name, False, opts)`` with the
+    `zooctl.video.ingest.AddOptions` to preprocess it. ``taken``: names reserved besides the store's."""
+    from ..store.videos import VideoStore
+    from ..video.ingest import AddOptions, default_name
 
     opts = AddOptions(box=box)
     if masks == "auto":
@@ -119,19 +143,16 @@ def store_video(
     resolved = str(path.resolve())
     for k in range(1, 100):
         name = base if k == 1 else f"{base}-{k}"
+        if taken and name in taken:
+            continue
         if not vs.exists(name):
             break
         if _same_video(vs.get(name, what=()), vs.summary(name), resolved, segmenter, wanted_masks, box):
-            if reporter is not None:
-                reporter.message(f"using the stored video {name!r}")
-            return name
+            return name, True, opts
     else:
         raise UsageError(f"too many stored videos named {base}-N", hint="remove some with `zooctl video rm`")
-    if reporter is not None:
-        reporter.message(f"adding {path.name} to the video store as {name!r} (decode, flow, masks)")
     opts.name = name
-    add_video(vs, path, opts)
-    return name
+    return name, False, opts
 
 
 def _same_video(
@@ -172,6 +193,7 @@ def fit_job(
     box: tuple[float, float, float, float] | None = None,
     out_root: Path | None = None,
     cameras: str | None = None,
+    fits: FitStore | None = None,
 ) -> dict[str, Any]:
     """Fit a video and write its outputs and store record; returns the record (``fit.json``).
 
@@ -179,11 +201,12 @@ def fit_job(
     ``gt`` for a benchmark video's own cameras).
 
     Outputs go to ``out``, else ``out_root/<name>`` (the CLI's ``fits/<name>``), else the fit's
-    folder in the store."""
+    folder in the store. ``fits``: where the record goes instead of ``store_root``'s fits (a batch
+    worker's private folder; the batch driver commits it, `zooctl.pipelines.batch_fit`)."""
     from ..store.bank import Bank
     from .template import select_template
 
-    fits = FitStore(store_root)
+    fits = fits if fits is not None else FitStore(store_root)
     bank = bank if bank is not None else Bank.open(store_root)
     state = None
     if resume:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import zlib
 from collections.abc import Iterable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -74,13 +75,44 @@ def index_asset(
     names = list(embedders) if embedders is not None else enabled_embedders()
     summary = bank.summary(asset.name)
     digest = views_h5.summary_digest(summary)
+    computed = compute_views(bank, asset, summary, names, n_views, size, seed, device)
+    return store_views(bank, asset.name, computed, digest)
+
+
+@dataclass
+class ComputedViews:
+    """An asset's rendered views and their embeddings, not stored yet (what a batch worker returns)."""
+
+    views: ViewSet
+    embeddings: dict[str, np.ndarray]
+    kinds: dict[str, str]
+    identities: dict[str, str]
+    size: int
+
+
+def compute_views(
+    bank,
+    asset,
+    summary: dict[str, Any] | None,
+    names: list[str],
+    n_views: int = DEFAULT_VIEWS,
+    size: int = DEFAULT_SIZE,
+    seed: int = 0,
+    device: str = "cpu",
+) -> ComputedViews:
+    """Render and embed; only reads ``bank`` (the asset's current views, to keep its other
+    embedders' embeddings: ``summary`` is its index entry, None for an asset not stored yet)."""
     vs: ViewSet = render_views(
         asset, n_views=n_views, size=size, seed=view_seed(asset.name, seed), device=device
     )
     embs, kinds, idents = {}, {}, {}
-    old = summary.get("views") if isinstance(summary.get("views"), dict) else {}
+    old = summary.get("views") if summary and isinstance(summary.get("views"), dict) else {}
     others = [e for e in old.get("embedders", {}) if e not in names]
-    kept = _stored_embeddings(bank, asset.name, old, others, digest, vs)
+    kept = (
+        _stored_embeddings(bank, asset.name, old, others, views_h5.summary_digest(summary), vs)
+        if summary
+        else {}
+    )
     for e, (arr, kind, ident) in kept.items():
         embs[e], kinds[e] = arr, kind
         if ident:
@@ -90,20 +122,27 @@ def index_asset(
         embs[e] = embed_inputs(emb, vs.images, vs.masks)
         kinds[e] = getattr(emb, "input_kind", "rgb")
         idents[e] = embedder_identity(emb)
-    views_id = views_h5.write_views(bank.root, asset.name, vs, embs, digest, kinds)
-    if views_h5.summary_digest(bank.summary(asset.name)) != digest:
+    return ComputedViews(vs, embs, kinds, idents, size)
+
+
+def store_views(bank, name: str, cv: ComputedViews, digest: str | None = None) -> dict[str, Any]:
+    """Write the views sidecar and the index entry. ``digest``: the asset's summary digest the
+    views were made for (None: the asset as stored now); a replaced asset is refused."""
+    digest = digest if digest is not None else views_h5.summary_digest(bank.summary(name))
+    views_id = views_h5.write_views(bank.root, name, cv.views, cv.embeddings, digest, cv.kinds)
+    if views_h5.summary_digest(bank.summary(name)) != digest:
         raise StoreError(
-            f"asset {asset.name!r} was replaced while its views were rendered",
-            hint=f"run `zooctl bank reindex {asset.name}`",
+            f"asset {name!r} was replaced while its views were rendered",
+            hint=f"run `zooctl bank reindex {name}`",
         )
     entry = {
-        "count": len(vs),
-        "size": size,
-        "embedders": {e: int(a.shape[1]) for e, a in embs.items()},
-        "identities": idents,
+        "count": len(cv.views),
+        "size": cv.size,
+        "embedders": {e: int(a.shape[1]) for e, a in cv.embeddings.items()},
+        "identities": cv.identities,
         "views_id": views_id,
     }
-    bank.update_summary(asset.name, views=entry)
+    bank.update_summary(name, views=entry)
     return entry
 
 

@@ -1,0 +1,1 @@
+"""zooctl-ray: the ``ray`` executor (see `zooctl_ray.executor`)."""

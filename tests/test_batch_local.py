@@ -1,0 +1,180 @@
+"""Batches on the built-in `local` executor: every result stored once, failures per item,
+crashed workers retried, an interrupted batch resumed (issue 23)."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+from batch_helpers import fit_inputs, fit_records, glb_files, temporaries, tiny_config
+from cli_helpers import zooctl
+
+from zooctl.errors import InputError
+from zooctl.executors import get_executor
+from zooctl.pipelines.batch import BatchInterrupted, BatchItem, Progress, run_batch
+from zooctl.pipelines.batch_fit import commit_fit, fit_task, plan_fits, skip_finished
+
+pytestmark = pytest.mark.usefixtures("one_thread")
+
+
+def flaky(item, report):
+    """Dies (the whole worker process) on its first attempt when asked to; bad input on 'bad'."""
+    marker, kind = item
+    report("working")
+    if kind == "bad":
+        raise InputError("this item is bad", hint="fix it")
+    if kind == "die" and not marker.exists():
+        marker.write_text("died once")
+        os._exit(3)
+    return {"pid": os.getpid(), "kind": kind}
+
+
+def test_pool_retries_a_dead_worker_and_reports_bad_input(tmp_path):
+    items = [
+        BatchItem(f"i{k}", (tmp_path / f"m{k}", kind)) for k, kind in enumerate(["ok", "die", "bad", "ok"])
+    ]
+    stages = []
+
+    class Rec(Progress):
+        def stage(self, key, stage):
+            stages.append((key, stage))
+
+    ex = get_executor("local", jobs=2)
+    committed = []
+    report = run_batch(ex, flaky, items, lambda it, v: committed.append(it.key) or v, progress=Rec())
+    by = {r.key: r for r in report.results}
+    assert [r.key for r in report.results] == ["i0", "i1", "i2", "i3"]
+    assert by["i1"].status == "done" and by["i1"].attempts >= 2  # its worker died once
+    assert by["i2"].status == "failed" and by["i2"].error == "this item is bad" and by["i2"].attempts == 1
+    assert sorted(committed) == ["i0", "i1", "i3"]  # each good result committed exactly once
+    assert ("i0", "working") in stages
+
+
+def test_local_jobs2_fits_each_video_once_then_resume_skips_them(tmp_path, store):
+    videos = fit_inputs(tmp_path, store, 3)
+    items = plan_fits(videos + [videos[0]], store, tiny_config(), template="a0", out_root=tmp_path / "out")
+    assert [it.key for it in items] == ["a0", "a1", "a2", "a0-2"]  # a repeated input gets its own name
+    report = run_batch(get_executor("local", jobs=2), fit_task, items, commit_fit)
+    assert report.count("done") == 4, report.to_json()
+    recs = fit_records(store)
+    assert sorted(recs) == ["a0", "a0-2", "a1", "a2"] and all(r["status"] == "done" for r in recs.values())
+    # Outputs moved from the worker's private folder to OUT/NAME, and the records say so.
+    fit_json = json.loads((tmp_path / "out" / "a1" / "fit.json").read_text())
+    assert fit_json["out"] == str((tmp_path / "out" / "a1").resolve())
+    assert Path(recs["a1"]["outputs"]["usd"]).is_file() and (store / "fits" / "a1" / "character.h5").is_file()
+    assert not temporaries(store)
+    again = run_batch(get_executor("local", jobs=2), fit_task, items, commit_fit, skip=skip_finished)
+    assert again.count("skipped") == 4 and again.count("done") == 0
+
+
+def test_interrupted_batch_resumes_and_stores_every_fit_once(tmp_path, store):
+    videos = fit_inputs(tmp_path, store, 3)
+    items = plan_fits(videos, store, tiny_config(), template="a0", out_root=tmp_path / "out")
+
+    class CtrlC(Progress):  # the user presses Ctrl-C once the first fit is stored
+        def finished(self, result):
+            raise KeyboardInterrupt
+
+    with pytest.raises(BatchInterrupted) as exc:
+        run_batch(get_executor("local"), fit_task, items, commit_fit, progress=CtrlC())
+    assert [r.status for r in exc.value.report.results] == ["done"]
+    assert sorted(fit_records(store)) == ["a0"]
+    mtime = (store / "fits" / "a0" / "record.json").stat().st_mtime_ns
+    report = run_batch(get_executor("local"), fit_task, items, commit_fit, skip=skip_finished)
+    assert [r.status for r in report.results] == ["skipped", "done", "done"]
+    assert sorted(fit_records(store)) == ["a0", "a1", "a2"]
+    assert (store / "fits" / "a0" / "record.json").stat().st_mtime_ns == mtime  # not written again
+
+
+def test_cli_fit_batch_lists_failures_and_bank_add_batch(tmp_path, store):
+    videos = fit_inputs(tmp_path, store, 2)
+    cfg = tmp_path / "tiny.json"
+    cfg.write_text(json.dumps(tiny_config()))
+    r = zooctl(
+        "fit", *videos, "no-such-video", "--template", "a0", "--config", str(cfg),
+        "--executor", "local", "--out", str(tmp_path / "out"), "--json", store=store,
+    )  # fmt: skip
+    assert r.code == 2 and "1 of 3 fits failed" in r.err
+    rep = r.json()
+    assert [(i["key"], i["status"]) for i in rep["items"]] == [
+        ("a0", "done"),
+        ("a1", "done"),
+        ("no-such-video", "failed"),
+    ]
+    assert "neither a file or folder nor a stored video" in rep["items"][2]["error"]
+    glbs = glb_files(tmp_path, 2)
+    r = zooctl(
+        "bank",
+        "add",
+        *map(str, glbs),
+        str(tmp_path / "missing.glb"),
+        "--executor",
+        "local",
+        "--jobs",
+        "2",
+        store=store,
+    )
+    assert r.code == 2 and "2 assets done" in r.out and "does not exist" in r.out
+    r = zooctl("bank", "add", *map(str, glbs), "--resume", "--json", store=store)
+    assert r.code == 0 and [i["status"] for i in r.json()["items"]] == ["skipped", "skipped"]
+    r = zooctl("bank", "reindex", "m0", "m1", "nosuch", "--executor", "local", "--embedder", "silhouette",
+               "--views", "4", "--size", "48", "--json", store=store)  # fmt: skip
+    assert r.code == 2 and [i["status"] for i in r.json()["items"]] == ["done", "done", "failed"]
+    assert r.json()["items"][0]["views"] == 4 and r.json()["items"][0]["embedders"] == ["silhouette"]
+    r = zooctl("fit", str(tmp_path / "nowhere" / "*.mp4"), store=store)
+    assert r.code == 2 and "no file matches" in r.err
+    r = zooctl("fit", *videos, "--executor", "nope", store=store)
+    assert r.code == 2 and "no executor named 'nope'" in r.err and "Traceback" not in r.err
+
+
+def test_a_video_folder_is_decoded_in_the_worker_and_stored_once_by_the_driver(tmp_path, store):
+    """A DAVIS folder: the worker decodes it and computes its flow; the driver stores the video,
+    and the next batch fits the stored video instead of decoding the folder again."""
+    import numpy as np
+    from PIL import Image
+
+    from zooctl.fit.inputs import load_bench_video
+    from zooctl.store.videos import VideoStore
+
+    videos = fit_inputs(tmp_path, store, 1)
+    bench = load_bench_video(Path(videos[0]))
+    folder = tmp_path / "tubecam"
+    (folder / "JPEGImages").mkdir(parents=True)
+    (folder / "Annotations").mkdir()
+    for i, (f, m) in enumerate(zip(bench.frames, bench.masks, strict=True)):
+        Image.fromarray(f).save(folder / "JPEGImages" / f"{i:05d}.jpg", quality=95)
+        Image.fromarray((m * 255).astype(np.uint8)).save(folder / "Annotations" / f"{i:05d}.png")
+    items = plan_fits([str(folder)], store, tiny_config(), template="a0", out_root=tmp_path / "out")
+    assert items[0].key == "tubecam" and items[0].payload.ingest is not None
+    report = run_batch(get_executor("local"), fit_task, items, commit_fit)
+    assert report.count("done") == 1, report.to_json()
+    vs = VideoStore(store)
+    assert vs.names() == ["tubecam"] and fit_records(store)["tubecam"]["stored_video"] == "tubecam"
+    assert np.array_equal(vs.get("tubecam").masks, bench.masks)
+    again = plan_fits([str(folder)], store, tiny_config(), template="a0", out_root=tmp_path / "out")
+    assert again[0].payload.ingest is None and again[0].payload.source == "tubecam"  # reused
+
+
+def test_bench_run_on_an_executor_keeps_the_row_order_and_resumes(tmp_path, store):
+    from batch_helpers import TINY
+
+    from zooctl.benchdata.run import run_benchmark
+
+    fit_inputs(tmp_path, store, 2)
+    folder = tmp_path / "videos"
+    kw = {"ablations": ["full", "no-flow"], "template": "a0", "overrides": TINY}
+    res = run_benchmark(folder, store, executor=get_executor("local", jobs=2), **kw)
+    assert [(r["video"], r["ablation"]) for r in res["rows"]] == [
+        ("a0", "full"), ("a1", "full"), ("a0", "no-flow"), ("a1", "no-flow"),
+    ]  # fmt: skip
+    assert all("error" not in r and 0 <= r["mask_iou"] <= 1 for r in res["rows"]), res["rows"]
+    assert sorted(fit_records(store)) == [
+        "bench-a0-full",
+        "bench-a0-no-flow",
+        "bench-a1-full",
+        "bench-a1-no-flow",
+    ]
+    again = run_benchmark(folder, store, executor=get_executor("local"), resume=True, **kw)
+    assert [r["mask_iou"] for r in again["rows"]] == [r["mask_iou"] for r in res["rows"]]  # from the records

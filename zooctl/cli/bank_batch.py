@@ -1,0 +1,69 @@
+"""`bank add FILES... --executor` and `bank reindex --executor`: the batch forms (issue 23)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ._common import store_root
+from .batch_opts import make_executor, report_batch, run_cli_batch
+
+
+def _row(r) -> list[str]:
+    s = r.summary
+    return [str(s.get("vertices") or ""), str(s.get("joints") or ""), str(s.get("views") or "")]
+
+
+_COLS = [("vertices", "right"), ("joints", "right"), ("views", "right")]
+
+
+def add_many(
+    paths: list[Path],
+    *,
+    name: str | None,
+    tags: list[str] | None,
+    license: str | None,
+    replace: bool,
+    views: bool | None,
+    resume: bool,
+    json_out: bool,
+    executor: str,
+    jobs: int | None,
+    address: str | None,
+    cpus: float,
+    gpus: float | None,
+    device: str = "cpu",
+    limits: dict | None = None,
+) -> None:
+    from ..pipelines.batch_bank import bank_task, commit_bank, plan_add, skip_stored
+    from ..pipelines.ingest import _views_default
+    from ..store.bank import Bank
+
+    bank = Bank.open(store_root())
+    views = _views_default() if views is None else views
+    items = plan_add(bank, paths, name, tags, license, replace, views, resume, device, limits)
+    ex = make_executor(executor, jobs, address, cpus, gpus, device)
+    report = run_cli_batch(ex, bank_task, items, commit_bank, skip_stored if resume else None, json_out)
+    report_batch(report, json_out, "assets", _COLS, _row)
+
+
+def reindex_many(
+    names: list[str],
+    embedders: list[str],
+    n_views: int,
+    size: int,
+    device: str,
+    *,
+    json_out: bool,
+    executor: str,
+    jobs: int | None,
+    address: str | None,
+    cpus: float,
+    gpus: float | None,
+) -> None:
+    from ..pipelines.batch_bank import bank_task, commit_bank, plan_reindex
+    from ..store.bank import Bank
+
+    items = plan_reindex(Bank.open(store_root()), names, embedders, n_views, size, device)
+    ex = make_executor(executor, jobs, address, cpus, gpus, device)
+    report = run_cli_batch(ex, bank_task, items, commit_bank, None, json_out)
+    report_batch(report, json_out, "assets", _COLS, _row)

@@ -1,0 +1,153 @@
+"""What every batch command shares: the executor options, a progress bar over tasks, the summary.
+
+The batch logic is `zooctl.pipelines.batch`; this module only turns options into an executor and
+a report into lines and an exit code.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import typer
+
+from ..pipelines.batch import BatchInterrupted, BatchReport, ItemResult, Progress
+from ._common import console, err_console, print_json, print_table
+
+ExecutorOpt = typer.Option(
+    None,
+    "--executor",
+    help="Run as a batch on an executor: local (this machine) or ray (plugin zooctl-ray); see `zooctl plugins`.",
+)
+JobsOpt = typer.Option(
+    None,
+    "--jobs",
+    help="Tasks at once (local: worker processes, default 1; ray: default the cluster's CPUs / --cpus-per-task).",
+)
+AddressOpt = typer.Option(
+    None, "--address", help="Ray cluster to join (HOST:PORT; or RAY_ADDRESS). Default: start Ray here."
+)
+CpusOpt = typer.Option(1.0, "--cpus-per-task", help="CPUs each task asks for (and its torch threads).")
+GpusOpt = typer.Option(
+    None, "--gpus-per-task", help="GPUs each task asks for (default: 1 with --device cuda)."
+)
+
+
+def make_executor(
+    name: str | None,
+    jobs: int | None,
+    address: str | None,
+    cpus: float,
+    gpus: float | None,
+    device: str | None,
+):
+    from ..executors import get_executor
+
+    if gpus is None:
+        gpus = 1.0 if (device or "cpu").startswith("cuda") else 0.0
+    return get_executor(name or "local", jobs=jobs, address=address, cpus_per_task=cpus, gpus_per_task=gpus)
+
+
+class RichBatchProgress(Progress):
+    """One bar over the batch's tasks, with the stage each running task is in."""
+
+    def __init__(self, enabled: bool = True) -> None:
+        from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
+        from rich.progress import Progress as RichProgress
+
+        self.enabled = enabled
+        self.bar = RichProgress(
+            TextColumn("[bold]tasks"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            TextColumn("{task.fields[running]}"),
+            console=err_console,
+            disable=not enabled,
+        )
+        self.task: Any = None
+        self.running: dict[str, str] = {}
+
+    def __enter__(self) -> RichBatchProgress:
+        self.bar.start()
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.bar.stop()
+
+    def start(self, total: int, skipped: int) -> None:
+        self.task = self.bar.add_task("", total=total, running="")
+        if skipped:
+            self.bar.console.print(f"{skipped} of {total} done already (--resume): skipped", highlight=False)
+
+    def _show(self) -> None:
+        text = ", ".join(f"{k}: {s}" for k, s in list(self.running.items())[:4])
+        self.bar.update(self.task, running=text + (" ..." if len(self.running) > 4 else ""))
+
+    def stage(self, key: str, stage: str) -> None:
+        self.running[key] = stage
+        self._show()
+
+    def finished(self, result: ItemResult) -> None:
+        self.running.pop(result.key, None)
+        self.bar.update(self.task, advance=1)
+        self._show()
+        if result.status == "failed" and self.enabled:
+            self.bar.console.print(
+                f"[red]failed[/] {result.key}: {result.error}", highlight=False, markup=True
+            )
+
+
+def run_cli_batch(executor, fn, items, commit, skip, json_out: bool) -> BatchReport:
+    """`run_batch` with the progress bar; Ctrl-C prints what finished and exits 130."""
+    from ..pipelines.batch import run_batch
+
+    try:
+        with RichBatchProgress(enabled=not json_out) as prog:
+            return run_batch(executor, fn, items, commit, skip=skip, progress=prog)
+    except BatchInterrupted as exc:
+        say_interrupted(exc.report, len(items))
+        raise typer.Exit(130) from None
+    finally:
+        executor.close()
+
+
+def say_interrupted(report: BatchReport, total: int | None) -> None:
+    left = f", {total - len(report.results)} not finished" if total is not None else ""
+    err_console.print(
+        f"interrupted: {report.count('done')} done, {report.count('skipped')} skipped{left}; "
+        "run the same command with --resume to finish",
+        highlight=False,
+    )
+
+
+def report_batch(
+    report: BatchReport,
+    json_out: bool,
+    what: str,
+    columns: list[tuple[str, str]],
+    row: Callable[[ItemResult], list[str]],
+) -> None:
+    """Print the summary (a table, or ``--json``) and fail with one line if any item failed."""
+    from ..errors import UsageError
+
+    if json_out:
+        print_json(report.to_json())
+    else:
+        print_table(
+            [("item", "left"), ("status", "left"), *columns, ("tries", "right"), ("error", "left")],
+            [
+                [r.key, r.status, *row(r), str(r.attempts or "-"), (r.error or "")[:120]]
+                for r in report.results
+            ],
+            title=f"{report.count('done')} {what} done, {report.count('skipped')} skipped, "
+            f"{report.count('failed')} failed in {report.wall_s:.1f} s ({report.executor}, {report.slots} at once)",
+        )
+        for r in report.failed:
+            if r.hint:
+                console.print(f"  {r.key}: hint: {r.hint}", highlight=False, markup=False)
+    if report.failed:
+        raise UsageError(
+            f"{len(report.failed)} of {len(report.results)} {what} failed",
+            hint="the others are stored; fix the inputs named above and run again with --resume",
+        )

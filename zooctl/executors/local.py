@@ -1,0 +1,180 @@
+"""The built-in ``local`` executor: tasks in this process one after another, or in ``--jobs N``
+worker processes on this machine.
+
+Worker processes are started with ``spawn`` (a fresh interpreter: forking a process that has
+torch's thread pools running is unsafe). A worker that dies (killed, out of memory) breaks
+Python's pool; the pool is then rebuilt and the tasks that were running are retried, each such
+event counting as an attempt of every task that was in flight.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+import queue as queue_mod
+from collections.abc import Iterator
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from typing import Any
+
+from ..errors import UsageError
+from .base import StageCallback, Task, TaskOutcome, call_task, task_env
+
+_STAGES: Any = None  # the worker's end of the driver's stage queue (set by _init_worker)
+
+
+def _init_worker(stages: Any) -> None:
+    global _STAGES
+    _STAGES = stages
+
+
+def _report_to_queue(index: int):
+    def report(stage: str) -> None:
+        try:
+            _STAGES.put_nowait((index, stage))
+        except Exception:  # progress is a nicety, never a reason to fail a task
+            pass
+
+    return report
+
+
+def _pool_task(fn: Task, item: Any, index: int, env: dict[str, str], threads: int):
+    return call_task(fn, item, _report_to_queue(index), env, threads)
+
+
+class LocalExecutor:
+    name = "local"
+
+    def __init__(
+        self,
+        jobs: int | None = None,
+        address: str | None = None,
+        cpus_per_task: float = 1.0,
+        gpus_per_task: float = 0.0,
+        retries: int = 2,
+        env: dict[str, str] | None = None,
+    ) -> None:
+        if address:
+            raise UsageError("--address is for a cluster executor", hint="use --executor ray --address ...")
+        self.slots = jobs or 1
+        self.threads = max(1, math.floor(cpus_per_task))
+        self.retries = retries
+        self.env = {**task_env(), **(env or {})}
+        self._pool: ProcessPoolExecutor | None = None
+
+    # -- sequential ----------------------------------------------------------------------
+    def _map_inline(self, fn: Task, items: list[Any], on_stage: StageCallback | None):
+        for i, item in enumerate(items):
+            last = ""
+            for attempt in range(1, self.retries + 2):
+
+                def report(stage: str, _i: int = i) -> None:
+                    if on_stage is not None:
+                        on_stage(_i, stage)
+
+                try:
+                    status, a, b, w = call_task(fn, item, report, self.env, self.threads)
+                except Exception as exc:  # a crash: retried, bounded
+                    last = f"{type(exc).__name__}: {exc}"
+                    continue
+                yield _outcome(i, status, a, b, w, attempt)
+                break
+            else:
+                yield _crashed(i, self.retries + 1, last)
+
+    # -- process pool ----------------------------------------------------------------------
+    def _new_pool(self, stages: Any) -> ProcessPoolExecutor:
+        ctx = multiprocessing.get_context("spawn")
+        return ProcessPoolExecutor(self.slots, mp_context=ctx, initializer=_init_worker, initargs=(stages,))
+
+    def _map_pool(self, fn: Task, items: list[Any], on_stage: StageCallback | None):
+        stages = multiprocessing.get_context("spawn").Queue()
+        self._pool = self._new_pool(stages)
+        todo = list(range(len(items)))[::-1]  # a stack: pop() takes the first item first
+        attempts = [0] * len(items)
+        running: dict[Future, int] = {}
+        try:
+            while todo or running:
+                while todo and len(running) < self.slots:  # one task per worker: all in flight run
+                    i = todo.pop()
+                    attempts[i] += 1
+                    fut = self._pool.submit(_pool_task, fn, items[i], i, self.env, self.threads)
+                    running[fut] = i
+                done, _ = wait(list(running), timeout=0.25, return_when=FIRST_COMPLETED)
+                _drain(stages, on_stage)
+                broken = False
+                for fut in done:
+                    i = running.pop(fut)
+                    try:
+                        status, a, b, w = fut.result()
+                    except BrokenProcessPool:
+                        broken = True
+                        failed = self._retry(i, "its worker process died", attempts, todo)
+                    except Exception as exc:
+                        failed = self._retry(i, f"{type(exc).__name__}: {exc}", attempts, todo)
+                    else:
+                        failed = _outcome(i, status, a, b, w, attempts[i])
+                    if failed is not None:
+                        yield failed
+                if broken:  # every other task of the dead pool fails too: collect and rebuild
+                    for fut in list(running):
+                        failed = self._retry(
+                            running.pop(fut), "its worker pool lost a process", attempts, todo
+                        )
+                        if failed is not None:
+                            yield failed
+                    self._pool.shutdown(wait=False, cancel_futures=True)
+                    self._pool = self._new_pool(stages)
+        finally:
+            self._stop_pool()
+            _drain(stages, on_stage)
+
+    def _retry(self, i: int, reason: str, attempts: list[int], todo: list[int]) -> TaskOutcome | None:
+        """Queue item ``i`` again, or (attempts spent) its failure."""
+        if attempts[i] <= self.retries:
+            todo.append(i)
+            return None
+        return _crashed(i, attempts[i], reason)
+
+    def _stop_pool(self) -> None:
+        pool, self._pool = self._pool, None
+        if pool is None:
+            return
+        # Python's pool cannot stop a running task: end its workers so Ctrl-C is prompt.
+        for p in list(getattr(pool, "_processes", {}).values()):
+            if p.is_alive():
+                p.terminate()
+        pool.shutdown(wait=True, cancel_futures=True)
+
+    def map(self, fn: Task, items: list[Any], on_stage: StageCallback | None = None) -> Iterator[TaskOutcome]:
+        if self.slots == 1:
+            return self._map_inline(fn, list(items), on_stage)
+        return self._map_pool(fn, list(items), on_stage)
+
+    def close(self) -> None:
+        self._stop_pool()
+
+
+def _drain(stages: Any, on_stage: StageCallback | None) -> None:
+    while True:
+        try:
+            i, stage = stages.get_nowait()
+        except (queue_mod.Empty, OSError, ValueError):
+            return
+        if on_stage is not None:
+            on_stage(i, stage)
+
+
+def _outcome(i: int, status: str, a: Any, b: Any, w: str, attempts: int) -> TaskOutcome:
+    if status == "ok":
+        return TaskOutcome(i, value=a, attempts=attempts, where=w)
+    return TaskOutcome(i, error=a, hint=b, attempts=attempts, where=w)
+
+
+def _crashed(i: int, attempts: int, reason: str) -> TaskOutcome:
+    return TaskOutcome(
+        i,
+        error=f"crashed {attempts} times; last: {reason}",
+        hint="run it alone with ZOOCTL_DEBUG=1 to see the traceback",
+        attempts=attempts,
+    )
