@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from ..components import ExporterSpec
-from ..errors import UsageError
+from ..errors import StoreError, UsageError
 
 
 def export_formats() -> list[str]:
@@ -96,8 +96,8 @@ def export_asset(
     check_writable(path)
     try:
         spec.save(asset, path, clips, **opts)
-    except OSError as exc:  # a full disk, a read-only mount, a file the OS will not create
-        why = exc.strerror or type(exc).__name__
+    except (OSError, StoreError) as exc:  # a full disk, a read-only mount, a file the OS will not create
+        why = exc.message if isinstance(exc, StoreError) else exc.strerror or type(exc).__name__
         raise UsageError(
             f"cannot write {path}: {why}", hint="check the folder's space and permissions"
         ) from None
