@@ -375,6 +375,41 @@ for args in cmds:
 """
 
 
+def _drive(argv: list[str], env: dict, cwd: Path) -> tuple[list[str], str | None, str | None]:
+    """Run the driver, killing it when one command runs past `HANG_S`. Returns its stdout lines,
+    a crash description (or None) and the command that hung (or None)."""
+    import queue
+    import tempfile
+    import threading
+
+    lines: queue.Queue = queue.Queue()
+    with tempfile.TemporaryFile("w+") as errf:
+        proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=errf, text=True, env=env, cwd=cwd)
+        reader = threading.Thread(target=lambda: [lines.put(x) for x in proc.stdout] + [lines.put(None)])
+        reader.start()
+        out, current, hung = [], "startup", None
+        while True:
+            try:
+                ln = lines.get(timeout=HANG_S)
+            except queue.Empty:
+                hung = current
+                proc.kill()
+                break
+            if ln is None:
+                break
+            out.append(ln.rstrip("\n"))
+            if ln.startswith("START "):
+                current = ln[6:].strip()
+        proc.wait()
+        reader.join()
+        errf.seek(0)
+        tail = errf.read()[-300:]
+    crash = None
+    if hung is None and proc.returncode != 0:
+        crash = f"crash ({proc.returncode}) during {current}: {tail}"
+    return out, crash, hung
+
+
 def hashes(root: Path, rels: list[str]) -> dict[str, str | None]:
     out = {}
     for rel in rels:
@@ -429,26 +464,14 @@ def run_state(
     env.pop("ZOOCTL_DEBUG", None)
     t0 = time.perf_counter()
     rec = {"seed": seed, "kind": kind, "damage": st.kinds, "problems": [], "outcomes": {}}
-    proc = subprocess.Popen(
-        [*NO_OVERRIDE, sys.executable, "-c", DRIVER, str(root), json.dumps(cmds)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=env,
-        cwd=work,
+    out, err, hung = _drive(
+        [*NO_OVERRIDE, sys.executable, "-c", DRIVER, str(root), json.dumps(cmds)], env, work
     )
-    try:
-        out, err = proc.communicate(timeout=HANG_S * len(cmds))
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, err = proc.communicate()
-        rec["problems"].append("hang: the commands ran past their time")
-    results = [json.loads(ln[5:]) for ln in out.splitlines() if ln.startswith("DONE ")]
-    started = [ln[6:] for ln in out.splitlines() if ln.startswith("START ")]
-    if proc.returncode not in (0, None) and not rec["problems"]:
-        rec["problems"].append(
-            f"crash ({proc.returncode}) during {started[-1] if started else '?'}: {err[-300:]}"
-        )
+    results = [json.loads(ln[5:]) for ln in out if ln.startswith("DONE ")]
+    if hung is not None:
+        rec["problems"].append(f"hang: {hung} ran past {HANG_S:g} s")
+    elif err is not None:
+        rec["problems"].append(err)
     by = {}
     for res in results:
         name = " ".join(res["args"][:2])
