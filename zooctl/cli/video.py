@@ -78,6 +78,11 @@ def add(
     max_size: int = typer.Option(
         854, "--max-size", help="Downscale so the longest side is at most this many pixels (0: keep)."
     ),
+    max_memory: float = typer.Option(
+        2.0,
+        "--max-memory",
+        help="Refuse a video whose preprocessing would need more than this many GB (about 32 bytes per stored pixel).",
+    ),
     replace: bool = typer.Option(False, "--replace", help="Overwrite a video of the same name."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars."),
     json_out: bool = JsonOpt,
@@ -102,7 +107,8 @@ def add(
         start=start,
         end=end,
         max_frames=max_frames,
-        max_size=max_size or None,
+        max_size=max_size,
+        max_memory_gb=max_memory,
         flow=flow,
         flow_options=flow_opts,
         replace=replace,
@@ -117,6 +123,14 @@ def add(
             f"masks by {summary['segmenter']} (mean coverage {summary['mask_coverage_mean']:.1%})",
             highlight=False,
         )
+        if summary.get("empty_masks"):
+            console.print(
+                f"{summary['empty_masks']} of {summary['frames']} frames have no animal in their mask "
+                f"(stored empty; the fit skips them): see `zooctl video show {summary['name']}`",
+                style="yellow",
+                highlight=False,
+                markup=False,
+            )
 
 
 @app.command("list")

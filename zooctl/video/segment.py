@@ -18,24 +18,42 @@ from .decode import IMAGE_SUFFIXES, VIDEO_SUFFIXES, image_files
 Progress = Callable[[int, int], None]
 
 
-def mask_from_image(img: np.ndarray, mode: str) -> np.ndarray:
+def mask_from_image(img: np.ndarray, mode: str, where: str = "mask") -> np.ndarray:
     """A mask image -> (H, W) bool. Palette images: index != 0; with alpha: alpha > 127; else grey > 127
-    (or > 0 when the file holds only 0/1 values)."""
+    (or > 0 when the file holds only 0/1 values). A photo (many colours) is an InputError."""
     a = np.asarray(img)
     if mode == "P":
         return a != 0
+    check_mask_like(a, where)
     if a.ndim == 3 and a.shape[2] in (2, 4) and (a[..., -1] < 255).any():
         return a[..., -1] > 127
     grey = a if a.ndim == 2 else a[..., : min(3, a.shape[2])].max(-1)
     return grey > (0 if grey.max() <= 1 else 127)
 
 
+def check_mask_like(a: np.ndarray, where: str) -> None:
+    """InputError unless ``a`` (H, W[, C]) uint8 looks like a mask: a few flat colours, not a photo.
+
+    Coarse colours (8 levels a channel, so compression noise at edges stays in its level): in a mask
+    the four commonest cover nearly every pixel; in a photo they rarely reach half.
+    """
+    q = (np.asarray(a)[..., :3] if a.ndim == 3 else np.asarray(a)).astype(np.int64) // 32
+    codes = q if q.ndim == 2 else (q[..., 0] * 8 + q[..., 1]) * 8 + q[..., 2]
+    counts = np.sort(np.bincount(codes.ravel(), minlength=512))[::-1]
+    if counts[:4].sum() < 0.9 * codes.size:
+        raise InputError(
+            f"{where} is not a mask: it has the many colours of a photo or video frame",
+            hint="--masks takes single-channel or binary images (animal white or non-zero, background black)",
+        )
+
+
 class MaskSegmenter:
     """User-supplied masks: a folder of mask images (PNG...) or a mask video, one per source frame.
 
     Matching: as many masks as stored frames (taken in order), or as many as the source has
-    frames (then the stored frames' ``source_indices`` pick theirs). Size: the source's original
-    size or the stored size; masks are resized to the stored size.
+    frames (``source_frames``; then the stored frames' ``source_indices`` pick theirs); any other
+    count is an error. Size: the source's original size or the stored size; masks are resized to
+    the stored size. Images or video frames with a photo's colours are refused.
     """
 
     name = "masks"
@@ -45,8 +63,12 @@ class MaskSegmenter:
         path: str | Path,
         source_indices: Sequence[int] | None = None,
         original_size: tuple[int, int] | None = None,
+        source_frames: int | None = None,
+        source_exact: bool = True,
     ) -> None:
         self.path = Path(path).expanduser()
+        self.source_frames = source_frames
+        self.source_exact = source_exact
         if not self.path.exists():
             raise InputError(
                 f"mask source {self.path} does not exist", hint="give a folder of mask images or a mask video"
@@ -66,12 +88,21 @@ class MaskSegmenter:
         )
 
     def _pick(self, count: int, t: int) -> np.ndarray:
+        """Which of ``count`` masks each of the ``t`` stored frames takes. A folder's frame count is
+        exact (``source_exact``); a video file's header count may be off by a frame."""
         if count == t:
             return np.arange(t)
-        if self.source_indices is not None and count > int(self.source_indices.max()) and count != t:
+        src = self.source_frames
+        slack = 0 if self.source_exact else 1
+        if (
+            self.source_indices is not None
+            and count > int(self.source_indices.max())
+            and (src is None or abs(count - src) <= slack)
+        ):
             return self.source_indices
+        of_source = f" (its source has {src})" if src is not None and src != t else ""
         raise InputError(
-            f"{count} masks in {self.path} for a video of {t} frames",
+            f"{count} masks in {self.path} for a video of {t} frames{of_source}",
             hint="give exactly one mask per frame (in the same order as the frames)",
         )
 
@@ -104,7 +135,7 @@ class MaskSegmenter:
             try:
                 with Image.open(files[i]) as im:
                     im.load()
-                    m = mask_from_image(np.asarray(im), im.mode)
+                    m = mask_from_image(np.asarray(im), im.mode, files[i].name)
             except OSError as exc:
                 raise InputError(f"{files[i]} is not a readable mask image: {exc}") from None
             out[k] = self._fit(m, h, w, files[i].name)
@@ -115,7 +146,8 @@ class MaskSegmenter:
     def _from_video(self, t, h, w, progress) -> np.ndarray:
         from .decode import decode
 
-        dv = decode(self.path, max_size=None)
+        dv = decode(self.path, max_size=None, max_memory_gb=None)
+        check_mask_like(dv.frames[len(dv.frames) // 2], f"the middle frame of {self.path.name}")
         masks = dv.frames.max(-1) > 127
         pick = self._pick(len(masks), t)
         out = np.stack([self._fit(masks[i], h, w, f"frame {i} of {self.path.name}") for i in pick])
