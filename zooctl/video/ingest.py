@@ -25,6 +25,7 @@ class AddOptions:
     segmenter: str | None = None
     segmenter_options: dict[str, Any] = field(default_factory=dict)
     box: tuple[float, float, float, float] | None = None  # x, y, w, h in pixels of the original video
+    box_frame: int = 0  # the stored frame the box is drawn on
     fps: float | None = None
     start: float | None = None
     end: float | None = None
@@ -107,6 +108,10 @@ def preprocess(path: str | Path, opts: AddOptions, progress: StageProgress | Non
     kwargs: dict[str, Any] = {"box": box, "progress": stage("segment")}
     if getattr(segmenter, "uses_flow", False):
         kwargs["flow"] = vf
+    if opts.box_frame:
+        if box is None or seg_name != "grabcut":
+            raise UsageError("--box-frame places --box: give both, with the grabcut segmenter")
+        kwargs["box_frame"] = opts.box_frame
     masks = np.asarray(segmenter.segment(dv.frames, **kwargs), dtype=bool)
     if masks.shape != (t, h, w):
         raise InputError(
@@ -143,6 +148,7 @@ def preprocess(path: str | Path, opts: AddOptions, progress: StageProgress | Non
             "name": seg_name,
             "options": recorded,
             "box": list(box) if box is not None else None,
+            "box_frame": opts.box_frame if box is not None else None,
             **report,
             **dict(getattr(segmenter, "report", None) or {}),
         },
