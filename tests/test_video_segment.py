@@ -94,9 +94,9 @@ def test_grabcut_bad_box_and_static_scene(synthetic):
     seg = get_registry().get("segmenter", "grabcut").create()
     with pytest.raises(UsageError, match="does not cover"):
         seg.segment(frames, box=(500, 500, 10, 10))
+    # nothing moves and nothing looks like an animal: no masks (video add reports it), no failure
     still = np.repeat(frames[:1], 3, 0)
-    with pytest.raises(UsageError, match="no single moving animal"):
-        seg.segment(still)
+    assert not seg.segment(still).any() and set(seg.report["seeding"]) == {"empty"}
 
 
 @needs_shared_videos

@@ -148,6 +148,8 @@ class GrabCutTracker:
             how[s] = "localiser"
         masks = np.zeros((t, h, w), bool)
         masks[s] = masks_s
+        if not masks_s.any():
+            how[s] = "empty"
         hist_fg = cues.colour_histogram(bins[s], masks[s])
         hist_bg0 = cues.colour_histogram(bins[s], ~masks[s])
         gate = self.gate
@@ -244,7 +246,7 @@ class GrabCutTracker:
             return np.zeros((h, w), bool)
         # seed as from a user's box around the evidence: the whole connected part of the weaker
         # evidence (the class map is blurry, motion stops at still limbs), and a little past it
-        n, lab = cv2.connectedComponents((score > 0.25).astype(np.uint8), connectivity=8)
+        n, lab = cv2.connectedComponents((score > 0.4).astype(np.uint8), connectivity=8)
         hit = np.unique(lab[region])
         x, y, bw, bh = cues.box_of(np.isin(lab, hit[hit > 0]) | region)
         m = round(self.seed_margin * max(bw, bh))

@@ -237,7 +237,9 @@ def fuse(ev: Evidence, motion: np.ndarray | None) -> np.ndarray:
     if mean.max() < 0.2:  # nothing that moves looks like the animal
         return ev.animal
     weight = np.clip(mean / mean.max(), 0.0, 1.0)
-    return np.maximum(0.6 * ev.animal, weight[lab] * motion).astype(np.float32)
+    # motion far from any class evidence (ripples around a swimming bird) fades out
+    near = np.clip(ev.animal / 0.2, 0.0, 1.0)
+    return np.maximum(0.6 * ev.animal, weight[lab] * motion * near).astype(np.float32)
 
 
 def main_region(score: np.ndarray, threshold: float = 0.5) -> tuple[np.ndarray, int]:
