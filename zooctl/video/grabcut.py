@@ -41,8 +41,8 @@ class GrabCutTracker:
     segmented downscaled and the masks upsampled; None: full size). ``box_margin``: the band around
     the first-frame box that may still hold the animal, as a fraction of the box's longer side.
     ``localise``: check tracked masks against the localiser and re-seed. ``key_every``: keyframe
-    spacing. ``min_animal_prob``: the frame probability of the animal classes under which the class
-    map is not trusted (motion alone seeds). ``min_agreement``: the share of the localiser's animal
+    spacing. ``min_confidence``: the animal-class probability the surest cell of the class map needs
+    for the map to be trusted (`zooctl.video.localise.Evidence`; else motion alone seeds). ``min_agreement``: the share of the localiser's animal
     region a tracked mask must touch to be kept. ``seed_margin``: how far past the class map's region
     the animal may reach, as a fraction of its longer side. ``localiser_width``: network input width.
     """
@@ -65,7 +65,7 @@ class GrabCutTracker:
         box_margin: float = 0.0,
         localise: bool = True,
         key_every: int = 10,
-        min_animal_prob: float = 0.1,
+        min_confidence: float = 0.85,
         min_agreement: float = 0.3,
         seed_margin: float = 0.1,
         localiser_width: int = 448,
@@ -89,7 +89,7 @@ class GrabCutTracker:
             raise UsageError(f"key_every must be at least 1, got {key_every}")
         self.localise = localise
         self.key_every = key_every
-        self.min_animal_prob = min_animal_prob
+        self.min_confidence = min_confidence
         self.min_agreement = min_agreement
         self.seed_margin = seed_margin
         self.localiser_width = localiser_width
@@ -219,7 +219,7 @@ class GrabCutTracker:
         if motion.mean() > 0.5:  # most of the frame "moves": the camera model failed, not an animal
             motion = None
         score = fuse(ev, motion)
-        if ev.animal_prob < self.min_animal_prob:  # no animal class stands out: motion alone, if any
+        if ev.confidence < self.min_confidence:  # no part of the frame surely an animal: motion alone
             score = np.zeros_like(score) if motion is None else motion
         return score, ev
 
@@ -231,7 +231,7 @@ class GrabCutTracker:
         for k in keys:
             ev = self._seen(frames, k)
             region, _ = main_region(self._fused(frames, flow, k)[0])
-            score = ev.animal_prob * float(region.any()) + 1e-3 * float(region.mean())
+            score = ev.confidence * float(region.any()) + 1e-3 * float(region.mean())
             if score > best_score:
                 best, best_score = k, score
         return best, self._seed(frames, bins, flow, best)

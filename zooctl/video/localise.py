@@ -146,11 +146,14 @@ class Evidence:
 
     ``animal``: (H, W) float32 in [0, 1], the animal map at the frame's size (1 at its peak).
     ``animal_prob``: probability the classifier gives all animal classes together for the frame.
+    ``confidence``: the same per cell of the class map, at its most sure cell (an animal fills a
+    few cells surely, even when the whole frame reads as grass or water).
     ``classes``: the frame's top animal classes as (ImageNet index, probability).
     """
 
     animal: np.ndarray
     animal_prob: float
+    confidence: float
     classes: list[tuple[int, float]]
 
 
@@ -192,6 +195,9 @@ class Localiser:
         x = (x.astype(np.float32)[None] - INPUT_MEAN) / INPUT_STD
         head = self._head(x)[0]
         m = self.model
+        cells = head @ m.fc_weight + m.fc_bias  # (h/32, w/32, 1000): the classifier on every cell
+        cells = np.exp(cells - cells.max(-1, keepdims=True))
+        confidence = float((cells[..., :ANIMAL_CLASSES].sum(-1) / cells.sum(-1)).max())
         logits = head.mean((0, 1)) @ m.fc_weight + m.fc_bias
         p = np.exp(logits - logits.max())
         p /= p.sum()
@@ -212,6 +218,7 @@ class Localiser:
         return Evidence(
             animal.astype(np.float32),
             float(animal_p.sum()),
+            confidence,
             [(int(i), float(animal_p[i])) for i in top],
         )
 
