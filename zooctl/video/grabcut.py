@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import InputError, UsageError
 from . import cues
-from .flow import DISFlow, VideoFlow, compute_video_flow, warp
+from .flow import DISFlow, VideoFlow, compute_video_flow, fb_inconsistent, warp
 from .localise import Evidence, Localiser, class_name, fuse, main_region
 
 Box = tuple[int, int, int, int]  # x, y, w, h in pixels of the frames given to segment()
@@ -172,7 +172,14 @@ class GrabCutTracker:
                 m = np.zeros((h, w), bool)
                 if prior.any():
                     m = self._track(
-                        frames[i], bins[i], prior, self._motion_flow(flow, i), hist_fg, hist_bg, gate
+                        frames[i],
+                        bins[i],
+                        prior,
+                        self._motion_flow(flow, i),
+                        hist_fg,
+                        hist_bg,
+                        gate,
+                        self._unreliable(flow, i),
                     )
                 if self.localise and self._due(i, s, m, prior):
                     new = self._reseed(frames, bins, flow, i, m)
@@ -195,7 +202,17 @@ class GrabCutTracker:
     # -- the localiser: where to start and when to start again -------------------------------------
 
     def _residual(self, flow, i: int) -> np.ndarray:
-        return cues.background_motion_residual(self._motion_flow(flow, i))
+        """Frame i's motion unlike the camera, in pixels; 0 where the flow is unreliable."""
+        r = cues.background_motion_residual(self._motion_flow(flow, i))
+        return np.where(_closed(self._unreliable(flow, i)), 0.0, r).astype(np.float32)
+
+    @staticmethod
+    def _unreliable(flow, i: int) -> np.ndarray:
+        """(H, W) bool: frame i's pixels whose flow fails the forward-backward check (ripples,
+        glints, smoke: texture that changes rather than moves)."""
+        if i < len(flow.forward):
+            return fb_inconsistent(flow.forward[i], flow.backward[i])
+        return fb_inconsistent(flow.backward[i - 1], flow.forward[i - 1])
 
     @staticmethod
     def _motion_flow(flow, i: int) -> np.ndarray:
@@ -319,7 +336,9 @@ class GrabCutTracker:
         # can drop it all: the seed itself is a better start than nothing
         return out if out.sum() >= 0.3 * seed.sum() else _clean(seed, seed)
 
-    def _track(self, frame, bins, prior, motion_flow, hist_fg, hist_bg, gate: float) -> np.ndarray:
+    def _track(
+        self, frame, bins, prior, motion_flow, hist_fg, hist_bg, gate: float, unreliable=None
+    ) -> np.ndarray:
         h, w = bins.shape
         box = cues.box_of(prior)
         if box is None:  # lost: nothing to propagate (the animal left the frame)
@@ -336,6 +355,8 @@ class GrabCutTracker:
         )
         p_colour = 0.5 * (p_first + p_local)
         p_motion = cues.motion_probability(cues.background_motion_residual(motion_flow), window)
+        if unreliable is not None:  # what only seems to move (ripples) is no evidence of the animal
+            p_motion = np.where(_closed(unreliable), 0.0, p_motion)
         cue = np.sqrt(p_colour * p_motion)
         # a limb the flow lost is taken back when it moves unlike the camera and looks like the animal
         grow = prior | (window & (cue > 0.5) & (p_first > gate))
@@ -391,6 +412,11 @@ def _check_box(box: Box, w: int, h: int, frame: int = 0) -> Box:
             hint="give x,y,w,h in pixels of the original video, around the animal in frame --box-frame",
         )
     return x0, y0, x1 - x0, y1 - y0
+
+
+def _closed(mask: np.ndarray) -> np.ndarray:
+    """Small gaps closed: unreliable flow comes in speckles over a rippling surface."""
+    return cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, cues.disk(2)).astype(bool)
 
 
 def _resize_flow(flow: np.ndarray, w: int, h: int) -> np.ndarray:
