@@ -109,8 +109,12 @@ def preprocess(path: str | Path, opts: AddOptions, progress: StageProgress | Non
     if getattr(segmenter, "uses_flow", False):
         kwargs["flow"] = vf
     if opts.box_frame:
-        if box is None or seg_name != "grabcut":
-            raise UsageError("--box-frame places --box: give both, with the grabcut segmenter")
+        import inspect
+
+        if box is None:
+            raise UsageError("--box-frame places --box: give both", hint="--box x,y,w,h --box-frame N")
+        if "box_frame" not in inspect.signature(segmenter.segment).parameters:
+            raise UsageError(f"the {seg_name} segmenter takes its box on the first frame only")
         kwargs["box_frame"] = opts.box_frame
     masks = np.asarray(segmenter.segment(dv.frames, **kwargs), dtype=bool)
     if masks.shape != (t, h, w):
