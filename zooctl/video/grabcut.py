@@ -45,6 +45,8 @@ class GrabCutTracker:
     for the map to be trusted (`zooctl.video.localise.Evidence`; else motion alone seeds). ``min_agreement``: the share of the localiser's animal
     region a tracked mask must touch to be kept. ``seed_margin``: how far past the class map's region
     the animal may reach, as a fraction of its longer side. ``localiser_width``: network input width.
+    ``keep_moving``: while tracking, pixels next to the mask that surely move unlike the camera
+    (reliable flow) and have the animal's colours (``keep_colour``) are kept as sure foreground.
     """
 
     name = "grabcut"
@@ -69,6 +71,8 @@ class GrabCutTracker:
         min_agreement: float = 0.3,
         seed_margin: float = 0.1,
         localiser_width: int = 448,
+        keep_moving: bool = False,
+        keep_colour: float = 0.5,
     ) -> None:
         if iterations < 1 or first_iterations < 1:
             raise UsageError("GrabCut needs at least one iteration")
@@ -93,6 +97,8 @@ class GrabCutTracker:
         self.min_agreement = min_agreement
         self.seed_margin = seed_margin
         self.localiser_width = localiser_width
+        self.keep_moving = keep_moving
+        self.keep_colour = keep_colour
         self._loc: Localiser | None = None
         self.report: dict = {}
 
@@ -372,6 +378,11 @@ class GrabCutTracker:
         # drift: propagated pixels that neither look like frame 0's animal nor move/look like this frame's
         trimap[prior & (p_first < self.demote) & ((p_motion < 0.5) | (p_local < 0.5))] = cv2.GC_PR_BGD
         trimap[sure] = cv2.GC_FGD
+        # GrabCut shaves off thin parts (legs, tails) whose colours the background shares; off by
+        # default: next to water the animal's reflection and wake move with it and would be locked in
+        if self.keep_moving:
+            near = cv2.dilate(prior.astype(np.uint8), cues.disk(self.band * size)).astype(bool)
+            trimap[near & (p_motion > 0.9) & (p_first > max(gate, self.keep_colour))] = cv2.GC_FGD
         return _clean(_grabcut(frame, trimap, self.iterations), prior)
 
 
