@@ -47,6 +47,8 @@ class GrabCutTracker:
     the animal may reach, as a fraction of its longer side. ``localiser_width``: network input width.
     ``keep_moving``: while tracking, pixels next to the mask that surely move unlike the camera
     (reliable flow) and have the animal's colours (``keep_colour``) are kept as sure foreground.
+    ``reliable_motion``: flow that fails the forward-backward check (ripples, glints) is no motion
+    evidence, in the seed, the localiser and tracking.
     """
 
     name = "grabcut"
@@ -73,6 +75,7 @@ class GrabCutTracker:
         localiser_width: int = 448,
         keep_moving: bool = False,
         keep_colour: float = 0.5,
+        reliable_motion: bool = False,
     ) -> None:
         if iterations < 1 or first_iterations < 1:
             raise UsageError("GrabCut needs at least one iteration")
@@ -99,6 +102,7 @@ class GrabCutTracker:
         self.localiser_width = localiser_width
         self.keep_moving = keep_moving
         self.keep_colour = keep_colour
+        self.reliable_motion = reliable_motion
         self._loc: Localiser | None = None
         self.report: dict = {}
 
@@ -185,7 +189,7 @@ class GrabCutTracker:
                         hist_fg,
                         hist_bg,
                         gate,
-                        self._unreliable(flow, i),
+                        self._unreliable(flow, i) if self.reliable_motion else None,
                     )
                 if self.localise and self._due(i, s, m, prior):
                     new = self._reseed(frames, bins, flow, i, m)
@@ -208,8 +212,11 @@ class GrabCutTracker:
     # -- the localiser: where to start and when to start again -------------------------------------
 
     def _residual(self, flow, i: int) -> np.ndarray:
-        """Frame i's motion unlike the camera, in pixels; 0 where the flow is unreliable."""
+        """Frame i's motion unlike the camera, in pixels (with ``reliable_motion``: 0 where the flow
+        fails the forward-backward check)."""
         r = cues.background_motion_residual(self._motion_flow(flow, i))
+        if not self.reliable_motion:
+            return r
         return np.where(_closed(self._unreliable(flow, i)), 0.0, r).astype(np.float32)
 
     @staticmethod
