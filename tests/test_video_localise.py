@@ -79,3 +79,28 @@ def test_cli_box_frame_and_show_report_seeding(store, synthetic, tmp_path, capsy
     assert r.code == 0, r.err
     r = run_inprocess(capsys, "video", "show", "clip")
     assert r.code == 0 and "seeding: 1 box" in r.out and "(first seed on frame 3)" in r.out, r.out
+
+
+def test_an_animal_that_leaves_the_frame_is_found_again(synthetic):
+    """Frames 4-6 show only the panning background: they stay empty, and the object is taken up
+    again when it is back (the localiser re-seeds where tracking lost it)."""
+    from video_helpers import texture
+
+    frames, masks = (a.copy() for a in synthetic)
+    bg = (texture(96, 128 + 40, 0) * 0.5 + np.array([60, 90, 60])).astype(np.uint8)
+    for i in (4, 5, 6):
+        frames[i], masks[i] = bg[:, 2 * i : 2 * i + 128], False
+    seg = GrabCutTracker()
+    got = seg.segment(frames)
+    assert not got[4:6].any()  # no background taken for the animal
+    present = [i for i in range(10) if masks[i].any()]
+    assert np.mean([iou(got[i], masks[i]) for i in present]) > 0.8
+    assert "re-seeded" in seg.report["seeding"] or seg.report["seed_frame"] < 4
+
+
+def test_main_region_is_the_one_with_most_evidence():
+    score = np.zeros((60, 80), np.float32)
+    score[5:20, 5:20] = 0.9  # small, sure
+    score[30:55, 40:75] = 0.7  # big, less sure: more evidence in all
+    region, count = main_region(score)
+    assert count == 2 and region[40, 60] and not region[10, 10]

@@ -47,7 +47,8 @@ class GrabCutTracker:
     the animal may reach, as a fraction of its longer side. ``localiser_width``: network input width.
     ``keep_moving``: while tracking, pixels next to the mask that surely move unlike the camera
     (reliable flow) and have the animal's colours (``keep_colour``) are kept as sure foreground.
-    ``reliable_motion``: flow that fails the forward-backward check (ripples, glints) is no motion
+    ``reseed_colour``: the mean seed-frame colour probability a fresh seed needs to replace a
+    tracked mask. ``reliable_motion``: flow that fails the forward-backward check (ripples, glints) is no motion
     evidence, in the seed, the localiser and tracking.
     """
 
@@ -76,6 +77,7 @@ class GrabCutTracker:
         keep_moving: bool = False,
         keep_colour: float = 0.5,
         reliable_motion: bool = False,
+        reseed_colour: float = 0.5,
     ) -> None:
         if iterations < 1 or first_iterations < 1:
             raise UsageError("GrabCut needs at least one iteration")
@@ -103,6 +105,7 @@ class GrabCutTracker:
         self.keep_moving = keep_moving
         self.keep_colour = keep_colour
         self.reliable_motion = reliable_motion
+        self.reseed_colour = reseed_colour
         self._loc: Localiser | None = None
         self.report: dict = {}
 
@@ -192,7 +195,7 @@ class GrabCutTracker:
                         self._unreliable(flow, i) if self.reliable_motion else None,
                     )
                 if self.localise and self._due(i, s, m, prior):
-                    new = self._reseed(frames, bins, flow, i, m)
+                    new = self._reseed(frames, bins, flow, i, m, hist_fg, hist_bg)
                     if new is not None:
                         m, how[i] = new, "re-seeded"
                 masks[i] = m
@@ -288,12 +291,13 @@ class GrabCutTracker:
         if abs(i - s) % self.key_every == 0:
             return True
         area, before = int(mask.sum()), int(prior.sum())
-        if before == 0:  # lost: look again every few frames, not every frame
-            return abs(i - s) % 3 == 0
+        if before == 0:  # lost (out of frame, hidden): look for it again on every frame
+            return True
         return area < 0.5 * before
 
-    def _reseed(self, frames, bins, flow, i: int, mask: np.ndarray) -> np.ndarray | None:
-        """A fresh mask for frame i when the tracked one disagrees with what the localiser sees, else None."""
+    def _reseed(self, frames, bins, flow, i: int, mask, hist_fg, hist_bg) -> np.ndarray | None:
+        """A fresh mask for frame i when the tracked one disagrees with what the localiser sees and
+        the fresh one has the animal's colours (seed frame's model), else None."""
         score, ev = self._fused(frames, flow, i)
         region, _ = main_region(score)
         if not region.any():
@@ -303,7 +307,12 @@ class GrabCutTracker:
         if mask.any() and agreement >= self.min_agreement:
             return None
         new = self._seed(frames, bins, flow, i)
-        return new if new.any() else None
+        if not new.any():
+            return None
+        # the localiser also fires on empty backgrounds (grass "looks like" a field with a dog in
+        # it): a new seed must look like the animal tracked so far
+        p = cues.colour_probability(bins[i], hist_fg, hist_bg)[new]
+        return new if float(p.mean()) >= self.reseed_colour else None
 
     def _report(self, how: list[str], s: int) -> dict:
         """What `video show` tells: how each frame got its mask and what the localiser saw."""
