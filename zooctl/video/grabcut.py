@@ -311,8 +311,11 @@ class GrabCutTracker:
             return None
         # the localiser also fires on empty backgrounds (grass "looks like" a field with a dog in
         # it): a new seed must look like the animal tracked so far
-        p = cues.colour_probability(bins[i], hist_fg, hist_bg)[new]
-        return new if float(p.mean()) >= self.reseed_colour else None
+        p = cues.colour_probability(bins[i], hist_fg, hist_bg)
+        fresh = float(p[new].mean())
+        if fresh < self.reseed_colour or (mask.any() and fresh <= float(p[mask].mean())):
+            return None  # a tracked mask is replaced only by one that looks more like the animal
+        return new
 
     def _report(self, how: list[str], s: int) -> dict:
         """What `video show` tells: how each frame got its mask and what the localiser saw."""
