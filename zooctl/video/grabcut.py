@@ -151,6 +151,7 @@ class GrabCutTracker:
         t, h, w = frames.shape[:3]
         bins = [cues.lab_bins(f) for f in frames]
         self._evidence: dict[int, Evidence] = {}
+        self._animals_seen = 0
         how = ["tracked"] * t
         if box is not None:
             s = box_frame
@@ -273,7 +274,7 @@ class GrabCutTracker:
         """A mask of the main animal in frame i from the localiser alone (empty when none is seen)."""
         score, _ = self._fused(frames, flow, i)
         region, count = main_region(score)
-        self._animals_seen = max(getattr(self, "_animals_seen", 0), count)
+        self._animals_seen = max(self._animals_seen, count)
         h, w = score.shape
         if not region.any():
             return np.zeros((h, w), bool)
@@ -332,7 +333,7 @@ class GrabCutTracker:
             "animal_classes": [
                 {"index": c, "name": class_name(c), "probability": round(p, 3)} for c, p in top
             ],
-            "animals_seen": int(getattr(self, "_animals_seen", 0)),
+            "animals_seen": int(self._animals_seen),
         }
 
     # -- steps ------------------------------------------------------------------------------------
