@@ -1,12 +1,12 @@
 """Video preprocessing benchmarks: segmentation quality (J) on DAVIS and throughput (frames/s).
 
     .venv/bin/python bench/video.py                      # both parts, all three sequences
-    .venv/bin/python bench/video.py --part quality       # mean region IoU (J) from a first-frame box
+    .venv/bin/python bench/video.py --part quality       # mean region IoU (J): no box, first-frame box
     .venv/bin/python bench/video.py --part throughput --repeats 3
 
 Quality: each shared DAVIS sequence (``../shared/data/videos/{blackswan,dog,cows}``) is decoded at
-the default size (854 px, DAVIS's own 480p), the `grabcut` segmenter gets only the box of the
-first ground-truth mask, and J is the mean over frames of |mask & truth| / |mask | truth| (all
+the default size (854 px, DAVIS's own 480p) and segmented by `grabcut` twice: (a) with no box (its
+localiser finds the animal) and (b) with only the box of the first ground-truth mask. J is the mean over frames of |mask & truth| / |mask | truth| (all
 frames, the first included, as DAVIS reports it). Throughput: frames per second of decode (JPEG
 folder and H.264 file), DIS flow (forward + backward + occlusion check), segmentation, and writing
 the HDF5 store, at 480p and at 256 px; each is the median of ``--repeats`` runs.
@@ -49,36 +49,150 @@ def load_truth(seq: str, frames_shape) -> np.ndarray:
 
 
 def quality(sequences, max_size: int, preset: str) -> dict:
+    """J per sequence with (a) no box (the localiser seeds) and (b) the first true mask's box;
+    ``add_fps``: frames per second of decode + flow + no-box masks, what `video add` does."""
     from zooctl.plugins import get_registry
     from zooctl.video import cues
     from zooctl.video.decode import decode
     from zooctl.video.flow import DISFlow, compute_video_flow
 
-    out = {}
+    out: dict = {"no_box": {}, "box": {}}
     for seq in sequences:
-        dv = decode(VIDEOS / seq, max_size=max_size)
-        truth = load_truth(seq, dv.frames.shape)
         t0 = time.perf_counter()
-        vf = compute_video_flow(DISFlow(preset), dv.frames)
+        dv = decode(VIDEOS / seq, max_size=max_size)
         t1 = time.perf_counter()
-        seg = get_registry().get("segmenter", "grabcut").create()
-        masks = seg.segment(dv.frames, box=cues.box_of(truth[0]), flow=vf)
+        vf = compute_video_flow(DISFlow(preset), dv.frames)
         t2 = time.perf_counter()
-        j = [float((m & g).sum() / max((m | g).sum(), 1)) for m, g in zip(masks, truth)]
-        out[seq] = {
-            "frames": len(j),
-            "J": float(np.mean(j)),
-            "J_min": float(np.min(j)),
-            "flow_s": t1 - t0,
-            "segment_s": t2 - t1,
-        }
-        print(
-            f"  {seq:10s} J={np.mean(j):.3f} (min {np.min(j):.3f}) {len(j)} frames, flow {t1 - t0:.1f}s, segment {t2 - t1:.1f}s",
-            file=sys.stderr,
-            flush=True,
-        )
-    out["mean_J"] = float(np.mean([out[s]["J"] for s in sequences]))
+        truth = load_truth(seq, dv.frames.shape)
+        for mode, box in (("no_box", None), ("box", cues.box_of(truth[0]))):
+            seg = get_registry().get("segmenter", "grabcut").create()
+            t3 = time.perf_counter()
+            masks = seg.segment(dv.frames, box=box, flow=vf)
+            t4 = time.perf_counter()
+            j = [float((m & g).sum() / max((m | g).sum(), 1)) for m, g in zip(masks, truth)]
+            how = seg.report.get("seeding", [])
+            r = {
+                "frames": len(j),
+                "J": float(np.mean(j)),
+                "J_min": float(np.min(j)),
+                "segment_s": t4 - t3,
+                "seed_frame": seg.report.get("seed_frame"),
+                "re_seeded": how.count("re-seeded"),
+                "empty": how.count("empty"),
+                "classes": [c["name"] for c in seg.report.get("animal_classes", [])],
+            }
+            if mode == "no_box":
+                r["add_fps"] = len(j) / (t1 - t0 + t2 - t1 + t4 - t3)
+                r["decode_s"], r["flow_s"] = t1 - t0, t2 - t1
+            out[mode][seq] = r
+            if _OVERLAYS is not None:
+                _overlay(_OVERLAYS / f"{seq}_{mode}.png", dv.frames, masks, truth)
+            print(
+                f"  {seq:10s} {mode:6s} J={r['J']:.3f} (min {r['J_min']:.3f}) {len(j)} frames, "
+                f"segment {t4 - t3:.1f}s, seed frame {r['seed_frame']}, {r['re_seeded']} re-seeded, "
+                f"{r['empty']} empty, saw {', '.join(r['classes'])}"
+                + (f"; decode+flow+masks {r['add_fps']:.1f} frames/s" if mode == "no_box" else ""),
+                file=sys.stderr,
+                flush=True,
+            )
+    for mode in ("no_box", "box"):
+        out[mode]["mean_J"] = float(np.mean([out[mode][s]["J"] for s in sequences]))
     return out
+
+
+def composited_set(assets, frames: int, size: int, tmp: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Rendered animals (`zooctl bench make`) over real backgrounds: each DAVIS sequence with its
+    animal painted out (OpenCV inpainting over the dilated true mask) and a square crop taken,
+    so the background is real texture that moves as the DAVIS camera did. {name: (frames, masks)}."""
+    import subprocess
+
+    import cv2
+
+    from zooctl.video.decode import decode
+
+    bank = REPO.parent / "shared" / "data" / "assets" / "quaternius" / "animals_pack"
+    cmd = [
+        sys.executable,
+        "-m",
+        "zooctl",
+        "--store",
+        str(tmp / "store"),
+        "bench",
+        "make",
+        "--out",
+        str(tmp / "made"),
+    ]
+    cmd += ["--bank", str(bank), "--frames", str(frames), "--size", str(size)]
+    for a in assets:
+        cmd += ["--asset", a]
+    subprocess.run(
+        cmd, check=True, capture_output=True, env={**__import__("os").environ, "PYTHONPATH": str(REPO)}
+    )
+    out = {}
+    for k, a in enumerate(assets):
+        seq = SEQUENCES[k % len(SEQUENCES)]
+        dv = decode(VIDEOS / seq, max_size=427, max_frames=frames)
+        truth = load_truth(seq, dv.frames.shape)
+        with np.load(tmp / "made" / a / "video.npz") as z:
+            fg, masks = z["frames"], z["masks"]
+        h, w = dv.frames.shape[1:3]
+        x0 = (w - h) // 2 + (k % 3 - 1) * (w - h) // 2  # left, middle or right square
+        comp = np.empty_like(fg)
+        for i in range(len(fg)):
+            j = i % len(dv.frames)
+            hole = cv2.dilate(truth[j].astype(np.uint8), np.ones((15, 15), np.uint8))
+            bg = cv2.inpaint(dv.frames[j], hole, 5, cv2.INPAINT_TELEA)[:, x0 : x0 + h]
+            bg = cv2.resize(bg, (size, size), interpolation=cv2.INTER_LINEAR)
+            comp[i] = np.where(masks[i][..., None], fg[i], bg)
+        out[f"{a}/{seq}"] = (comp, masks)
+    return out
+
+
+def composited_quality(assets, frames: int, size: int, preset: str) -> dict:
+    """J per composited video, no box and first-frame box (see `composited_set`)."""
+    from zooctl.plugins import get_registry
+    from zooctl.video import cues
+    from zooctl.video.flow import DISFlow, compute_video_flow
+
+    out: dict = {"no_box": {}, "box": {}}
+    with tempfile.TemporaryDirectory() as tmp:
+        videos = composited_set(assets, frames, size, Path(tmp))
+    for name, (rgb, truth) in videos.items():
+        vf = compute_video_flow(DISFlow(preset), rgb)
+        for mode, box in (("no_box", None), ("box", cues.box_of(truth[0]))):
+            seg = get_registry().get("segmenter", "grabcut").create()
+            masks = seg.segment(rgb, box=box, flow=vf)
+            j = [float((m & g).sum() / max((m | g).sum(), 1)) for m, g in zip(masks, truth)]
+            out[mode][name] = {"frames": len(j), "J": float(np.mean(j)), "J_min": float(np.min(j))}
+            print(
+                f"  {name:16s} {mode:6s} J={np.mean(j):.3f} (min {np.min(j):.3f}), "
+                f"saw {', '.join(c['name'] for c in seg.report.get('animal_classes', []))}",
+                file=sys.stderr,
+                flush=True,
+            )
+            if _OVERLAYS is not None:
+                _overlay(_OVERLAYS / f"{name.replace('/', '_')}_{mode}.png", rgb, masks, truth)
+    for mode in ("no_box", "box"):
+        out[mode]["mean_J"] = float(np.mean([v["J"] for k, v in out[mode].items()]))
+    return out
+
+
+_OVERLAYS: Path | None = None
+
+
+def _overlay(path: Path, frames, masks, truth) -> None:
+    """Six frames: the mask tinted green, the truth outlined red."""
+    import cv2
+
+    tiles = []
+    for i in np.linspace(0, len(frames) - 1, 6).astype(int):
+        f = frames[i].copy()
+        f[masks[i]] = (0.5 * f[masks[i]] + [0, 120, 0]).astype(np.uint8)
+        c, _ = cv2.findContours(truth[i].astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        cv2.drawContours(f, c, -1, (255, 0, 0), 1)
+        tiles.append(f)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(path), np.vstack([np.hstack(tiles[:3]), np.hstack(tiles[3:])])[..., ::-1])
 
 
 def _median_fps(fn, n_frames: int, repeats: int) -> float:
@@ -164,7 +278,7 @@ def throughput_at(
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--part", choices=("all", "quality", "throughput"), default="all")
-    ap.add_argument("--sequences", default=",".join(SEQUENCES))
+    ap.add_argument("--sequences", default=",".join(SEQUENCES), help="DAVIS sequences ('' to skip)")
     ap.add_argument(
         "--max-size", type=int, default=854, help="frame size for the quality part (854: DAVIS 480p)"
     )
@@ -172,15 +286,37 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--throughput-sequence", default="dog")
     ap.add_argument("--seg-frames", type=int, default=10, help="frames timed for segmentation throughput")
+    ap.add_argument(
+        "--composited",
+        default="Horse,Fox,Cow,Deer,Wolf,Alpaca",
+        help="animals_pack assets rendered over DAVIS backgrounds ('' to skip)",
+    )
+    ap.add_argument("--composited-frames", type=int, default=30)
+    ap.add_argument("--overlays", type=Path, default=None, help="write mask overlay PNGs here")
     args = ap.parse_args()
+    global _OVERLAYS
+    _OVERLAYS = args.overlays
     if not VIDEOS.is_dir():
         sys.exit(f"shared DAVIS videos not found at {VIDEOS}")
     report = {"machine": machine(), "command": " ".join(["python", "bench/video.py", *sys.argv[1:]])}
     print(f"machine: {report['machine']}", file=sys.stderr)
     if args.part in ("all", "quality"):
-        print("quality (grabcut from a first-frame box):", file=sys.stderr)
-        report["quality"] = quality(args.sequences.split(","), args.max_size, args.preset)
-        print(f"  mean J = {report['quality']['mean_J']:.3f}", file=sys.stderr)
+        if args.sequences:
+            print("quality (grabcut: no box, then a first-frame box):", file=sys.stderr)
+            report["quality"] = q = quality(args.sequences.split(","), args.max_size, args.preset)
+            print(
+                f"  mean J: no box {q['no_box']['mean_J']:.3f}, first-frame box {q['box']['mean_J']:.3f}",
+                file=sys.stderr,
+            )
+        if args.composited:
+            print("quality on rendered animals over painted-out DAVIS backgrounds:", file=sys.stderr)
+            report["composited"] = c = composited_quality(
+                args.composited.split(","), args.composited_frames, 320, args.preset
+            )
+            print(
+                f"  mean J: no box {c['no_box']['mean_J']:.3f}, first-frame box {c['box']['mean_J']:.3f}",
+                file=sys.stderr,
+            )
     if args.part in ("all", "throughput"):
         print(f"throughput ({args.throughput_sequence}, median of {args.repeats}):", file=sys.stderr)
         report["throughput"] = throughput(

@@ -45,7 +45,8 @@ def register_segmenters(register):
             "segmenter",
             "grabcut",
             _grabcut,
-            "classical, CPU: first-frame box (--box, else the moving object), motion + colour cues, GrabCut tracked along the flow",
+            "classical, CPU: seeded by --box (any frame) or by the animal localiser (ImageNet class maps + motion), "
+            "motion + colour cues, GrabCut tracked both ways along the flow, re-seeded when the localiser disagrees",
         )
     )
     register(
@@ -53,7 +54,7 @@ def register_segmenters(register):
             "segmenter",
             "onnx",
             _onnx,
-            "a salient-object/matting network from a local .onnx file (--model PATH)",
+            "a segmentation network from a local .onnx file (--model PATH); box/point prompts if it takes them",
         )
     )
 

@@ -59,7 +59,11 @@ def add(
     box: str = typer.Option(
         None,
         "--box",
-        help="x,y,w,h around the animal in the first frame (original pixels). Default: the moving object.",
+        help="x,y,w,h around the animal in frame --box-frame (original pixels): a hint. Default: the localiser "
+        "finds the animal (ImageNet animal classes and motion).",
+    ),
+    box_frame: int = typer.Option(
+        0, "--box-frame", help="The frame --box is drawn on (a stored frame number; default 0)."
     ),
     model: Path = typer.Option(None, "--model", help="Local .onnx model for --segmenter onnx."),
     seg_option: list[str] = typer.Option(
@@ -77,6 +81,11 @@ def add(
     max_frames: int = typer.Option(None, "--max-frames", help="Keep at most this many frames."),
     max_size: int = typer.Option(
         854, "--max-size", help="Downscale so the longest side is at most this many pixels (0: keep)."
+    ),
+    max_memory: float = typer.Option(
+        2.0,
+        "--max-memory",
+        help="Refuse a video whose preprocessing would need more than this many GB (about 32 bytes per stored pixel).",
     ),
     replace: bool = typer.Option(False, "--replace", help="Overwrite a video of the same name."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars."),
@@ -98,11 +107,13 @@ def add(
         segmenter=segmenter,
         segmenter_options=seg_opts,
         box=parse_box(box) if box else None,
+        box_frame=box_frame,
         fps=fps,
         start=start,
         end=end,
         max_frames=max_frames,
-        max_size=max_size or None,
+        max_size=max_size,
+        max_memory_gb=max_memory,
         flow=flow,
         flow_options=flow_opts,
         replace=replace,
@@ -117,6 +128,14 @@ def add(
             f"masks by {summary['segmenter']} (mean coverage {summary['mask_coverage_mean']:.1%})",
             highlight=False,
         )
+        if summary.get("empty_masks"):
+            console.print(
+                f"{summary['empty_masks']} of {summary['frames']} frames have no animal in their mask "
+                f"(stored empty; the fit skips them): see `zooctl video show {summary['name']}`",
+                style="yellow",
+                highlight=False,
+                markup=False,
+            )
 
 
 @app.command("list")
@@ -159,7 +178,7 @@ def show(
     json_out: bool = JsonOpt,
 ) -> None:
     """Show a stored video: frames, fps, size, mask coverage per frame, flow statistics."""
-    from ..video.stats import video_stats
+    from ..video.stats import seeding_lines, video_stats
 
     store = _store()
     rec = store.get(name, what=("masks", "flow") + (("frames",) if preview else ()))
@@ -186,6 +205,8 @@ def show(
     console.print(
         f"masks: {info['segmenter']}; flow: {info['flow_estimator']}", highlight=False, markup=False
     )
+    for line in seeding_lines(info.get("seeding")):
+        console.print(line, highlight=False, markup=False)
     fs = info["flow"]
     console.print(
         f"flow: mean {fs['mean_magnitude']:.2f} px, p99 {fs['p99_magnitude']:.2f} px, max {fs['max_magnitude']:.1f} px; "
@@ -193,10 +214,12 @@ def show(
         highlight=False,
     )
     cov = info["mask_coverage"]
+    how = (info.get("seeding") or {}).get("seeding") or [""] * len(cov)
     rows = [
-        [str(i), f"{c:.1%}", " ".join(str(v) for v in b)] for i, (c, b) in enumerate(zip(cov, info["boxes"]))
+        [str(i), f"{c:.1%}", " ".join(str(v) for v in b), s]
+        for i, (c, b, s) in enumerate(zip(cov, info["boxes"], how))
     ]
-    print_table([("frame", "right"), ("coverage", "right"), ("box x y w h", "left")], rows)
+    print_table([("frame", "right"), ("coverage", "right"), ("box x y w h", "left"), ("mask", "left")], rows)
     if preview:
         console.print(f"preview written to {preview}", highlight=False, markup=False)
 

@@ -22,6 +22,11 @@ VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".webm", ".m4v")
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
 DEFAULT_MAX_SIZE = 854  # longest side in pixels: DAVIS 480p; keeps flow and GrabCut affordable on a CPU
 DEFAULT_FOLDER_FPS = 30.0
+# Preprocessing holds, per stored pixel: RGB (3 B), forward and backward flow (16 B), occlusion and
+# mask bytes, grey copies and the segmenter's working images: about 32 bytes. The default budget
+# keeps `video add` under 2 GB however small the input file (a tiny file can hold hours of video).
+BYTES_PER_PIXEL = 32
+DEFAULT_MAX_MEMORY_GB = 2.0
 
 ProgressFn = Callable[[int, int | None], None]  # (frames done, total or None)
 
@@ -45,6 +50,7 @@ class DecodedVideo:
     source_indices: np.ndarray
     annotations: Path | None = None
     image_files: list[Path] = field(default_factory=list)
+    source_frames: int | None = None  # frames in the whole source (a file's from its header: approximate)
 
 
 def image_files(folder: Path) -> list[Path]:
@@ -80,13 +86,16 @@ def decode(
     max_frames: int | None = None,
     max_size: int | None = DEFAULT_MAX_SIZE,
     progress: ProgressFn | None = None,
+    max_memory_gb: float | None = DEFAULT_MAX_MEMORY_GB,
 ) -> DecodedVideo:
     """Decode ``path`` (video file, image folder, folder with ``JPEGImages/``, or one image: a
     one-frame video).
 
     ``fps`` resamples a video file; for a folder it declares the images' rate (default 30).
     ``start``/``end`` are seconds; ``max_frames`` keeps the first N after those; ``max_size`` bounds
-    the longest side (0 or None: keep the original size).
+    the longest side (0 or None: keep the original size). ``max_memory_gb`` bounds what
+    preprocessing the decoded frames will take (``BYTES_PER_PIXEL`` per stored pixel); a video
+    over it is refused before (or while) decoding, with a hint (None: no bound).
     """
     path = Path(path).expanduser()
     if not path.exists():
@@ -102,20 +111,42 @@ def decode(
         raise UsageError(f"--end {end} is not after --start {start}", hint="give a window with end > start")
     if max_frames is not None and max_frames < 1:
         raise UsageError(f"--max-frames {max_frames} must be at least 1")
+    if max_memory_gb is not None and not max_memory_gb > 0:
+        raise UsageError(f"--max-memory {max_memory_gb} must be positive", hint="give gigabytes, e.g. 4")
+    budget = _Budget(max_memory_gb)
     if path.is_dir() or path.suffix.lower() in IMAGE_SUFFIXES:
-        return _decode_folder(path, fps, start, end, max_frames, max_size, progress)
+        return _decode_folder(path, fps, start, end, max_frames, max_size, progress, budget)
     if path.suffix.lower() not in VIDEO_SUFFIXES:
         raise InputError(
             f"{path.name}: not a video file zooctl reads ({path.suffix or 'no suffix'})",
             hint=f"use one of {' '.join(VIDEO_SUFFIXES)}, an image, or a folder of images",
         )
-    return _decode_file(path, fps, start, end, max_frames, max_size, progress)
+    return _decode_file(path, fps, start, end, max_frames, max_size, progress, budget)
+
+
+class _Budget:
+    """Refuses a video whose frames would need more than ``gb`` of preprocessing memory."""
+
+    def __init__(self, gb: float | None) -> None:
+        self.gb = gb
+
+    def check(self, frames: int, w: int, h: int, estimate: bool = False) -> None:
+        if self.gb is None:
+            return
+        need = frames * w * h * BYTES_PER_PIXEL / 1e9
+        if need > self.gb:
+            what = f"{'about ' if estimate else 'over '}{frames} frames of {w}x{h}"
+            raise InputError(
+                f"{what} need about {need:.1f} GB to preprocess, over the --max-memory limit of {self.gb:g} GB",
+                hint="keep fewer frames (--max-frames, --fps, --start/--end), a smaller --max-size, "
+                "or raise --max-memory",
+            )
 
 
 # -- folders --------------------------------------------------------------------------------------
 
 
-def _decode_folder(folder, fps, start, end, max_frames, max_size, progress) -> DecodedVideo:
+def _decode_folder(folder, fps, start, end, max_frames, max_size, progress, budget) -> DecodedVideo:
     from PIL import Image
 
     kind, annotations, img_dir = "images", None, folder
@@ -163,6 +194,7 @@ def _decode_folder(folder, fps, start, end, max_frames, max_size, progress) -> D
         if orig is None:
             orig = rgb.size
             size = scaled_size(*orig, max_size)
+            budget.check(len(indices), *size)
         elif rgb.size != orig:
             raise InputError(
                 f"{f.name} is {rgb.size[0]}x{rgb.size[1]}, the first image is {orig[0]}x{orig[1]}",
@@ -185,6 +217,7 @@ def _decode_folder(folder, fps, start, end, max_frames, max_size, progress) -> D
         source_indices=indices.astype(np.int64),
         annotations=annotations,
         image_files=[files[i] for i in indices],
+        source_frames=len(files),
     )
 
 
@@ -229,7 +262,7 @@ def _short(exc: BaseException) -> str:
     return (useful or lines or [type(exc).__name__])[-1][:200]
 
 
-def _decode_file(path, fps, start, end, max_frames, max_size, progress) -> DecodedVideo:
+def _decode_file(path, fps, start, end, max_frames, max_size, progress, budget) -> DecodedVideo:
     import imageio_ffmpeg
 
     if path.stat().st_size == 0:
@@ -258,6 +291,7 @@ def _decode_file(path, fps, start, end, max_frames, max_size, progress) -> Decod
         total = max(int(round(span * rate)), 0)
         if max_frames is not None:
             total = min(total, max_frames)
+        budget.check(total, w, h, estimate=True)
     frames: list[np.ndarray] = []
     # imageio-ffmpeg logs a warning whenever the output size differs from the source: that is our scaling
     logging.getLogger("imageio_ffmpeg").setLevel(logging.ERROR)
@@ -269,6 +303,7 @@ def _decode_file(path, fps, start, end, max_frames, max_size, progress) -> Decod
         fw, fh = meta["size"]
         for buf in gen:
             frames.append(np.frombuffer(buf, dtype=np.uint8).reshape(fh, fw, 3))
+            budget.check(len(frames), fw, fh)  # the header's duration may be missing or lie
             if progress:
                 progress(len(frames), total)
     except (RuntimeError, OSError) as exc:
@@ -296,4 +331,5 @@ def _decode_file(path, fps, start, end, max_frames, max_size, progress) -> Decod
         original_size=(ow, oh),
         source_fps=src_fps,
         source_indices=indices,
+        source_frames=int(round(duration * src_fps)) if duration else None,
     )

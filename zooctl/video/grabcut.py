@@ -1,10 +1,14 @@
-"""The classical automatic segmenter: a first-frame box, then GrabCut tracked along the flow.
+"""The classical automatic segmenter: a seed mask on one frame, then GrabCut tracked along the flow.
 
-Frame 0: inside the box, pixels that both move unlike the camera (flow residual after a RANSAC
-homography) and have the box's colours (Lab histograms, box against the rest) seed GrabCut.
-Frame t: the previous mask, warped along the backward flow, is the shape prior; the colour
-histograms are tracked (running average of each frame's result) and the motion cue is recomputed;
-together they build GrabCut's trimap in a window around the prior. Works on CPU, offline.
+Seed: with a box (on any frame, ``box_frame``), the pixels inside it that move unlike the camera
+(flow residual after a RANSAC homography) and have the box's colours (Lab histograms, box against
+the rest) seed GrabCut. Without one, the localiser (`zooctl.video.localise`: ImageNet animal class
+maps fused with motion) looks at keyframes, picks the one where it sees an animal most surely and
+seeds GrabCut around the main animal there. Tracking, forwards and backwards from the seed frame:
+the neighbouring mask, warped along the flow, is the shape prior; the colour histograms are tracked
+and the motion cue is recomputed; together they build GrabCut's trimap in a window around the
+prior. On keyframes, and when the mask shrinks or vanishes, the localiser checks it: a mask that
+misses the animal it sees is replaced by a fresh seed (re-seeding). Works on CPU, offline.
 """
 
 from __future__ import annotations
@@ -16,15 +20,18 @@ import numpy as np
 
 from ..errors import InputError, UsageError
 from . import cues
-from .flow import DISFlow, VideoFlow, compute_video_flow, warp
+from .flow import DISFlow, VideoFlow, compute_video_flow, fb_inconsistent, warp
+from .localise import Evidence, Localiser, class_name, fuse, main_region
 
 Box = tuple[int, int, int, int]  # x, y, w, h in pixels of the frames given to segment()
 
 
 class GrabCutTracker:
-    """``segment(frames, box, progress, flow) -> (T, H, W) bool``; see the module docstring.
+    """``segment(frames, box, progress, flow, box_frame) -> (T, H, W) bool``; see the module docstring.
+    After a run, ``report`` says how each frame got its mask ("box", "localiser", "tracked",
+    "re-seeded", "empty") and the animal classes the localiser saw.
 
-    ``iterations``: GrabCut iterations per tracked frame (``first_iterations`` on frame 0).
+    ``iterations``: GrabCut iterations per tracked frame (``first_iterations`` on the seed frame).
     ``colour_memory``: weight of the past in the running background histogram. ``band``: width of
     the uncertain band around the propagated mask, as a fraction of the animal's size. ``demote``:
     frame-0 colour probability under which a propagated pixel that also stops moving or looking like
@@ -33,6 +40,16 @@ class GrabCutTracker:
     at most ``max_gate``). ``work_size``: longest side GrabCut works at (larger frames are
     segmented downscaled and the masks upsampled; None: full size). ``box_margin``: the band around
     the first-frame box that may still hold the animal, as a fraction of the box's longer side.
+    ``localise``: check tracked masks against the localiser and re-seed. ``key_every``: keyframe
+    spacing. ``min_confidence``: the animal-class probability the surest cell of the class map needs
+    for the map to be trusted (`zooctl.video.localise.Evidence`; else motion alone seeds). ``min_agreement``: the share of the localiser's animal
+    region a tracked mask must touch to be kept. ``seed_margin``: how far past the class map's region
+    the animal may reach, as a fraction of its longer side. ``localiser_width``: network input width.
+    ``keep_moving``: while tracking, pixels next to the mask that surely move unlike the camera
+    (reliable flow) and have the animal's colours (``keep_colour``) are kept as sure foreground.
+    ``reseed_colour``: the mean seed-frame colour probability a fresh seed needs to replace a
+    tracked mask. ``reliable_motion``: flow that fails the forward-backward check (ripples, glints) is no motion
+    evidence, in the seed, the localiser and tracking.
     """
 
     name = "grabcut"
@@ -51,6 +68,16 @@ class GrabCutTracker:
         flow_preset: str = "medium",
         work_size: int | None = 427,
         box_margin: float = 0.0,
+        localise: bool = True,
+        key_every: int = 10,
+        min_confidence: float = 0.85,
+        min_agreement: float = 0.3,
+        seed_margin: float = 0.1,
+        localiser_width: int = 448,
+        keep_moving: bool = False,
+        keep_colour: float = 0.5,
+        reliable_motion: bool = False,
+        reseed_colour: float = 0.5,
     ) -> None:
         if iterations < 1 or first_iterations < 1:
             raise UsageError("GrabCut needs at least one iteration")
@@ -67,6 +94,20 @@ class GrabCutTracker:
         self.max_gate = max_gate
         self.work_size = work_size
         self.box_margin = box_margin
+        if key_every < 1:
+            raise UsageError(f"key_every must be at least 1, got {key_every}")
+        self.localise = localise
+        self.key_every = key_every
+        self.min_confidence = min_confidence
+        self.min_agreement = min_agreement
+        self.seed_margin = seed_margin
+        self.localiser_width = localiser_width
+        self.keep_moving = keep_moving
+        self.keep_colour = keep_colour
+        self.reliable_motion = reliable_motion
+        self.reseed_colour = reseed_colour
+        self._loc: Localiser | None = None
+        self.report: dict = {}
 
     def segment(
         self,
@@ -74,13 +115,19 @@ class GrabCutTracker:
         box: Box | None = None,
         progress: Callable[[int, int], None] | None = None,
         flow: VideoFlow | None = None,
+        box_frame: int = 0,
     ) -> np.ndarray:
-        """(T, H, W, 3) uint8 RGB frames, first-frame box -> (T, H, W) bool masks."""
+        """(T, H, W, 3) uint8 RGB frames, optional box on frame ``box_frame`` -> (T, H, W) bool masks."""
         t, h, w = frames.shape[:3]
         if t < 2:
             raise InputError("the grabcut segmenter needs at least 2 frames (it uses motion)")
+        if not 0 <= box_frame < t:
+            raise UsageError(
+                f"--box-frame {box_frame} is not a frame of this {t}-frame video",
+                hint=f"give a stored frame number from 0 to {t - 1}",
+            )
         if box is not None:
-            box = _check_box(box, w, h)
+            box = _check_box(box, w, h, box_frame)
         cv2.setRNGSeed(
             0
         )  # GrabCut seeds its colour models with k-means on OpenCV's global RNG: be repeatable
@@ -88,48 +135,206 @@ class GrabCutTracker:
             flow = compute_video_flow(DISFlow(self.flow_preset), frames)
         scale = self.work_size / max(h, w) if self.work_size and max(h, w) > self.work_size else 1.0
         if scale == 1.0:
-            return self._segment(frames, box, progress, flow)
+            return self._segment(frames, box, box_frame, progress, flow)
         # GrabCut and its cues work at a bounded size (4x faster at 480p, and the band/window sizes
         # were tuned there); the masks come back up with a linear upsample of their 0/1 values
         sw, sh = round(w * scale), round(h * scale)
         small = np.stack([cv2.resize(f, (sw, sh), interpolation=cv2.INTER_AREA) for f in frames])
         small_flow = VideoFlow(*(_resize_flow(f, sw, sh) for f in (flow.forward, flow.backward)), None, None)
         small_box = None if box is None else tuple(int(round(v * scale)) for v in box)
-        masks = self._segment(small, small_box, progress, small_flow)
+        masks = self._segment(small, small_box, box_frame, progress, small_flow)
         return np.stack(
             [cv2.resize(m.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR) > 0.5 for m in masks]
         )
 
-    def _segment(self, frames, box, progress, flow) -> np.ndarray:
+    def _segment(self, frames, box, box_frame, progress, flow) -> np.ndarray:
         t, h, w = frames.shape[:3]
-        residual0 = cues.background_motion_residual(flow.forward[0])
-        box = _check_box(box, w, h) if box is not None else _box_from_motion(residual0)
         bins = [cues.lab_bins(f) for f in frames]
+        self._evidence: dict[int, Evidence] = {}
+        self._animals_seen = 0
+        how = ["tracked"] * t
+        if box is not None:
+            s = box_frame
+            masks_s = self._first(frames[s], bins[s], self._residual(flow, s), box)
+            how[s] = "box"
+        else:
+            s, masks_s = self._start(frames, bins, flow)
+            how[s] = "localiser"
         masks = np.zeros((t, h, w), bool)
-        masks[0] = self._first(frames[0], bins[0], residual0, box)
-        hist_fg = cues.colour_histogram(bins[0], masks[0])
-        hist_bg = cues.colour_histogram(bins[0], ~masks[0])
+        masks[s] = masks_s
+        if not masks_s.any():
+            how[s] = "empty"
+        hist_fg = cues.colour_histogram(bins[s], masks[s])
+        hist_bg0 = cues.colour_histogram(bins[s], ~masks[s])
         gate = self.gate
         if (
-            gate is None and masks[0].any()
+            gate is None and masks[s].any()
         ):  # adaptive: how animal-like its least typical tenth of colours looks
-            p0 = cues.colour_probability(bins[0], hist_fg, hist_bg)[masks[0]]
+            p0 = cues.colour_probability(bins[s], hist_fg, hist_bg0)[masks[s]]
             gate = min(self.gate_scale * float(np.percentile(p0, 10)), self.max_gate)
         gate = 0.0 if gate is None else gate
+        done = 1
         if progress:
-            progress(1, t)
-        for i in range(1, t):
-            prior = warp(masks[i - 1].astype(np.float32), flow.backward[i - 1]) > 0.5
-            motion_flow = flow.forward[i] if i < t - 1 else -flow.backward[i - 1]
-            masks[i] = self._track(frames[i], bins[i], prior, motion_flow, hist_fg, hist_bg, gate)
-            if masks[i].any() and (~masks[i]).any():
-                # the animal's colours stay those of frame 0 (a slow leak must not teach it the water);
-                # the background's follow the camera
-                a = self.colour_memory
-                hist_bg = a * hist_bg + (1 - a) * cues.colour_histogram(bins[i], ~masks[i])
-            if progress:
-                progress(i + 1, t)
+            progress(done, t)
+        # from the seed frame forwards to the end, then backwards to the start
+        for order in (range(s + 1, t), range(s - 1, -1, -1)):
+            hist_bg = hist_bg0
+            for i in order:
+                src = i - 1 if i > s else i + 1
+                pull = flow.backward[i - 1] if i > s else flow.forward[i]  # takes frame src onto i's grid
+                prior = warp(masks[src].astype(np.float32), pull) > 0.5
+                m = np.zeros((h, w), bool)
+                if prior.any():
+                    m = self._track(
+                        frames[i],
+                        bins[i],
+                        prior,
+                        self._motion_flow(flow, i),
+                        hist_fg,
+                        hist_bg,
+                        gate,
+                        self._unreliable(flow, i) if self.reliable_motion else None,
+                    )
+                if self.localise and self._due(i, s, m, prior):
+                    new = self._reseed(frames, bins, flow, i, m, hist_fg, hist_bg)
+                    if new is not None:
+                        m, how[i] = new, "re-seeded"
+                masks[i] = m
+                if not m.any():
+                    how[i] = "empty"
+                elif (~m).any():
+                    # the animal's colours stay those of the seed frame (a slow leak must not teach it
+                    # the water); the background's follow the camera
+                    a = self.colour_memory
+                    hist_bg = a * hist_bg + (1 - a) * cues.colour_histogram(bins[i], ~m)
+                done += 1
+                if progress:
+                    progress(done, t)
+        self.report = self._report(how, s)
         return masks
+
+    # -- the localiser: where to start and when to start again -------------------------------------
+
+    def _residual(self, flow, i: int) -> np.ndarray:
+        """Frame i's motion unlike the camera, in pixels (with ``reliable_motion``: 0 where the flow
+        fails the forward-backward check)."""
+        r = cues.background_motion_residual(self._motion_flow(flow, i))
+        if not self.reliable_motion:
+            return r
+        return np.where(_closed(self._unreliable(flow, i)), 0.0, r).astype(np.float32)
+
+    @staticmethod
+    def _unreliable(flow, i: int) -> np.ndarray:
+        """(H, W) bool: frame i's pixels whose flow fails the forward-backward check (ripples,
+        glints, smoke: texture that changes rather than moves)."""
+        if i < len(flow.forward):
+            return fb_inconsistent(flow.forward[i], flow.backward[i])
+        return fb_inconsistent(flow.backward[i - 1], flow.forward[i - 1])
+
+    @staticmethod
+    def _motion_flow(flow, i: int) -> np.ndarray:
+        """Frame i's motion: its forward flow (the last frame: its backward flow, reversed)."""
+        return flow.forward[i] if i < len(flow.forward) else -flow.backward[i - 1]
+
+    def _localiser(self) -> Localiser:
+        if self._loc is None:
+            self._loc = Localiser(width=self.localiser_width)
+        return self._loc
+
+    def _seen(self, frames, i: int) -> Evidence:
+        if i not in self._evidence:
+            self._evidence[i] = self._localiser().evidence(frames[i])
+        return self._evidence[i]
+
+    def _fused(self, frames, flow, i: int) -> tuple[np.ndarray, Evidence]:
+        ev = self._seen(frames, i)
+        h, w = ev.animal.shape
+        motion = cues.motion_probability(self._residual(flow, i), np.ones((h, w), bool), min_threshold=1.0)
+        if motion.mean() > 0.5:  # most of the frame "moves": the camera model failed, not an animal
+            motion = None
+        score = fuse(ev, motion)
+        if ev.confidence < self.min_confidence:  # no part of the frame surely an animal: motion alone
+            score = np.zeros_like(score) if motion is None else motion
+        return score, ev
+
+    def _start(self, frames, bins, flow) -> tuple[int, np.ndarray]:
+        """The frame to start from (the most confidently seen animal among keyframes) and its mask."""
+        t = len(frames)
+        keys = sorted(set(range(0, t, self.key_every)) | {t - 1})
+        best, best_score = keys[0], -1.0
+        for k in keys:
+            ev = self._seen(frames, k)
+            region, _ = main_region(self._fused(frames, flow, k)[0])
+            score = ev.confidence * float(region.any()) + 1e-3 * float(region.mean())
+            if score > best_score:
+                best, best_score = k, score
+        return best, self._seed(frames, bins, flow, best)
+
+    def _seed(self, frames, bins, flow, i: int) -> np.ndarray:
+        """A mask of the main animal in frame i from the localiser alone (empty when none is seen)."""
+        score, _ = self._fused(frames, flow, i)
+        region, count = main_region(score)
+        self._animals_seen = max(self._animals_seen, count)
+        h, w = score.shape
+        if not region.any():
+            return np.zeros((h, w), bool)
+        # seed as from a user's box around the evidence: the whole connected part of the weaker
+        # evidence (the class map is blurry, motion stops at still limbs), and a little past it
+        n, lab = cv2.connectedComponents((score > 0.4).astype(np.uint8), connectivity=8)
+        hit = np.unique(lab[region])
+        x, y, bw, bh = cues.box_of(np.isin(lab, hit[hit > 0]) | region)
+        m = round(self.seed_margin * max(bw, bh))
+        x0, y0, x1, y1 = max(x - m, 0), max(y - m, 0), min(x + bw + m, w), min(y + bh + m, h)
+        return self._first(frames[i], bins[i], self._residual(flow, i), (x0, y0, x1 - x0, y1 - y0))
+
+    def _due(self, i: int, s: int, mask: np.ndarray, prior: np.ndarray) -> bool:
+        """Check the tracked mask against the localiser on keyframes, and whenever it shrinks or vanishes."""
+        if abs(i - s) % self.key_every == 0:
+            return True
+        area, before = int(mask.sum()), int(prior.sum())
+        if before == 0:  # lost (out of frame, hidden): look for it again on every frame
+            return True
+        return area < 0.5 * before
+
+    def _reseed(self, frames, bins, flow, i: int, mask, hist_fg, hist_bg) -> np.ndarray | None:
+        """A fresh mask for frame i when the tracked one disagrees with what the localiser sees and
+        the fresh one has the animal's colours (seed frame's model), else None."""
+        score, ev = self._fused(frames, flow, i)
+        region, _ = main_region(score)
+        if not region.any():
+            return None
+        near = cv2.dilate(mask.astype(np.uint8), cues.disk(max(mask.shape) // 40)).astype(bool)
+        agreement = float((region & near).sum() / region.sum())
+        if mask.any() and agreement >= self.min_agreement:
+            return None
+        new = self._seed(frames, bins, flow, i)
+        if not new.any():
+            return None
+        # the localiser also fires on empty backgrounds (grass "looks like" a field with a dog in
+        # it): a new seed must look like the animal tracked so far
+        p = cues.colour_probability(bins[i], hist_fg, hist_bg)
+        fresh = float(p[new].mean())
+        if fresh < self.reseed_colour or (mask.any() and fresh <= float(p[mask].mean())):
+            return None  # a tracked mask is replaced only by one that looks more like the animal
+        return new
+
+    def _report(self, how: list[str], s: int) -> dict:
+        """What `video show` tells: how each frame got its mask and what the localiser saw."""
+        seen = self._evidence
+        probs: dict[int, float] = {}
+        for ev in seen.values():
+            for c, p in ev.classes:
+                probs[c] = probs.get(c, 0.0) + p / len(seen)
+        top = sorted(probs.items(), key=lambda kv: -kv[1])[:3]
+        return {
+            "seeding": how,
+            "seed_frame": s,
+            "localised_frames": sorted(seen),
+            "animal_classes": [
+                {"index": c, "name": class_name(c), "probability": round(p, 3)} for c, p in top
+            ],
+            "animals_seen": int(self._animals_seen),
+        }
 
     # -- steps ------------------------------------------------------------------------------------
 
@@ -152,9 +357,14 @@ class GrabCutTracker:
         trimap = np.full((h, w), cv2.GC_BGD, np.uint8)
         trimap[cues.box_mask((h, w), (x - m, y - m, bw + 2 * m, bh + 2 * m))] = cv2.GC_PR_BGD
         trimap[seed] = cv2.GC_PR_FGD
-        return _clean(_grabcut(frame, trimap, self.first_iterations), seed)
+        out = _clean(_grabcut(frame, trimap, self.first_iterations), seed)
+        # a box that cuts through the animal puts its colours in the background model and GrabCut
+        # can drop it all: the seed itself is a better start than nothing
+        return out if out.sum() >= 0.3 * seed.sum() else _clean(seed, seed)
 
-    def _track(self, frame, bins, prior, motion_flow, hist_fg, hist_bg, gate: float) -> np.ndarray:
+    def _track(
+        self, frame, bins, prior, motion_flow, hist_fg, hist_bg, gate: float, unreliable=None
+    ) -> np.ndarray:
         h, w = bins.shape
         box = cues.box_of(prior)
         if box is None:  # lost: nothing to propagate (the animal left the frame)
@@ -171,6 +381,8 @@ class GrabCutTracker:
         )
         p_colour = 0.5 * (p_first + p_local)
         p_motion = cues.motion_probability(cues.background_motion_residual(motion_flow), window)
+        if unreliable is not None:  # what only seems to move (ripples) is no evidence of the animal
+            p_motion = np.where(_closed(unreliable), 0.0, p_motion)
         cue = np.sqrt(p_colour * p_motion)
         # a limb the flow lost is taken back when it moves unlike the camera and looks like the animal
         grow = prior | (window & (cue > 0.5) & (p_first > gate))
@@ -186,6 +398,11 @@ class GrabCutTracker:
         # drift: propagated pixels that neither look like frame 0's animal nor move/look like this frame's
         trimap[prior & (p_first < self.demote) & ((p_motion < 0.5) | (p_local < 0.5))] = cv2.GC_PR_BGD
         trimap[sure] = cv2.GC_FGD
+        # GrabCut shaves off thin parts (legs, tails) whose colours the background shares; off by
+        # default: next to water the animal's reflection and wake move with it and would be locked in
+        if self.keep_moving:
+            near = cv2.dilate(prior.astype(np.uint8), cues.disk(self.band * size)).astype(bool)
+            trimap[near & (p_motion > 0.9) & (p_first > max(gate, self.keep_colour))] = cv2.GC_FGD
         return _clean(_grabcut(frame, trimap, self.iterations), prior)
 
 
@@ -217,30 +434,20 @@ def _clean(mask: np.ndarray, reference: np.ndarray) -> np.ndarray:
     return cues.fill_holes(cues.largest_components(mask, reference=reference))
 
 
-def _check_box(box: Box, w: int, h: int) -> Box:
+def _check_box(box: Box, w: int, h: int, frame: int = 0) -> Box:
     x, y, bw, bh = (int(round(v)) for v in box)
     x0, y0, x1, y1 = max(x, 0), max(y, 0), min(x + bw, w), min(y + bh, h)
     if bw <= 0 or bh <= 0 or x1 - x0 < 4 or y1 - y0 < 4:
         raise UsageError(
-            f"--box {x},{y},{bw},{bh} does not cover a part of the {w}x{h} first frame",
-            hint="give x,y,w,h in pixels of the original video, around the animal in its first frame",
+            f"--box {x},{y},{bw},{bh} does not cover a part of the {w}x{h} frame {frame}",
+            hint="give x,y,w,h in pixels of the original video, around the animal in frame --box-frame",
         )
     return x0, y0, x1 - x0, y1 - y0
 
 
-def _box_from_motion(residual: np.ndarray) -> Box:
-    """The box of the largest region that moves unlike the camera in the first frame pair."""
-    h, w = residual.shape
-    moving = cues.motion_probability(residual, np.ones((h, w), bool), min_threshold=1.0) > 0.5
-    moving = cv2.morphologyEx(moving.astype(np.uint8), cv2.MORPH_OPEN, cues.disk(2)).astype(bool)
-    moving = cues.largest_components(moving, keep_ratio=1.0)
-    box = cues.box_of(moving)
-    if box is None or moving.sum() < 0.002 * h * w or moving.sum() > 0.8 * h * w:
-        raise UsageError(
-            "no single moving animal found in the first frames to start segmentation from",
-            hint="give --box x,y,w,h around the animal in the first frame",
-        )
-    return box
+def _closed(mask: np.ndarray) -> np.ndarray:
+    """Small gaps closed: unreliable flow comes in speckles over a rippling surface."""
+    return cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, cues.disk(2)).astype(bool)
 
 
 def _resize_flow(flow: np.ndarray, w: int, h: int) -> np.ndarray:

@@ -25,11 +25,13 @@ class AddOptions:
     segmenter: str | None = None
     segmenter_options: dict[str, Any] = field(default_factory=dict)
     box: tuple[float, float, float, float] | None = None  # x, y, w, h in pixels of the original video
+    box_frame: int = 0  # the stored frame the box is drawn on
     fps: float | None = None
     start: float | None = None
     end: float | None = None
     max_frames: int | None = None
-    max_size: int | None = None  # None: the decoder's default (854)
+    max_size: int | None = None  # None: the decoder's default (854); 0: keep the original size
+    max_memory_gb: float | None = None  # None: the decoder's default budget (2 GB)
     flow: str = "dis"
     flow_options: dict[str, Any] = field(default_factory=dict)
     replace: bool = False
@@ -61,7 +63,7 @@ def preprocess(path: str | Path, opts: AddOptions, progress: StageProgress | Non
     """Decode ``path`` and compute flow and masks; returns a `zooctl.store.videos.VideoRecord`."""
     from ..plugins import get_registry
     from ..store.videos import VideoRecord
-    from .decode import DEFAULT_MAX_SIZE, decode
+    from .decode import DEFAULT_MAX_MEMORY_GB, DEFAULT_MAX_SIZE, decode
     from .flow import compute_video_flow
 
     path = Path(path).expanduser()
@@ -74,7 +76,7 @@ def preprocess(path: str | Path, opts: AddOptions, progress: StageProgress | Non
     def stage(label: str) -> Callable[[int, int | None], None] | None:
         return None if progress is None else (lambda done, total: progress(label, done, total))
 
-    max_size = DEFAULT_MAX_SIZE if opts.max_size is None else opts.max_size
+    max_size = DEFAULT_MAX_SIZE if opts.max_size is None else (opts.max_size or None)
     dv = decode(
         path,
         fps=opts.fps,
@@ -83,6 +85,7 @@ def preprocess(path: str | Path, opts: AddOptions, progress: StageProgress | Non
         max_frames=opts.max_frames,
         max_size=max_size,
         progress=stage("decode"),
+        max_memory_gb=DEFAULT_MAX_MEMORY_GB if opts.max_memory_gb is None else opts.max_memory_gb,
     )
     t, h, w = dv.frames.shape[:3]
     if t < 2:
@@ -97,28 +100,33 @@ def preprocess(path: str | Path, opts: AddOptions, progress: StageProgress | Non
     if seg_name == "masks":
         seg_opts.setdefault("source_indices", dv.source_indices)
         seg_opts.setdefault("original_size", dv.original_size)
+        seg_opts.setdefault("source_frames", dv.source_frames)
+        seg_opts.setdefault("source_exact", dv.kind != "file")
         seg_opts.setdefault("path", path)  # a DAVIS folder: MaskSegmenter reads its Annotations/
     segmenter = seg_spec.create(**seg_opts)
     box = _scale_box(opts.box, dv.original_size, (w, h))
     kwargs: dict[str, Any] = {"box": box, "progress": stage("segment")}
     if getattr(segmenter, "uses_flow", False):
         kwargs["flow"] = vf
+    if opts.box_frame:
+        import inspect
+
+        if box is None:
+            raise UsageError("--box-frame places --box: give both", hint="--box x,y,w,h --box-frame N")
+        if "box_frame" not in inspect.signature(segmenter.segment).parameters:
+            raise UsageError(f"the {seg_name} segmenter takes its box on the first frame only")
+        kwargs["box_frame"] = opts.box_frame
     masks = np.asarray(segmenter.segment(dv.frames, **kwargs), dtype=bool)
     if masks.shape != (t, h, w):
         raise InputError(
             f"segmenter {seg_name!r} returned masks of shape {masks.shape}, expected {(t, h, w)}"
         )
 
-    empty = int((~masks.reshape(t, -1).any(1)).sum())
-    if empty > t // 2:
-        raise InputError(
-            f"the {seg_name} segmenter found no animal in {empty} of {t} frames; nothing was stored",
-            hint="give --box x,y,w,h around the animal in the first frame, or your own --masks",
-        )
+    masks, report = check_masks(masks, seg_name, user=seg_name == "masks")
     recorded = {
         k: str(Path(v).resolve()) if isinstance(v, Path) else str(v)
         for k, v in seg_opts.items()
-        if k not in ("source_indices", "original_size")
+        if k not in ("source_indices", "original_size", "source_frames", "source_exact")
     }
     return VideoRecord(
         name=name,
@@ -140,9 +148,51 @@ def preprocess(path: str | Path, opts: AddOptions, progress: StageProgress | Non
             "end": opts.end,
         },
         source_indices=dv.source_indices,
-        segmenter={"name": seg_name, "options": recorded, "box": list(box) if box is not None else None},
+        segmenter={
+            "name": seg_name,
+            "options": recorded,
+            "box": list(box) if box is not None else None,
+            "box_frame": opts.box_frame if box is not None else None,
+            **report,
+            **dict(getattr(segmenter, "report", None) or {}),
+        },
         flow_estimator={"name": opts.flow, "options": {k: str(v) for k, v in opts.flow_options.items()}},
     )
+
+
+MIN_COVERAGE = 0.001  # of the frame: below this a mask is a speck the fit cannot use
+
+
+def check_masks(masks: np.ndarray, seg_name: str, user: bool) -> tuple[np.ndarray, dict[str, Any]]:
+    """Masks (T, H, W) bool as a segmenter gave them -> the masks to store and what to report.
+
+    Frames without an animal are kept empty (the fit skips them) and listed. Specks under
+    ``MIN_COVERAGE`` of the frame: an automatic segmenter's are cleared (noise), a user's are listed,
+    and refused when most masked frames are specks. No animal in any frame is an InputError.
+    """
+    t = len(masks)
+    cov = masks.reshape(t, -1).mean(1)
+    small = (cov > 0) & (cov < MIN_COVERAGE)
+    if user and small.sum() > 0.5 * max(int((cov > 0).sum()), 1):
+        raise InputError(
+            f"the masks cover almost nothing: under {MIN_COVERAGE:.1%} of the frame in {int(small.sum())} "
+            f"of {t} frames (median {np.median(cov[cov > 0]):.3%})",
+            hint="the animal must be visible in the masks: check they belong to this video and are not inverted",
+        )
+    if not user and small.any():
+        masks = masks.copy()
+        masks[small] = False
+        small[:] = False
+    empty = ~masks.reshape(t, -1).any(1)
+    if empty.all():
+        raise InputError(
+            f"the {seg_name} segmenter found no animal in any of the {t} frames; nothing was stored",
+            hint="give --box x,y,w,h around the animal (and --box-frame N), or your own --masks",
+        )
+    report = {"empty_frames": np.flatnonzero(empty).tolist()}
+    if small.any():
+        report["small_frames"] = np.flatnonzero(small).tolist()
+    return masks, report
 
 
 def add_video(

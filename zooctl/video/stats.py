@@ -15,7 +15,10 @@ def video_stats(rec) -> dict[str, Any]:
     coverage = rec.masks.reshape(t, -1).mean(1)
     mag = np.linalg.norm(rec.flow_forward, axis=-1)
     occ = np.concatenate([rec.occlusion_forward.reshape(-1), rec.occlusion_backward.reshape(-1)])
+    seg = rec.segmenter or {}
+    keys = ("seeding", "seed_frame", "animal_classes", "animals_seen", "empty_frames", "small_frames")
     return {
+        "seeding": {k: seg[k] for k in keys if k in seg} or None,
         "mask_coverage": [round(float(c), 5) for c in coverage],
         "boxes": boxes_of(rec.masks).tolist(),
         "flow": {
@@ -26,3 +29,43 @@ def video_stats(rec) -> dict[str, Any]:
             "per_frame_mean_magnitude": [round(float(m), 4) for m in mag.reshape(t - 1, -1).mean(1)],
         },
     }
+
+
+def seeding_lines(seeding: dict[str, Any] | None) -> list[str]:
+    """What `video show` prints about how the masks were seeded and what the localiser saw."""
+    if not seeding:
+        return []
+    out = []
+    how = seeding.get("seeding") or []
+    if how:
+        counts = {k: how.count(k) for k in ("box", "localiser", "re-seeded", "tracked", "empty")}
+        out.append(
+            "seeding: "
+            + ", ".join(f"{n} {k}" for k, n in counts.items() if n)
+            + f" (first seed on frame {seeding.get('seed_frame')})"
+        )
+    classes = seeding.get("animal_classes") or []
+    if classes:
+        seen = ", ".join(f"{c['name']} {c['probability']:.0%}" for c in classes)
+        n = seeding.get("animals_seen", 0)
+        extra = f"; {n} animal-like regions at once, the one with most evidence kept" if n > 1 else ""
+        out.append(f"localiser saw: {seen}{extra}")
+    if seeding.get("empty_frames"):
+        out.append(
+            f"no animal in frames {_ranges(seeding['empty_frames'])} (stored empty; the fit skips them)"
+        )
+    if seeding.get("small_frames"):
+        out.append(f"masks under 0.1% of the frame in frames {_ranges(seeding['small_frames'])}")
+    return out
+
+
+def _ranges(frames: list[int]) -> str:
+    """[1, 2, 3, 7] -> "1-3, 7"."""
+    parts, start = [], None
+    for i, f in enumerate(frames):
+        if start is None:
+            start = f
+        if i + 1 == len(frames) or frames[i + 1] != f + 1:
+            parts.append(str(start) if start == f else f"{start}-{f}")
+            start = None
+    return ", ".join(parts)

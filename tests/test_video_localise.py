@@ -1,0 +1,106 @@
+"""The animal localiser (ImageNet class maps + motion) and the segmenter's seeding without a box,
+from a box on any frame, and what it reports."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from cli_helpers import run_inprocess
+from conftest import VIDEOS_DIR, needs_shared_videos
+from PIL import Image
+from video_helpers import iou, moving_object_video
+
+from zooctl.errors import UsageError
+from zooctl.video import cues
+from zooctl.video.grabcut import GrabCutTracker
+from zooctl.video.localise import Localiser, class_name, main_region
+
+
+@pytest.fixture(scope="module")
+def synthetic():
+    return moving_object_video(t=10, h=96, w=128)
+
+
+def test_class_names():
+    assert class_name(207) == "golden retriever" and class_name(354) == "Arabian camel"
+    assert class_name(200) == "dog #200" and class_name(12) == "bird #12"
+
+
+@needs_shared_videos
+def test_localiser_sees_the_dog_where_it_is():
+    from zooctl.video.decode import decode
+
+    seq = VIDEOS_DIR / "dog"
+    frame = decode(seq, max_size=427, max_frames=1).frames[0]
+    with Image.open(sorted((seq / "Annotations").glob("*.png"))[0]) as im:
+        truth = np.asarray(im.resize(frame.shape[1::-1], Image.Resampling.NEAREST)) != 0
+    ev = Localiser().evidence(frame)
+    assert ev.animal.shape == truth.shape and ev.animal.max() == pytest.approx(1.0)
+    assert ev.animal_prob > 0.3
+    assert 151 <= ev.classes[0][0] <= 268  # a dog breed
+    region, _ = main_region(ev.animal)
+    assert (region & truth).sum() > 0.5 * region.sum()  # the evidence lies on the dog
+    # a flat grey frame holds no animal worth a seed
+    assert Localiser().evidence(np.full_like(frame, 128)).animal_prob < 0.3
+
+
+def test_no_box_finds_the_moving_object(synthetic):
+    frames, masks = synthetic
+    seg = GrabCutTracker()
+    got = seg.segment(frames)
+    assert iou(got, masks) > 0.6
+    how = seg.report["seeding"]
+    assert how[seg.report["seed_frame"]] == "localiser" and len(how) == len(frames)
+    assert set(how) <= {"localiser", "tracked", "re-seeded", "empty"}
+
+
+def test_box_on_a_later_frame_tracks_both_ways(synthetic):
+    frames, masks = synthetic
+    seg = GrabCutTracker(localise=False)
+    got = seg.segment(frames, box=cues.box_of(masks[6]), box_frame=6)
+    assert seg.report["seeding"][6] == "box" and seg.report["seed_frame"] == 6
+    assert iou(got[:6], masks[:6]) > 0.7 and iou(got[6:], masks[6:]) > 0.7
+    with pytest.raises(UsageError, match="--box-frame 10 is not a frame of this 10-frame video"):
+        seg.segment(frames, box=cues.box_of(masks[0]), box_frame=10)
+
+
+def test_cli_box_frame_and_show_report_seeding(store, synthetic, tmp_path, capsys):
+    frames, masks = synthetic
+    folder = tmp_path / "clip"
+    folder.mkdir()
+    for i, f in enumerate(frames):
+        Image.fromarray(f).save(folder / f"{i:05d}.png")
+    x, y, w, h = cues.box_of(masks[3])
+    r = run_inprocess(capsys, "video", "add", str(folder), "--box-frame", "3", "-q")
+    assert r.code == 2 and "--box-frame places --box" in r.err
+    r = run_inprocess(
+        capsys, "video", "add", str(folder), "--box", f"{x},{y},{w},{h}", "--box-frame", "3", "-q"
+    )
+    assert r.code == 0, r.err
+    r = run_inprocess(capsys, "video", "show", "clip")
+    assert r.code == 0 and "seeding: 1 box" in r.out and "(first seed on frame 3)" in r.out, r.out
+
+
+def test_an_animal_that_leaves_the_frame_is_found_again(synthetic):
+    """Frames 4-6 show only the panning background: they stay empty, and the object is taken up
+    again when it is back (the localiser re-seeds where tracking lost it)."""
+    from video_helpers import texture
+
+    frames, masks = (a.copy() for a in synthetic)
+    bg = (texture(96, 128 + 40, 0) * 0.5 + np.array([60, 90, 60])).astype(np.uint8)
+    for i in (4, 5, 6):
+        frames[i], masks[i] = bg[:, 2 * i : 2 * i + 128], False
+    seg = GrabCutTracker()
+    got = seg.segment(frames)
+    assert not got[4:6].any()  # no background taken for the animal
+    present = [i for i in range(10) if masks[i].any()]
+    assert np.mean([iou(got[i], masks[i]) for i in present]) > 0.8
+    assert "re-seeded" in seg.report["seeding"] or seg.report["seed_frame"] < 4
+
+
+def test_main_region_is_the_one_with_most_evidence():
+    score = np.zeros((60, 80), np.float32)
+    score[5:20, 5:20] = 0.9  # small, sure
+    score[30:55, 40:75] = 0.7  # big, less sure: more evidence in all
+    region, count = main_region(score)
+    assert count == 2 and region[40, 60] and not region[10, 10]
