@@ -1,6 +1,6 @@
-"""The example plugin package's renderer, articulation model and exporter are used by the commands
-that should use them: `zooctl fit --renderer pointsplat --articulation rigid` (a tiny fit) and
-`bank export --format ply`.
+"""The example plugin package's renderer, articulation model, exporter, segmenter and flow estimator
+are used by the commands that should use them: `zooctl fit --renderer pointsplat --articulation
+rigid` (a tiny fit), `bank export --format ply` and `video add --segmenter backdrop --flow farneback`.
 
 The package is pip-installed into a private folder put on PYTHONPATH (not into the venv), so
 tests running at the same time never see it; `tests/test_plugins.py` covers the venv install."""
@@ -8,6 +8,7 @@ tests running at the same time never see it; `tests/test_plugins.py` covers the 
 from __future__ import annotations
 
 import json
+import math
 
 import pytest
 from cli_helpers import REPO, pip, zooctl
@@ -93,3 +94,39 @@ def test_bank_export_through_the_plugin_exporter(example):
     assert lines[0] == "ply" and lines[2] == "element vertex 156"  # (4 * 3 + 1) rings of 12
     r = zooctl("bank", "export", "worm", "-o", str(root / "w.ply"), store=store, env=env)  # suffix -> format
     assert r.code == 0 and (root / "w.ply").is_file(), r.err
+
+
+def test_video_add_through_the_plugin_segmenter_and_flow_estimator(example, tmp_path):
+    """`video add --segmenter backdrop --flow farneback`: a bright disc moving right over a plain
+    backdrop is masked where it is, and its stored flow points right."""
+    import cv2
+    import numpy as np
+
+    env, store, _ = example
+    path = tmp_path / "disc.mp4"
+    w, h, n = 96, 64, 8
+    out = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), 10, (w, h))
+    for t in range(n):
+        img = np.full((h, w, 3), (40, 90, 30), np.uint8)
+        cv2.circle(img, (24 + 4 * t, 32), 12, (220, 200, 180), -1)
+        out.write(img)
+    out.release()
+    r = zooctl(
+        *f"video add {path} --name disc --segmenter backdrop --flow farneback --json".split(),
+        store=store,
+        env=env,
+    )
+    assert r.code == 0, r.err
+    from zooctl.store.videos import VideoStore
+
+    v = VideoStore.open(store).get("disc")
+    got = {
+        "seg": v.segmenter,
+        "flow": v.flow_estimator,
+        "cov": float(v.masks.mean()),
+        "u": float(v.flow_forward[..., 0][v.masks[:-1]].mean()),
+    }
+    assert got["seg"]["name"] == "backdrop" and got["flow"]["name"] == "farneback"
+    disc = math.pi * 12**2 / (w * h)
+    assert 0.7 * disc < got["cov"] < 1.3 * disc
+    assert got["u"] > 1.5  # about 4 px a frame to the right

@@ -9,6 +9,11 @@
   (``zooctl fit --articulation rigid``);
 - exporter ``ply``: the mesh, posed at the first frame of the first clip, as ASCII PLY
   (``zooctl bank export NAME --format ply``);
+- segmenter ``backdrop``: an animal filmed against a plain backdrop (a studio, a tank, the sky):
+  pixels whose colour is far from the frame border's median colour
+  (``zooctl video add clip.mp4 --segmenter backdrop --seg-option tolerance=40``);
+- flow estimator ``farneback``: OpenCV's Farneback dense optical flow
+  (``zooctl video add clip.mp4 --flow farneback``);
 - a command, ``zooctl toyrig``.
 
 Heavy imports (torch, zooctl's model code) stay inside the factories, so ``zooctl --help`` stays fast.
@@ -155,6 +160,75 @@ def save_ply(asset, path, clips=None, **options):
     lines += [f"{x:.6f} {y:.6f} {z:.6f}" for x, y, z in verts]
     lines += [f"3 {a} {b} {c}" for a, b, c in asset.faces]
     write_bytes_atomic(Path(path), ("\n".join(lines) + "\n").encode())  # temporary, then os.replace
+
+
+class BackdropSegmenter:
+    """Foreground = colour farther than ``tolerance`` (0-255 units) from the median colour of the
+    frame's border pixels; the largest connected region is kept."""
+
+    def __init__(self, tolerance: float = 40.0, border: int = 4) -> None:
+        self.tolerance, self.border = float(tolerance), int(border)
+        if self.tolerance <= 0 or self.border < 1:
+            raise InputError("backdrop: tolerance must be positive and border at least 1 pixel")
+
+    def segment(self, frames, box=None, progress=None):
+        """(T, H, W, 3) uint8 -> (T, H, W) bool."""
+        import cv2
+        import numpy as np
+
+        b = self.border
+        out = np.zeros(frames.shape[:3], bool)
+        for t, img in enumerate(frames):
+            f = img.astype(np.float32)
+            ring = np.concatenate([f[:b].reshape(-1, 3), f[-b:].reshape(-1, 3)])
+            ring = np.concatenate([ring, f[:, :b].reshape(-1, 3), f[:, -b:].reshape(-1, 3)])
+            fg = (np.linalg.norm(f - np.median(ring, 0), axis=-1) > self.tolerance).astype(np.uint8)
+            n, labels, stats, _ = cv2.connectedComponentsWithStats(fg, connectivity=8)
+            if n > 1:
+                out[t] = labels == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+            if progress is not None:
+                progress(t + 1, len(frames))
+        return out
+
+
+class FarnebackFlow:
+    """OpenCV's Farneback flow (a dense polynomial-expansion method; DIS is the built-in)."""
+
+    def __init__(self, levels: int = 3, winsize: int = 15) -> None:
+        self.levels, self.winsize = int(levels), int(winsize)
+
+    def flow(self, frame_a, frame_b):
+        """(H, W, 3) uint8 twice -> (H, W, 2) float32: pixel displacement from a to b."""
+        import cv2
+        import numpy as np
+
+        a, b = (cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for f in (frame_a, frame_b))
+        fl = cv2.calcOpticalFlowFarneback(a, b, None, 0.5, self.levels, self.winsize, 3, 5, 1.2, 0)
+        return fl.astype(np.float32)
+
+
+@hookimpl
+def register_segmenters(register):
+    register(
+        ComponentSpec(
+            "segmenter",
+            "backdrop",
+            lambda **options: BackdropSegmenter(**options),
+            "animal against a plain backdrop (example plugin)",
+        )
+    )
+
+
+@hookimpl
+def register_flow_estimators(register):
+    register(
+        ComponentSpec(
+            "flow_estimator",
+            "farneback",
+            lambda **options: FarnebackFlow(**options),
+            "OpenCV Farneback dense flow (example plugin)",
+        )
+    )
 
 
 @hookimpl
