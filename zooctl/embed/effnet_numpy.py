@@ -132,6 +132,11 @@ class NumpyEfficientNetLite0:
 
     def features(self, x: np.ndarray) -> np.ndarray:
         """(N, H, W, 3) float32 normalised images (NHWC) -> (N, 1280) pooled features."""
+        return self.feature_map(x).mean(axis=(1, 2))
+
+    def feature_map(self, x: np.ndarray) -> np.ndarray:
+        """(N, H, W, 3) float32 normalised images (NHWC) -> (N, H/32, W/32, 1280) head activations
+        before pooling (what class activation maps are made of)."""
         h = self._relu6(self._apply_stem(np.asarray(x, np.float32)))
         for b in self.blocks:
             y = h
@@ -142,8 +147,7 @@ class NumpyEfficientNetLite0:
             if b.skip:
                 y += h
             h = y
-        h = self._relu6(self._apply_pointwise(h, self.head))
-        return h.mean(axis=(1, 2))
+        return self._relu6(self._apply_pointwise(h, self.head))
 
     def logits(self, x: np.ndarray) -> np.ndarray:
         """(N, H, W, 3) float32 normalised images -> (N, 1000) ImageNet logits."""

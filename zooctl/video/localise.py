@@ -171,18 +171,7 @@ class Localiser:
 
     def _head(self, x: np.ndarray) -> np.ndarray:
         """(N, h, w, 3) normalised input -> (N, h/32, w/32, 1280) unpooled head activations."""
-        m = self.model
-        h = m._relu6(m._apply_stem(x))
-        for b in m.blocks:
-            y = h
-            if b.expand is not None:
-                y = m._relu6(m._apply_pointwise(y, b.expand))
-            y = m._relu6(m._apply_depthwise(y, b.depthwise))
-            y = m._apply_pointwise(y, b.project)
-            if b.skip:
-                y += h
-            h = y
-        return m._relu6(m._apply_pointwise(h, m.head))
+        return self.model.feature_map(x)
 
     def evidence(self, frame: np.ndarray) -> Evidence:
         """(H, W, 3) uint8 RGB -> `Evidence` at the frame's size."""
