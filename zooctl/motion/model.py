@@ -45,6 +45,14 @@ class MotionConfig:
     # Positions are in skeleton diagonals, so their errors are small (MSE ~1e-3): at 10 the KL
     # outweighed them and the decoder learned to ignore z (see `losses`).
     joint_weight: float = 100.0
+    # Relative joint-velocity error (`losses.velocity_loss`): pose errors alone let a decoder that
+    # outputs each window's mean pose score well, and its samples stand still.
+    velocity_weight: float = 1.0
+    # z also added to the decoder's timestamp queries, so it shapes how frames attend to each other.
+    z_queries: bool = False
+    # Where samples draw z: "posterior", a Gaussian per skeleton fitted to its training windows'
+    # posterior means (`latents`), or "normal", N(0, I).
+    sampler: str = "posterior"
 
     def __post_init__(self) -> None:
         if self.width < 8 or self.width % self.heads:
@@ -53,6 +61,8 @@ class MotionConfig:
             )
         if self.free_bits < 0 or self.kl_weight < 0:
             raise InputError("kl_weight and free_bits must be >= 0")
+        if self.sampler not in ("posterior", "normal"):
+            raise InputError(f"sampler must be 'posterior' or 'normal', got {self.sampler!r}")
         if self.layers < 1 or self.latent < 1 or self.length < 2 or not self.fps > 0:
             raise InputError("layers and latent must be >= 1, length >= 2 frames and fps > 0")
 
@@ -179,8 +189,13 @@ class MotionVAE(nn.Module):
     def decode_frames(self, z: torch.Tensor, T: int) -> torch.Tensor:
         """z (B, Z) -> frame features (B, T, W) at timestamps 0..T-1."""
         queries = self.time_in(time_encoding(torch.arange(T, device=z.device), self.cfg.width))
+        m = self.z_in(z)
+        if self.cfg.z_queries:
+            # Cross-attention to one token only adds a z-dependent constant to every frame; the
+            # frames' motion then barely depends on z. Here z also enters the self-attention.
+            return decode_single_memory(self.temporal_decoder, queries[None] + m[:, None], m[:, None])[:, 0]
         # All B windows share the timestamp queries: one group of B sequences.
-        return decode_single_memory(self.temporal_decoder, queries[None], self.z_in(z)[None])[0]
+        return decode_single_memory(self.temporal_decoder, queries[None], m[None])[0]
 
     def decode_bones(self, frames: torch.Tensor, sk: SkeletonBatch) -> torch.Tensor:
         """frame features (B, T, W) -> 6D rotations (B, T, J, 6) relative to rest."""

@@ -29,12 +29,14 @@ from ..errors import InputError, StoreError
 from ..geometry import decompose_trs, matrix_to_quat
 from .calibrate import calibrate_temperature
 from .dataset import MotionDataset, MotionSequence, quat_mul
+from .latents import LatentGaussians
 from .model import MotionConfig, MotionVAE
 from .skeleton import Skeleton, SkeletonBatch
 from .train import TrainHistory, TrainOptions, train_vae
 
 WEIGHTS = "weights.pt"
 CONFIG = "config.json"
+LATENTS = "latents.npz"
 SCHEMA_VERSION = 1
 
 
@@ -51,6 +53,7 @@ class PonymationPrior:
         self.model = MotionVAE(self.cfg).to(self.device).eval()
         self.training: dict[str, Any] = {}
         self.history: TrainHistory | None = None
+        self.latents: LatentGaussians | None = None  # aggregate posterior (`latents`), set by `fit`
 
     # -- training ---------------------------------------------------------------------------
     def dataset(
@@ -88,6 +91,7 @@ class PonymationPrior:
                 "final_loss": self.history.to_json()["final"],
             }
         )
+        self.latents = LatentGaussians.fit(self.model, ds) if self.cfg.sampler == "posterior" else None
         cal = calibrate_temperature(self, ds)
         self.training["sample_temperature"] = cal["temperature"]
         self.training["calibration"] = cal
@@ -121,6 +125,9 @@ class PonymationPrior:
         d.mkdir(parents=True, exist_ok=True)
         torch.save({k: v.detach().cpu() for k, v in self.model.state_dict().items()}, d / WEIGHTS)
         cfg = self.config_json(name or d.name, extra)
+        if self.latents is not None:
+            self.latents.save(d / LATENTS)
+            cfg["files"] = {**cfg["files"], "latents": LATENTS}
         (d / CONFIG).write_text(json.dumps(cfg, indent=1, sort_keys=True) + "\n")
 
     @classmethod
@@ -149,6 +156,14 @@ class PonymationPrior:
             ) from None
         prior.model.to(prior.device).eval()
         prior.training = cfg.get("training", {})
+        if "latents" in cfg.get("files", {}):
+            try:
+                prior.latents = LatentGaussians.load(d / cfg["files"]["latents"])
+            except (OSError, KeyError, ValueError) as exc:
+                raise StoreError(
+                    f"the latent statistics of motion prior {d.name!r} are unreadable: {exc}",
+                    hint="train it again",
+                ) from None
         return prior
 
     # -- sampling -----------------------------------------------------------------------------
@@ -187,15 +202,15 @@ class PonymationPrior:
             raise InputError(f"need at least one sample of one frame, got n={n}, frames={frames}")
         if not temperature >= 0:
             raise InputError(f"temperature must be >= 0, got {temperature}")
-        L, Z = self.cfg.length, self.cfg.latent
+        L = self.cfg.length
         gen = torch.Generator().manual_seed(int(seed))
         K = 1 if frames <= L else int(np.ceil((frames + L - 2) / (2 * L - 2)))
-        z_content = (torch.randn(n * K, Z, generator=gen) * temperature).to(self.device)
+        z_content = self._draw(skeleton, n * K, temperature, gen)
         with torch.no_grad():
             content = self.model.decode_frames(z_content, L).reshape(n, K, L, -1)  # (n, K, L, W)
         feats = content[:, 0]
         if K > 1:
-            z_trans = (torch.randn(n * (K - 1), Z, generator=gen) * temperature).to(self.device)
+            z_trans = self._draw(skeleton, n * (K - 1), temperature, gen)
             z_trans = self._optimise_transitions(z_trans, content, transition_steps)
             trans = self._transition_frames(z_trans, content)  # (n, K-1, L, W)
             parts = [content[:, 0]]
@@ -206,6 +221,23 @@ class PonymationPrior:
         with torch.no_grad():
             rot = self.model.decode_bones(feats[:, :frames], self._skeletons(skeleton, n))
         return self._to_quat(rot)
+
+    def _draw(self, skeleton: Skeleton, n: int, temperature: float, gen: torch.Generator) -> torch.Tensor:
+        """(n, Z) latents: from the skeleton's aggregate posterior when the prior has one, else
+        from N(0, temperature^2 I)."""
+        if self.latents is not None:
+            return self.latents.sample(skeleton, n, temperature, gen).to(self.device)
+        return (torch.randn(n, self.cfg.latent, generator=gen) * temperature).to(self.device)
+
+    def seams(self, frames: int) -> list[int]:
+        """Frames of a ``frames``-long sample where a new segment starts (content, transition,
+        content, ...): where chaining could show."""
+        L, out, t, k = self.cfg.length, [], self.cfg.length, 0
+        while t < frames:
+            out.append(t)
+            t += L - 2 if k % 2 == 0 else L
+            k += 1
+        return out
 
     @staticmethod
     def _ends(content: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
