@@ -110,19 +110,19 @@ def motion_ratio(gen: np.ndarray, real: np.ndarray) -> float | None:
 
 def gait_periodicity(p: np.ndarray, feet: np.ndarray, min_lag: int = 5) -> float | None:
     """How periodic the feet move, in [-1, 1]: the highest normalised autocorrelation of the feet's
-    centred heights at a lag of ``min_lag`` frames to two thirds of the window, averaged over
-    windows. A walk or trot scores ~0.5-1, a statue ~0. p (N, T, J, 3); None without feet."""
-    T = p.shape[1]
-    if len(feet) < 2 or T < 3 * min_lag:
+    vertical velocities at a lag of ``min_lag`` frames to two thirds of the window, averaged over
+    windows (velocities, not heights: a slow drift of the heights correlates at any lag). A walk
+    or trot scores ~0.5-1, a statue or a random drift ~0. p (N, T, J, 3); None without feet."""
+    if len(feet) < 2 or p.shape[1] < 3 * min_lag + 1:
         return None
-    y = p[:, :, feet, 1] - p[:, :, feet, 1].mean(1, keepdims=True)  # (N, T, F)
-    energy = (y**2).sum((1, 2))
+    y = np.diff(p[:, :, feet, 1], axis=1)  # (N, T-1, F)
+    T = y.shape[1]
     best = np.full(len(p), -1.0)
     for lag in range(min_lag, T - T // 3 + 1):
         num = (y[:, lag:] * y[:, :-lag]).sum((1, 2))
         a = np.sqrt((y[:, lag:] ** 2).sum((1, 2)) * (y[:, :-lag] ** 2).sum((1, 2)))
         best = np.maximum(best, np.where(a > 1e-12, num / np.maximum(a, 1e-12), 0.0))
-    best = np.where(energy > 1e-9, best, 0.0)  # a foot that never moves has no gait
+    best = np.where((y**2).sum((1, 2)) > 1e-9, best, 0.0)  # feet that never move have no gait
     return float(best.mean())
 
 
