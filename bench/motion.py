@@ -50,6 +50,7 @@ def main() -> None:
     ap.add_argument("--kl-anneal", type=float, default=TrainOptions.kl_anneal)
     ap.add_argument("--velocity-weight", type=float, default=MotionConfig.velocity_weight)
     ap.add_argument("--sampler", default=MotionConfig.sampler, choices=("posterior", "normal"))
+    ap.add_argument("--arch", default=MotionConfig.arch, choices=("ponymation", "trajectory"))
     ap.add_argument("--lr", type=float, default=None)
     ap.add_argument("--batch-size", type=int, default=None)
     ap.add_argument("--device", default="cpu")
@@ -82,6 +83,7 @@ def main() -> None:
         kl_weight=args.kl_weight,
         velocity_weight=args.velocity_weight,
         sampler=args.sampler,
+        arch=args.arch,
     )
     prior = PonymationPrior(cfg, device=args.device)
     data = prior.dataset(train)

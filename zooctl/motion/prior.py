@@ -30,7 +30,7 @@ from ..geometry import decompose_trs, matrix_to_quat
 from .calibrate import calibrate_temperature
 from .dataset import MotionDataset, MotionSequence, quat_mul
 from .latents import LatentGaussians
-from .model import MotionConfig, MotionVAE
+from .model import MotionConfig, build_model
 from .skeleton import Skeleton, SkeletonBatch
 from .train import TrainHistory, TrainOptions, train_vae
 
@@ -50,7 +50,7 @@ class PonymationPrior:
             config = MotionConfig.from_json(config)
         self.cfg = config or MotionConfig(**options)
         self.device = torch.device(device)
-        self.model = MotionVAE(self.cfg).to(self.device).eval()
+        self.model = build_model(self.cfg).to(self.device).eval()
         self.training: dict[str, Any] = {}
         self.history: TrainHistory | None = None
         self.latents: LatentGaussians | None = None  # aggregate posterior (`latents`), set by `fit`
@@ -207,19 +207,21 @@ class PonymationPrior:
         K = 1 if frames <= L else int(np.ceil((frames + L - 2) / (2 * L - 2)))
         z_content = self._draw(skeleton, n * K, temperature, gen)
         with torch.no_grad():
-            content = self.model.decode_frames(z_content, L).reshape(n, K, L, -1)  # (n, K, L, W)
+            content = self.model.frame_features(z_content, self._skeletons(skeleton, n * K))
+            content = content.reshape(n, K, L, -1)  # (n, K, L, W)
         feats = content[:, 0]
         if K > 1:
             z_trans = self._draw(skeleton, n * (K - 1), temperature, gen)
-            z_trans = self._optimise_transitions(z_trans, content, transition_steps)
-            trans = self._transition_frames(z_trans, content)  # (n, K-1, L, W)
+            sk_t = self._skeletons(skeleton, n * (K - 1))
+            z_trans = self._optimise_transitions(z_trans, content, transition_steps, sk_t)
+            trans = self._transition_frames(z_trans, content, sk_t)  # (n, K-1, L, W)
             parts = [content[:, 0]]
             for k in range(K - 1):
                 parts += [trans[:, k, 1 : L - 1], content[:, k + 1]]
             feats = torch.cat(parts, 1)
         # One spatial decode for every kept frame: it costs T * J tokens, the bulk of sampling.
         with torch.no_grad():
-            rot = self.model.decode_bones(feats[:, :frames], self._skeletons(skeleton, n))
+            rot = self.model.features_to_rot6d(feats[:, :frames], self._skeletons(skeleton, n))
         return self._to_quat(rot)
 
     def _draw(self, skeleton: Skeleton, n: int, temperature: float, gen: torch.Generator) -> torch.Tensor:
@@ -245,7 +247,9 @@ class PonymationPrior:
         n, K, L, W = content.shape
         return content[:, :-1].reshape(-1, L, W), content[:, 1:].reshape(-1, L, W)
 
-    def _optimise_transitions(self, z: torch.Tensor, content: torch.Tensor, steps: int) -> torch.Tensor:
+    def _optimise_transitions(
+        self, z: torch.Tensor, content: torch.Tensor, steps: int, sk: SkeletonBatch
+    ) -> torch.Tensor:
         """Transition latents (Ponymation appendix A): z (n*(K-1), Z) initial latents, content
         (n, K, L, W) frame features of the content segments -> optimised z.
 
@@ -254,7 +258,6 @@ class PonymationPrior:
         differences, for velocity) matches the poses without running the J-token spatial decoder in
         the loop (which made this step ~20 s for a 53-joint skeleton at width 256).
         """
-        L = content.shape[2]
         prev, nxt = self._ends(content)
         scale = content.reshape(-1, content.shape[-1]).var(0).mean().clamp_min(1e-8)  # scale-free loss
         z = z.detach().clone().requires_grad_(True)
@@ -266,7 +269,7 @@ class PonymationPrior:
             p.requires_grad_(False)
         try:
             for i in range(1, steps + 1):
-                loss = transition_error(self.model.decode_frames(z, L), prev, nxt).mean() / scale
+                loss = transition_error(self.model.frame_features(z, sk), prev, nxt).mean() / scale
                 loss = loss + 1e-3 * (z**2).mean()  # the Gaussian prior keeps z plausible
                 (g,) = torch.autograd.grad(loss, z)
                 with torch.no_grad():
@@ -280,12 +283,12 @@ class PonymationPrior:
         return z.detach()
 
     @torch.no_grad()
-    def _transition_frames(self, z: torch.Tensor, content: torch.Tensor) -> torch.Tensor:
+    def _transition_frames(self, z: torch.Tensor, content: torch.Tensor, sk: SkeletonBatch) -> torch.Tensor:
         """Decoded transition features (n, K-1, L, W) for latents z (n*(K-1), Z); the residual
         left at both ends is spread linearly over the transition, so segments join exactly."""
         n, K, L, W = content.shape
         prev, nxt = self._ends(content)
-        t = self.model.decode_frames(z, L)
+        t = self.model.frame_features(z, sk)
         w = torch.linspace(0.0, 1.0, L, device=t.device)[None, :, None]
         t = t + (1 - w) * (prev[:, -1:] - t[:, :1]) + w * (nxt[:, :1] - t[:, -1:])
         return t.reshape(n, K - 1, L, W)
