@@ -44,9 +44,10 @@ def store_root(tmp_path_factory) -> Path:
 
 def test_defaults_follow_the_device():
     cpu, note = MotionTrainOptions().resolve()
-    assert (cpu.width, cpu.layers, cpu.latent) == (64, 2, 64) and "CPU" in note and "64 x 2" in note
+    assert (cpu.arch, cpu.width, cpu.layers, cpu.latent) == ("trajectory", 64, 2, 64)
+    assert "CPU" in note and "trajectory 64 x 2" in note
     cuda, note = MotionTrainOptions(device="cuda").resolve()
-    assert (cuda.width, cuda.layers) == (256, 4) and "Ponymation" in note
+    assert (cuda.arch, cuda.width, cuda.layers) == ("ponymation", 256, 4) and "Ponymation" in note
     mine, note = MotionTrainOptions(width=32, batch_size=8).resolve()
     assert (mine.width, mine.layers, mine.batch_size, mine.latent) == (32, 2, 8, 32)
 
@@ -76,7 +77,7 @@ def test_training_on_fits(store_root, capsys, monkeypatch):
     tiny = ["--width", "16", "--layers", "1", "--latent", "8", "--length", "8", "--epochs", "1"]
     r = run_inprocess(capsys, "motion", "train", "--fits", "walkvid,trotvid", "--name", "fromfits", *tiny)
     assert r.code == 0, r.err
-    assert "16 x 1" in r.out and "2 fits" in r.err
+    assert "trajectory 16 x 1" in r.out and "2 fits" in r.err
     cfg = json.loads((store_root / "motion" / "fromfits" / "config.json").read_text())
     assert sorted(cfg["training"]["sequences"]) == ["fit:trotvid", "fit:walkvid"]
     assert len(cfg["training"]["skeletons"]) == 1  # fits of one template pool

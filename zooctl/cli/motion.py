@@ -38,6 +38,13 @@ def train(
         "--kind",
         help="Motion prior to train: any registered one (`zooctl plugins`). Default: ponymation.",
     ),
+    arch: str = typer.Option(
+        None,
+        "--arch",
+        help="Ponymation's model: 'ponymation' (per-frame spatial + temporal transformers, the paper's; "
+        "default on CUDA) or 'trajectory' (one token per bone holding its window; several times more "
+        "steps per minute; default on a CPU).",
+    ),
     name: str = typer.Option("ponymation", "--name", help="Name of the trained prior in the store."),
     epochs: int = typer.Option(None, "--epochs", min=1, help="Passes over all training windows at most."),
     max_minutes: float = typer.Option(
@@ -91,6 +98,7 @@ def train(
 
     given = {
         "kind": kind,
+        "arch": arch,
         "epochs": epochs,
         "max_minutes": max_minutes,
         "device": device,

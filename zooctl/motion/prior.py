@@ -284,13 +284,20 @@ class PonymationPrior:
 
     @torch.no_grad()
     def _transition_frames(self, z: torch.Tensor, content: torch.Tensor, sk: SkeletonBatch) -> torch.Tensor:
-        """Decoded transition features (n, K-1, L, W) for latents z (n*(K-1), Z); the residual
-        left at both ends is spread linearly over the transition, so segments join exactly."""
+        """Decoded transition features (n, K-1, L, W) for latents z (n*(K-1), Z). What is left of
+        the mismatch at both ends, in position and in velocity, is removed by a cubic Hermite
+        correction, so segments join exactly and without a kink (a linear correction left a
+        velocity jump at every seam)."""
         n, K, L, W = content.shape
         prev, nxt = self._ends(content)
         t = self.model.frame_features(z, sk)
-        w = torch.linspace(0.0, 1.0, L, device=t.device)[None, :, None]
-        t = t + (1 - w) * (prev[:, -1:] - t[:, :1]) + w * (nxt[:, :1] - t[:, -1:])
+        dp0, dp1 = prev[:, -1:] - t[:, :1], nxt[:, :1] - t[:, -1:]
+        dv0 = (prev[:, -1:] - prev[:, -2:-1]) - (t[:, 1:2] - t[:, :1])
+        dv1 = (nxt[:, 1:2] - nxt[:, :1]) - (t[:, -1:] - t[:, -2:-1])
+        s = torch.linspace(0.0, 1.0, L, device=t.device)[None, :, None]
+        h00, h10 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s
+        h01, h11 = -2 * s**3 + 3 * s**2, s**3 - s**2
+        t = t + h00 * dp0 + h01 * dp1 + (L - 1) * (h10 * dv0 + h11 * dv1)
         return t.reshape(n, K - 1, L, W)
 
     def sample(self, asset: Any, n: int = 5, frames: int = 60, seed: int = 0, **options: Any) -> np.ndarray:

@@ -20,9 +20,17 @@ from typing import Any
 from ..errors import UsageError
 
 # On a CPU the paper's 256 x 4 gets a few hundred steps in 20 minutes and stays near the mean
-# pose; 64 x 2 with a higher learning rate gets thousands (BENCHMARKS.md, motion prior).
-CPU_SIZE = {"width": 64, "layers": 2, "batch_size": 32, "lr": 1e-3, "max_minutes": 20.0}
-CUDA_SIZE = {"width": 256, "layers": 4, "batch_size": 64, "lr": 3e-4, "max_minutes": 20.0}
+# pose; the per-bone trajectory model at 64 x 2 gets several times more steps than the per-frame
+# one and reconstructs more of the motion (BENCHMARKS.md, motion prior).
+CPU_SIZE = {"arch": "trajectory", "width": 64, "layers": 2, "batch_size": 32, "lr": 1e-3, "max_minutes": 20.0}
+CUDA_SIZE = {
+    "arch": "ponymation",
+    "width": 256,
+    "layers": 4,
+    "batch_size": 64,
+    "lr": 3e-4,
+    "max_minutes": 20.0,
+}
 
 
 @dataclass
@@ -30,6 +38,7 @@ class MotionTrainOptions:
     """What to train and how; None means "follow the device" (`device_defaults`)."""
 
     kind: str = "ponymation"
+    arch: str | None = None  # ponymation's model: "ponymation" (per-frame) or "trajectory" (per-bone)
     width: int | None = None
     layers: int | None = None
     latent: int | None = None  # default: the width
@@ -54,10 +63,12 @@ class MotionTrainOptions:
             out.latent = out.width
         if out.kind != "ponymation":
             return out, f"{out.kind} on {self.device}"
-        picked = [k for k in ("width", "layers") if getattr(self, k) is None]
-        why = "Ponymation's size on CUDA" if self.device.startswith("cuda") else "the size a CPU trains well"
+        picked = [k for k in ("arch", "width", "layers") if getattr(self, k) is None]
+        why = (
+            "Ponymation's model on CUDA" if self.device.startswith("cuda") else "the model a CPU trains well"
+        )
         note = (
-            f"{out.width} x {out.layers}, batch {out.batch_size}, lr {out.lr:g}, "
+            f"{out.arch} {out.width} x {out.layers}, batch {out.batch_size}, lr {out.lr:g}, "
             f"{out.max_minutes:g} min budget on {self.device}" + (f": {why}" if picked else "")
         )
         return out, note
@@ -201,6 +212,8 @@ def _model_options(opts: MotionTrainOptions) -> dict[str, Any]:
     out: dict[str, Any] = {} if opts.length is None else {"length": opts.length}
     if opts.kind == "ponymation":
         out.update({"width": opts.width, "layers": opts.layers, "latent": opts.latent})
+        if opts.arch is not None:
+            out["arch"] = opts.arch
         out.update({k: getattr(opts, k) for k in ("kl_weight", "free_bits") if getattr(opts, k) is not None})
     return out
 
