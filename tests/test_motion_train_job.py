@@ -101,3 +101,43 @@ def test_amplitude_of_a_statue_is_zero(store_root):
     assert motion_amplitude(quad, still) < 0.01  # float32 rounding
     assert motion_amplitude(quad, quad.clips["trot"].rotations) > 5.0
     assert reference_clip(quad) in ("walk", "trot")
+
+
+def test_a_third_party_prior_trains_and_animates(store_root, capsys, monkeypatch, tmp_path):
+    """The example plugin's prior (registered in-process here; installed, its entry point does it)
+    goes through `motion train --kind` and `animate` like a built-in one."""
+    import importlib.util
+    import sys
+
+    from zooctl import plugins
+
+    path = (
+        Path(__file__).resolve().parents[1]
+        / "plugins"
+        / "zooctl-example"
+        / "zooctl_example"
+        / "motion_prior.py"
+    )
+    spec = importlib.util.spec_from_file_location("example_motion_prior", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    monkeypatch.setenv("ZOOCTL_STORE", str(store_root))
+    plugins.get_plugin_manager().register(module, "example-motion-test")
+    try:
+        r = run_inprocess(
+            capsys, "motion", "train", "--assets", "quadruped", "--kind", "example-loop", "--name", "loop"
+        )
+        assert r.code == 0, r.err
+        cfg = json.loads((store_root / "motion" / "loop" / "config.json").read_text())
+        assert cfg["plugin"] == "example-loop" and cfg["name"] == "loop"
+        import jsonschema
+
+        jsonschema.validate(cfg, json.loads(SCHEMA.read_text()))
+        args = ["--sample", "2", "--frames", "30", "--prior", "loop", "--no-preview", "--json"]
+        r = run_inprocess(capsys, "animate", "quadruped", "--out", str(tmp_path / "l"), *args)
+        assert r.code == 0, r.err
+        assert all(a > 1.0 for a in r.json()["amplitude_deg"])
+    finally:
+        plugins.reset()
+        sys.modules.pop(spec.name, None)
