@@ -49,7 +49,7 @@ def main() -> None:
     ap.add_argument("--recon-warmup", type=float, default=TrainOptions.recon_warmup)
     ap.add_argument("--kl-anneal", type=float, default=TrainOptions.kl_anneal)
     ap.add_argument("--velocity-weight", type=float, default=MotionConfig.velocity_weight)
-    ap.add_argument("--sampler", default=MotionConfig.sampler, choices=("posterior", "normal"))
+    ap.add_argument("--sampler", default=MotionConfig.sampler, choices=("mixture", "posterior", "normal"))
     ap.add_argument("--arch", default=MotionConfig.arch, choices=("ponymation", "trajectory"))
     ap.add_argument("--lr", type=float, default=None)
     ap.add_argument("--batch-size", type=int, default=None)

@@ -28,6 +28,9 @@ class LatentGaussians:
         self.mean: dict[str, np.ndarray] = {}
         self.factor: dict[str, np.ndarray] = {}
         self.rest: dict[str, np.ndarray] = {}  # normalised rest joint positions (J, 3) per key
+        # "mixture" sampling: the posterior means (N, Z) themselves and the mean posterior sigma (Z,)
+        self.points: dict[str, np.ndarray] = {}
+        self.sigma: dict[str, np.ndarray] = {}
 
     def __len__(self) -> int:
         return len(self.mean)
@@ -46,11 +49,13 @@ class LatentGaussians:
     def fit(cls, model, dataset, batch_size: int = 256) -> LatentGaussians:
         """Posterior means of every window of ``dataset`` (a `MotionDataset`) under ``model``."""
         dev = next(model.parameters()).device
-        mus = []
+        mus, sig = [], []
         for s in range(0, len(dataset), batch_size):
             b = dataset.batch(np.arange(s, min(len(dataset), s + batch_size)), dev)
-            mus.append(model.encode(b.rot6d, b.skeletons)[0].double().cpu().numpy())
-        mu = np.concatenate(mus)
+            m, lv = model.encode(b.rot6d, b.skeletons)
+            mus.append(m.double().cpu().numpy())
+            sig.append(torch.exp(0.5 * lv).double().cpu().numpy())
+        mu, sigma = np.concatenate(mus), np.concatenate(sig)
         out = cls()
         ids = np.asarray(dataset.skel_ids)
         for sid, sk in enumerate(dataset.skeletons):
@@ -58,6 +63,8 @@ class LatentGaussians:
             if len(sel):
                 out.mean[sk.key], out.factor[sk.key] = cls._gaussian(sel)
                 out.rest[sk.key] = sk.rest_positions
+                out.points[sk.key] = sel.astype(np.float32)
+                out.sigma[sk.key] = sigma[ids == sid].mean(0)
         out.mean[ALL], out.factor[ALL] = cls._gaussian(mu)
         return out
 
@@ -71,9 +78,19 @@ class LatentGaussians:
             return ALL
         return min(same, key=lambda k: float(np.abs(self.rest[k] - skeleton.rest_positions).sum()))
 
-    def sample(self, skeleton: Skeleton, n: int, temperature: float, gen: torch.Generator) -> torch.Tensor:
-        """(n, Z) latents; ``temperature`` scales the spread around the skeleton's mean latent."""
+    def sample(
+        self, skeleton: Skeleton, n: int, temperature: float, gen: torch.Generator, mixture: bool = False
+    ) -> torch.Tensor:
+        """(n, Z) latents; ``temperature`` scales the spread around the skeleton's mean latent, or
+        with ``mixture`` around a random training window's posterior mean (the aggregate posterior
+        itself, a mixture of the windows' posteriors: a single Gaussian blends a walk's latents
+        with an eating's into poses of neither)."""
         k = self.key_for(skeleton)
+        if mixture and k in self.points:
+            pts = torch.as_tensor(self.points[k], dtype=torch.float32)
+            pick = torch.randint(len(pts), (n,), generator=gen)
+            eps = torch.randn(n, pts.shape[1], generator=gen)
+            return pts[pick] + temperature * eps * torch.as_tensor(self.sigma[k], dtype=torch.float32)
         m = torch.as_tensor(self.mean[k], dtype=torch.float32)
         f = torch.as_tensor(self.factor[k], dtype=torch.float32)
         eps = torch.randn(n, len(m), generator=gen)
@@ -86,6 +103,8 @@ class LatentGaussians:
             arrays[f"mean_{i}"], arrays[f"factor_{i}"] = self.mean[k], self.factor[k]
             if k in self.rest:
                 arrays[f"rest_{i}"] = self.rest[k]
+            if k in self.points:
+                arrays[f"points_{i}"], arrays[f"sigma_{i}"] = self.points[k], self.sigma[k]
         keys = np.array(list(self.mean), dtype=object)
         with open(path, "wb") as fh:
             np.savez(fh, keys=np.array([str(k) for k in keys]), **arrays)
@@ -98,4 +117,6 @@ class LatentGaussians:
                 out.mean[k], out.factor[k] = z[f"mean_{i}"], z[f"factor_{i}"]
                 if f"rest_{i}" in z:
                     out.rest[k] = z[f"rest_{i}"]
+                if f"points_{i}" in z:
+                    out.points[k], out.sigma[k] = z[f"points_{i}"], z[f"sigma_{i}"]
         return out

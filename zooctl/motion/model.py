@@ -51,8 +51,9 @@ class MotionConfig:
     # z also added to the decoder's timestamp queries, so it shapes how frames attend to each other.
     z_queries: bool = False
     # Where samples draw z: "posterior", a Gaussian per skeleton fitted to its training windows'
-    # posterior means (`latents`), or "normal", N(0, I).
-    sampler: str = "posterior"
+    # posterior means (`latents`); "mixture", around a random training window's posterior mean
+    # (the aggregate posterior); or "normal", N(0, I).
+    sampler: str = "mixture"
     # "ponymation": per-frame spatial and temporal transformers (the paper's); "trajectory": one
     # token per bone carrying its whole window (`TrajectoryVAE`), T times fewer tokens.
     arch: str = "ponymation"
@@ -66,8 +67,8 @@ class MotionConfig:
             raise InputError("kl_weight and free_bits must be >= 0")
         if self.arch not in ("ponymation", "trajectory"):
             raise InputError(f"arch must be 'ponymation' or 'trajectory', got {self.arch!r}")
-        if self.sampler not in ("posterior", "normal"):
-            raise InputError(f"sampler must be 'posterior' or 'normal', got {self.sampler!r}")
+        if self.sampler not in ("posterior", "mixture", "normal"):
+            raise InputError(f"sampler must be 'posterior', 'mixture' or 'normal', got {self.sampler!r}")
         if self.layers < 1 or self.latent < 1 or self.length < 2 or not self.fps > 0:
             raise InputError("layers and latent must be >= 1, length >= 2 frames and fps > 0")
 

@@ -91,7 +91,7 @@ class PonymationPrior:
                 "final_loss": self.history.to_json()["final"],
             }
         )
-        self.latents = LatentGaussians.fit(self.model, ds) if self.cfg.sampler == "posterior" else None
+        self.latents = LatentGaussians.fit(self.model, ds) if self.cfg.sampler != "normal" else None
         cal = calibrate_temperature(self, ds)
         self.training["sample_temperature"] = cal["temperature"]
         self.training["calibration"] = cal
@@ -228,7 +228,8 @@ class PonymationPrior:
         """(n, Z) latents: from the skeleton's aggregate posterior when the prior has one, else
         from N(0, temperature^2 I)."""
         if self.latents is not None:
-            return self.latents.sample(skeleton, n, temperature, gen).to(self.device)
+            mixture = self.cfg.sampler == "mixture"
+            return self.latents.sample(skeleton, n, temperature, gen, mixture).to(self.device)
         return (torch.randn(n, self.cfg.latent, generator=gen) * temperature).to(self.device)
 
     def seams(self, frames: int) -> list[int]:
