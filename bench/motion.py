@@ -33,22 +33,26 @@ from zooctl.motion.model import MotionConfig
 from zooctl.motion.prior import PonymationPrior, motion_clip
 from zooctl.motion.train import TrainOptions, loss_curve_png
 from zooctl.names import sanitize_name
+from zooctl.pipelines.motion_train import device_defaults
 from zooctl.plugins import get_registry
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--width", type=int, default=256)
-    ap.add_argument("--layers", type=int, default=4)
-    ap.add_argument("--epochs", type=int, default=50)
+    ap.add_argument("--width", type=int, default=None, help="default: by device (zooctl motion train's)")
+    ap.add_argument("--layers", type=int, default=None)
+    ap.add_argument("--epochs", type=int, default=1000)
     ap.add_argument("--minutes", type=float, default=20.0, help="training time budget")
     ap.add_argument("--latent", type=int, default=None, help="latent size (default: the width)")
     ap.add_argument("--free-bits", type=float, default=MotionConfig.free_bits)
     ap.add_argument("--kl-weight", type=float, default=MotionConfig.kl_weight)
     ap.add_argument("--recon-warmup", type=float, default=TrainOptions.recon_warmup)
     ap.add_argument("--kl-anneal", type=float, default=TrainOptions.kl_anneal)
-    ap.add_argument("--lr", type=float, default=TrainOptions.lr)
-    ap.add_argument("--batch-size", type=int, default=64)
+    ap.add_argument("--velocity-weight", type=float, default=MotionConfig.velocity_weight)
+    ap.add_argument("--sampler", default=MotionConfig.sampler, choices=("mixture", "posterior", "normal"))
+    ap.add_argument("--arch", default=MotionConfig.arch, choices=("ponymation", "trajectory"))
+    ap.add_argument("--lr", type=float, default=None)
+    ap.add_argument("--batch-size", type=int, default=None)
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--samples", type=int, default=32)
@@ -63,6 +67,9 @@ def main() -> None:
     ap.add_argument("--load", type=Path, default=None, help="evaluate a prior saved with --save, no training")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
+    for k, v in device_defaults(args.device).items():
+        if k in ("width", "layers", "batch_size", "lr") and getattr(args, k) is None:
+            setattr(args, k, v)
     files = sorted((SHARED / "assets" / "quaternius").glob("*/*.glb"))
     if not files:
         sys.exit(f"bench/motion.py needs the shared assets at {SHARED / 'assets'}")
@@ -74,6 +81,9 @@ def main() -> None:
         latent=args.latent or args.width,
         free_bits=args.free_bits,
         kl_weight=args.kl_weight,
+        velocity_weight=args.velocity_weight,
+        sampler=args.sampler,
+        arch=args.arch,
     )
     prior = PonymationPrior(cfg, device=args.device)
     data = prior.dataset(train)

@@ -18,6 +18,8 @@ from zooctl.store.motion_store import MotionStore
 
 SCHEMA = Path(__file__).resolve().parents[1] / "schemas" / "motion_prior.schema.json"
 TINY = [
+    "--arch",
+    "ponymation",
     "--width",
     "16",
     "--layers",

@@ -42,7 +42,7 @@ def _toy() -> tuple[Skeleton, list[MotionSequence]]:
     return sk, seqs
 
 
-def test_training_on_two_motions_learns_both_and_samples_vary():
+def test_training_on_two_motions_learns_both_and_samples_move_like_them():
     torch.manual_seed(0)
     sk, seqs = _toy()
     prior = PonymationPrior(MotionConfig(**CFG))
@@ -66,6 +66,13 @@ def test_training_on_two_motions_learns_both_and_samples_vary():
     nearest = M.pairwise_mse(samples, p_real).argmin(1)  # real windows: swing_z first, then swing_x
     from_z = nearest < len(p_real) // 2
     assert 0 < from_z.sum() < len(from_z)
+    # Long samples (several chained segments) move like the data, not like a statue: per-joint
+    # amplitude and speed ratios to the training clips' 30-frame windows.
+    long_real = np.concatenate([np.stack([s.rotations[i : i + 30] for i in range(0, 34, 4)]) for s in seqs])
+    long_gen = prior.sample_delta(sk, 16, 30, seed=1)
+    amp = M.motion_ratio(M.joint_amplitude(long_gen), M.joint_amplitude(long_real))
+    speed = M.motion_ratio(M.joint_speed(long_gen), M.joint_speed(long_real))
+    assert 0.5 < amp < 1.5 and 0.5 < speed < 1.5, (amp, speed)
 
 
 def test_free_bits_leave_small_kl_unpenalised():

@@ -91,7 +91,7 @@ def _export_and_animate(con, args, rec) -> int:
     _zooctl("bank", "add", glb, "--name", "demo-fit", "--replace", "--no-views", "--tag", "fitted")
     _zooctl(
         "motion", "train", "--assets", "quadruped,quadruped-longneck,quadruped-stout,biped,bird,spider,insect",
-        "--name", "demo", "--width", "64", "--layers", "2", "--max-minutes", "2", "--replace",
+        "--name", "demo", "--max-minutes", "2", "--replace",
     )  # fmt: skip
     _zooctl("animate", "demo-fit", "--sample", "5", "--prior", "demo", "--out", str(out / "animate"))
     con.print(f"done: everything is in {out}/ (fit, exports, bank.png, animate/)")

@@ -27,110 +27,96 @@ def train(
         None, "--assets", "-a", help="Bank assets whose clips to train on (repeatable or comma-separated)."
     ),
     all_assets: bool = typer.Option(False, "--all", help="Train on every bank asset with clips."),
+    fits: list[str] = typer.Option(
+        None,
+        "--fits",
+        help="Fitted videos whose motion to train on (repeatable or comma-separated; with or without clips).",
+    ),
+    all_fits: bool = typer.Option(False, "--all-fits", help="Train on every finished fit."),
+    kind: str = typer.Option(
+        None,
+        "--kind",
+        help="Motion prior to train: any registered one (`zooctl plugins`). Default: ponymation.",
+    ),
+    arch: str = typer.Option(
+        None,
+        "--arch",
+        help="Ponymation's model: 'ponymation' (per-frame spatial + temporal transformers, the paper's; "
+        "default on CUDA) or 'trajectory' (one token per bone holding its window; several times more "
+        "steps per minute; default on a CPU).",
+    ),
     name: str = typer.Option("ponymation", "--name", help="Name of the trained prior in the store."),
-    epochs: int = typer.Option(50, "--epochs", min=1, help="Passes over all training windows."),
+    epochs: int = typer.Option(None, "--epochs", min=1, help="Passes over all training windows at most."),
     max_minutes: float = typer.Option(
-        20.0,
+        None,
         "--max-minutes",
         min=0.01,
         help="Time budget: stop after this many minutes (at the end of a step); the learning-rate and "
-        "KL schedules follow it. The default size does ~1 step per 10-30 s on a 2-core CPU: use "
-        "--width 64 --layers 2 there, or a GPU.",
+        "KL schedules follow it. Default: 20.",
     ),
-    device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
+    device: str = typer.Option(None, "--device", help="cpu or cuda (default: cpu)."),
     width: int = typer.Option(
-        256, "--width", help="Transformer width (Ponymation: 256; 64-128 trains much faster on a CPU)."
+        None, "--width", help="Transformer width. Default by device: 256 on CUDA (Ponymation's), 64 on a CPU."
     ),
-    layers: int = typer.Option(4, "--layers", help="Layers in each of the four transformers."),
+    layers: int = typer.Option(
+        None, "--layers", help="Layers in each of the four transformers. Default: 4 on CUDA, 2 on a CPU."
+    ),
     latent: int = typer.Option(None, "--latent", help="Latent size (default: the width)."),
-    length: int = typer.Option(10, "--length", help="Frames per training window (sequence length)."),
-    batch_size: int = typer.Option(64, "--batch-size", help="Windows per step."),
-    lr: float = typer.Option(3e-4, "--lr", help="Peak learning rate (AdamW, warm-up then cosine decay)."),
+    length: int = typer.Option(
+        None, "--length", help="Frames per training window (default: the prior's; ponymation 10, pca 30)."
+    ),
+    batch_size: int = typer.Option(None, "--batch-size", help="Windows per step (default: 64 CUDA, 32 CPU)."),
+    lr: float = typer.Option(
+        None, "--lr", help="Peak learning rate (AdamW, warm-up then cosine; default 3e-4 CUDA, 1e-3 CPU)."
+    ),
     kl_weight: float = typer.Option(
-        1e-3, "--kl-weight", min=0.0, help="Weight of the KL term (Ponymation's best: 1e-3)."
+        None, "--kl-weight", min=0.0, help="Weight of the KL term (default: Ponymation's best, 1e-3)."
     ),
     free_bits: float = typer.Option(
-        0.5,
+        None,
         "--free-bits",
         min=0.0,
-        help="KL nats per latent dimension left unpenalised (prevents posterior collapse).",
+        help="KL nats per latent dimension left unpenalised (prevents posterior collapse; default 0.5).",
     ),
     holdout: float = typer.Option(
-        0.0,
+        None,
         "--holdout",
         min=0.0,
         max=0.9,
-        help="Fraction of each asset's clips held out for `zooctl bench motion`.",
+        help="Fraction of each asset's clips held out for `zooctl bench motion` (default 0).",
     ),
-    seed: int = typer.Option(0, "--seed", help="Random seed (initialisation, batches, hold-out split)."),
+    seed: int = typer.Option(None, "--seed", help="Random seed (initialisation, batches, hold-out split)."),
     threads: int = typer.Option(None, "--threads", help="CPU threads for torch (default: torch's choice)."),
     replace: bool = typer.Option(False, "--replace", help="Overwrite a prior of the same name."),
     json_out: bool = JsonOpt,
 ) -> None:
-    """Train a motion prior on bank clips and store it (with its config and loss curve)."""
-    from datetime import datetime, timezone
-
+    """Train a motion prior on bank clips and/or fitted videos and store it (with its config and
+    loss curve). The model size follows the device unless given (said in the output)."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-    from ..errors import UsageError
-    from ..names import check_name
-    from ..store.bank import Bank
+    from ..pipelines.motion_train import MotionTrainOptions, gather_sequences, train_motion_prior
 
-    check_name(name, "motion prior name")
-    store = _store()
-    if store.exists(name) and not replace:
-        raise store._exists(name)
-    wanted = _split_names(assets)
-    if all_assets == bool(wanted):
-        raise UsageError(
-            "name the assets to train on with --assets, or use --all (not both)",
-            hint="zooctl motion train --all",
-        )
-    bank = Bank.open(store_root())
-    names = bank.names() if all_assets else wanted
-    loaded = []
-    for n in names:
-        a = bank.get(n)
-        if a.clips:
-            loaded.append(a)
-        elif not all_assets:
-            raise UsageError(
-                f"asset {n!r} has no animation clips to learn from",
-                hint="pick assets with clips (`zooctl bank list`)",
-            )
-    if not loaded:
-        raise UsageError(
-            "no bank asset with animation clips to train on",
-            hint="add some: zooctl bank add FILE.glb, or zooctl bank seed",
-        )
-    if threads:
-        import torch
-
-        torch.set_num_threads(threads)
-
-    from ..motion.evaluate import split_assets
-    from ..motion.model import MotionConfig
-    from ..motion.prior import PonymationPrior
-    from ..motion.train import TrainOptions, loss_curve_png
-
-    cfg = MotionConfig(
-        width=width,
-        layers=layers,
-        latent=latent or width,
-        length=length,
-        kl_weight=kl_weight,
-        free_bits=free_bits,
-    )
-    train_seqs, _, held = split_assets(loaded, holdout, seed)
-    prior = PonymationPrior(cfg, device=device)
-    data = prior.dataset(train_seqs)
-    opts = TrainOptions(
-        epochs=epochs, batch_size=batch_size, lr=lr, max_minutes=max_minutes, seed=seed, device=device
-    )
-    err_console.print(
-        f"training {name!r}: {len(loaded)} assets, {len(data.sequence_names)} clips, {len(data)} windows of {length} frames, "
-        f"width {width}, {layers} layers, {sum(p.numel() for p in prior.model.parameters()) / 1e6:.2f} M parameters, {device}",
-        highlight=False,
+    given = {
+        "kind": kind,
+        "arch": arch,
+        "epochs": epochs,
+        "max_minutes": max_minutes,
+        "device": device,
+        "width": width,
+        "layers": layers,
+        "latent": latent,
+        "length": length,
+        "batch_size": batch_size,
+        "lr": lr,
+        "kl_weight": kl_weight,
+        "free_bits": free_bits,
+        "holdout": holdout,
+        "seed": seed,
+        "threads": threads,
+    }
+    opts = MotionTrainOptions(**{k: v for k, v in given.items() if v is not None})
+    loaded, fit_seqs = gather_sequences(
+        store_root(), _split_names(assets), all_assets, _split_names(fits), all_fits
     )
     with Progress(
         TextColumn("{task.description}"),
@@ -148,30 +134,35 @@ def train(
         def on_step(step: int, total: int, losses: dict[str, float]) -> None:
             progress.update(task, completed=step, total=total, loss=f"{losses['total']:.4f}")
 
-        hist = prior.fit(data, opts, on_step)
-    prior.training["assets"] = sorted(a.name for a in loaded)
-    prior.training["holdout"] = held
-    prior.training["seed"] = seed
-    extra = {"created": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+        def log(line: str) -> None:
+            if not json_out:
+                err_console.print(line, highlight=False)
 
-    def write(tmp):
-        prior.save(tmp, name, {**extra, "files": {"weights": "weights.pt", "loss_curve": "loss.png"}})
-        (tmp / "loss.png").write_bytes(loss_curve_png(hist))
-
-    t = time.perf_counter()
-    path = store.add(name, write, replace=replace)
-    cfg_json = store.config(name)
+        t = time.perf_counter()
+        cfg = train_motion_prior(store_root(), name, opts, loaded, fit_seqs, replace, on_step, log)
     if json_out:
-        print_json({"path": str(path), "save_seconds": round(time.perf_counter() - t, 3), **cfg_json})
-    else:
-        fl = cfg_json["training"]["final_loss"]
-        console.print(
-            f"trained motion prior {name!r}: {hist.steps} steps in {hist.seconds:.0f} s"
-            f"{' (stopped at --max-minutes)' if hist.stopped_early else ''}, final loss {fl['total']:.4f} "
-            f"(rotation {fl['rotation']:.4f}, joints {fl['joints']:.5f}, KL {fl['kl']:.2f}); sampling temperature "
-            f"{prior.sample_temperature:g} (calibrated to the clips' diversity); loss curve: {path / 'loss.png'}",
-            highlight=False,
-        )
+        print_json({"seconds": round(time.perf_counter() - t, 3), **cfg})
+        return
+    tr = cfg.get("training", {})
+    fl = tr.get("final_loss") or {}
+    loss = (
+        f", final loss {fl['total']:.4f} (rotation {fl['rotation']:.4f}, joints {fl['joints']:.5f}, "
+        f"velocity {fl.get('velocity') or 0:.3f}, KL {fl['kl']:.2f})"
+        if fl.get("total") is not None
+        else ""
+    )
+    steps = f": {tr['steps']} steps in {tr.get('seconds', 0):.0f} s" if "steps" in tr else ""
+    early = " (stopped at --max-minutes)" if tr.get("stopped_early") else ""
+    temp = (
+        f"; sampling temperature {tr['sample_temperature']:g} (calibrated to the clips' diversity)"
+        if "sample_temperature" in tr
+        else ""
+    )
+    console.print(
+        f"trained motion prior {cfg['name']!r} ({cfg.get('plugin')}, {tr.get('size', '')}){steps}{early}"
+        f"{loss}{temp}; in {cfg['path']}",
+        highlight=False,
+    )
 
 
 @app.command("list")

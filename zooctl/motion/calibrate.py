@@ -18,7 +18,21 @@ import numpy as np
 
 from . import metrics as M
 
-GRID = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 8.0)  # an under-trained prior needs more than 4
+GRID = (
+    0.5,
+    0.75,
+    1.0,
+    1.25,
+    1.5,
+    2.0,
+    2.5,
+    3.0,
+    3.5,
+    4.0,
+    5.0,
+    6.0,
+    8.0,
+)  # an under-trained prior needs more than 4
 
 
 def calibrate_temperature(

@@ -40,6 +40,13 @@ def joint_loss(pred_pos: torch.Tensor, target_pos: torch.Tensor, mask: torch.Ten
     return masked_mean((pred_pos - target_pos) ** 2, mask)
 
 
+def velocity_loss(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Error of the frame-to-frame change of (B, T, J, ...) tensors over real joints, relative to
+    the target's own change: 1 for a decoder that outputs a still pose, 0 for exact motion."""
+    dp, dt = pred[:, 1:] - pred[:, :-1], target[:, 1:] - target[:, :-1]
+    return masked_mean((dp - dt) ** 2, mask) / masked_mean(dt**2, mask).clamp_min(1e-10)
+
+
 def kl_per_dim(mu: torch.Tensor, logvar: torch.Tensor) -> torch.Tensor:
     """mu, logvar (B, Z) -> (Z,) batch-mean KL(N(mu, exp(logvar)) || N(0, 1)) per latent dimension."""
     return (-0.5 * (1 + logvar - mu**2 - logvar.exp())).mean(0)
@@ -64,9 +71,19 @@ def vae_losses(
     dimensions carrying more than 0.01 nats (about 0 when the posterior has collapsed)."""
     pred_mat = rot6d_to_matrix(pred6d)
     rot = rotation_loss(pred_mat, target_mat, sk.mask)
-    joints = joint_loss(sk.joint_positions(pred_mat), sk.joint_positions(target_mat), sk.mask)
+    pred_pos, target_pos = sk.joint_positions(pred_mat), sk.joint_positions(target_mat)
+    joints = joint_loss(pred_pos, target_pos, sk.mask)
+    vel_w = getattr(cfg, "velocity_weight", 0.0)
+    vel = velocity_loss(pred_pos, target_pos, sk.mask) if vel_w > 0 else joints.new_zeros(())
     kl_d = kl_per_dim(mu, logvar)
     kl_opt = kl_d.clamp_min(getattr(cfg, "free_bits", 0.0)).sum()
-    total = cfg.rot_weight * rot + cfg.joint_weight * joints + kl_scale * cfg.kl_weight * kl_opt
+    total = cfg.rot_weight * rot + cfg.joint_weight * joints + vel_w * vel + kl_scale * cfg.kl_weight * kl_opt
     active = (kl_d.detach() > 0.01).sum().to(total.dtype)
-    return {"total": total, "rotation": rot, "joints": joints, "kl": kl_d.sum(), "active": active}
+    return {
+        "total": total,
+        "rotation": rot,
+        "joints": joints,
+        "velocity": vel,
+        "kl": kl_d.sum(),
+        "active": active,
+    }

@@ -78,3 +78,64 @@ def foot_sliding(p: np.ndarray, feet: np.ndarray, contact: float = 2.0) -> float
     both = touch[:, 1:] & touch[:, :-1]
     speed = np.linalg.norm((f[:, 1:] - f[:, :-1])[..., [0, 2]], axis=-1)
     return float(speed[both].mean()) if both.any() else 0.0
+
+
+# -- metrics that catch a statue: how far and how fast joints turn, gait, seams ----------------
+
+
+def _angle_deg(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
+    """Geodesic angle in degrees between unit quaternions (..., 4) -> (...)."""
+    return np.degrees(2 * np.arccos(np.abs((qa * qb).sum(-1)).clip(max=1.0)))
+
+
+def joint_amplitude(q: np.ndarray) -> np.ndarray:
+    """Per joint, how far it turns away from its first pose: rest-relative rotations (N, T, J, 4)
+    -> (J,) degrees, the largest angle to frame 0 in each window, averaged over windows."""
+    return _angle_deg(q, q[:, :1]).max(1).mean(0)
+
+
+def joint_speed(q: np.ndarray) -> np.ndarray:
+    """Per joint, how fast it turns: (N, T, J, 4) -> (J,) mean degrees per frame."""
+    if q.shape[1] < 2:
+        return np.zeros(q.shape[2])
+    return _angle_deg(q[:, 1:], q[:, :-1]).mean((0, 1))
+
+
+def motion_ratio(gen: np.ndarray, real: np.ndarray) -> float | None:
+    """Per-joint motion (J,) of samples over that of real windows, summed over joints (so the
+    joints that move in the data weigh most): 1 moves like the data, ~0 is a statue."""
+    total = float(np.sum(real))
+    return float(np.sum(gen)) / total if total > 1e-9 else None
+
+
+def gait_periodicity(p: np.ndarray, feet: np.ndarray, min_lag: int = 5) -> float | None:
+    """How periodic the feet move, in [-1, 1]: the highest normalised autocorrelation of the feet's
+    vertical velocities at a lag of ``min_lag`` frames to two thirds of the window, averaged over
+    windows (velocities, not heights: a slow drift of the heights correlates at any lag). A walk
+    or trot scores ~0.5-1, a statue or a random drift ~0. p (N, T, J, 3); None without feet."""
+    if len(feet) < 2 or p.shape[1] < 3 * min_lag + 1:
+        return None
+    y = np.diff(p[:, :, feet, 1], axis=1)  # (N, T-1, F)
+    T = y.shape[1]
+    best = np.full(len(p), -1.0)
+    for lag in range(min_lag, T - T // 3 + 1):
+        num = (y[:, lag:] * y[:, :-lag]).sum((1, 2))
+        a = np.sqrt((y[:, lag:] ** 2).sum((1, 2)) * (y[:, :-lag] ** 2).sum((1, 2)))
+        best = np.maximum(best, np.where(a > 1e-12, num / np.maximum(a, 1e-12), 0.0))
+    best = np.where((y**2).sum((1, 2)) > 1e-9, best, 0.0)  # feet that never move have no gait
+    return float(best.mean())
+
+
+def frame_jumps(p: np.ndarray) -> np.ndarray:
+    """Change of joint velocity between frames, mean over joints: p (N, T, J, 3) -> (N, T-2)
+    |v[t] - v[t-1]| at frames 1..T-2 (a seam shows as a spike)."""
+    v = p[:, 1:] - p[:, :-1]
+    return np.linalg.norm(v[:, 1:] - v[:, :-1], axis=-1).mean(-1)
+
+
+def seam_jump(p: np.ndarray, seams: list[int]) -> float | None:
+    """Mean velocity change at the given seam frames (between frame s-1 and s) of chained samples
+    (N, T, J, 3); compare with the data's 95th percentile of `frame_jumps`."""
+    j = frame_jumps(p)  # j[:, i] is the change at frame i + 1
+    idx = [i for s in seams for i in (s - 2, s - 1) if 0 <= i < j.shape[1]]
+    return float(j[:, idx].mean()) if idx else None

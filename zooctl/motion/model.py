@@ -45,6 +45,18 @@ class MotionConfig:
     # Positions are in skeleton diagonals, so their errors are small (MSE ~1e-3): at 10 the KL
     # outweighed them and the decoder learned to ignore z (see `losses`).
     joint_weight: float = 100.0
+    # Relative joint-velocity error (`losses.velocity_loss`): pose errors alone let a decoder that
+    # outputs each window's mean pose score well, and its samples stand still.
+    velocity_weight: float = 1.0
+    # z also added to the decoder's timestamp queries, so it shapes how frames attend to each other.
+    z_queries: bool = False
+    # Where samples draw z: "posterior", a Gaussian per skeleton fitted to its training windows'
+    # posterior means (`latents`); "mixture", around a random training window's posterior mean
+    # (the aggregate posterior); or "normal", N(0, I).
+    sampler: str = "mixture"
+    # "ponymation": per-frame spatial and temporal transformers (the paper's); "trajectory": one
+    # token per bone carrying its whole window (`TrajectoryVAE`), T times fewer tokens.
+    arch: str = "ponymation"
 
     def __post_init__(self) -> None:
         if self.width < 8 or self.width % self.heads:
@@ -53,6 +65,10 @@ class MotionConfig:
             )
         if self.free_bits < 0 or self.kl_weight < 0:
             raise InputError("kl_weight and free_bits must be >= 0")
+        if self.arch not in ("ponymation", "trajectory"):
+            raise InputError(f"arch must be 'ponymation' or 'trajectory', got {self.arch!r}")
+        if self.sampler not in ("posterior", "mixture", "normal"):
+            raise InputError(f"sampler must be 'posterior', 'mixture' or 'normal', got {self.sampler!r}")
         if self.layers < 1 or self.latent < 1 or self.length < 2 or not self.fps > 0:
             raise InputError("layers and latent must be >= 1, length >= 2 frames and fps > 0")
 
@@ -179,8 +195,13 @@ class MotionVAE(nn.Module):
     def decode_frames(self, z: torch.Tensor, T: int) -> torch.Tensor:
         """z (B, Z) -> frame features (B, T, W) at timestamps 0..T-1."""
         queries = self.time_in(time_encoding(torch.arange(T, device=z.device), self.cfg.width))
+        m = self.z_in(z)
+        if self.cfg.z_queries:
+            # Cross-attention to one token only adds a z-dependent constant to every frame; the
+            # frames' motion then barely depends on z. Here z also enters the self-attention.
+            return decode_single_memory(self.temporal_decoder, queries[None] + m[:, None], m[:, None])[:, 0]
         # All B windows share the timestamp queries: one group of B sequences.
-        return decode_single_memory(self.temporal_decoder, queries[None], self.z_in(z)[None])[0]
+        return decode_single_memory(self.temporal_decoder, queries[None], m[None])[0]
 
     def decode_bones(self, frames: torch.Tensor, sk: SkeletonBatch) -> torch.Tensor:
         """frame features (B, T, W) -> 6D rotations (B, T, J, 6) relative to rest."""
@@ -197,3 +218,85 @@ class MotionVAE(nn.Module):
         mu, logvar = self.encode(rot6d, sk)
         z = mu + torch.randn_like(mu) * torch.exp(0.5 * logvar) if sample else mu
         return self.decode(z, sk, rot6d.shape[1]), mu, logvar
+
+    # -- what chained sampling uses (`prior`) -----------------------------------------------
+    def frame_features(self, z: torch.Tensor, sk: SkeletonBatch) -> torch.Tensor:
+        """z (B, Z) -> per-frame features (B, L, D) that `features_to_rot6d` turns into poses."""
+        return self.decode_frames(z, self.cfg.length)
+
+    def features_to_rot6d(self, feats: torch.Tensor, sk: SkeletonBatch) -> torch.Tensor:
+        """(B, T, D) -> 6D rotations (B, T, J, 6)."""
+        return self.decode_bones(feats, sk)
+
+
+class TrajectoryVAE(nn.Module):
+    """The VAE with one token per bone holding its whole window: the encoder reads each bone's
+    T x 6 rotations (plus its static features), the decoder's bone queries attend to z and emit
+    each bone's T x 6 trajectory through a linear head. Shapes as in `MotionVAE`; windows are
+    ``cfg.length`` frames. Same losses, sampling and chaining; T times fewer tokens than the
+    per-frame model, and motion is an output of the head rather than something the decoder must
+    build frame by frame from timestamp queries."""
+
+    def __init__(self, cfg: MotionConfig):
+        super().__init__()
+        self.cfg = cfg
+        W, L = cfg.width, cfg.length
+        self.traj_in = nn.Linear(6 * L, W)
+        self.bone_in = nn.Linear(STATIC_FEATURES, W)
+        self.mu_token = nn.Parameter(torch.randn(W) * 0.02)
+        self.sigma_token = nn.Parameter(torch.randn(W) * 0.02)
+        self.encoder = _encoder(cfg)
+        self.to_mu = nn.Linear(W, cfg.latent)
+        self.to_logvar = nn.Linear(W, cfg.latent)
+        nn.init.constant_(self.to_logvar.bias, -4.0)  # see `MotionVAE`
+        self.z_in = nn.Linear(cfg.latent, W)
+        self.bone_query = nn.Linear(STATIC_FEATURES, W)
+        self.decoder = _decoder(cfg)
+        self.norm_out = nn.LayerNorm(W)
+        self.traj_out = nn.Linear(W, 6 * L)
+        nn.init.zeros_(self.traj_out.weight)
+        nn.init.zeros_(self.traj_out.bias)
+        self.register_buffer("identity6d", torch.tensor(IDENTITY_6D), persistent=False)
+        self.register_buffer("rot_gain", torch.tensor(1.0))  # set by `train_vae`, as in `MotionVAE`
+
+    def _check(self, T: int) -> None:
+        if T != self.cfg.length:
+            raise InputError(f"this model reads and writes windows of {self.cfg.length} frames, got {T}")
+
+    def encode(self, rot6d: torch.Tensor, sk: SkeletonBatch) -> tuple[torch.Tensor, torch.Tensor]:
+        """rot6d (B, T, J, 6) -> mu, logvar (B, Z)."""
+        B, T, J, _ = rot6d.shape
+        self._check(T)
+        traj = ((rot6d - self.identity6d) * self.rot_gain).permute(0, 2, 1, 3).reshape(B, J, T * 6)
+        tokens = self.traj_in(traj) + self.bone_in(sk.static)  # (B, J, W)
+        seq = torch.cat([self.mu_token.expand(B, 1, -1), self.sigma_token.expand(B, 1, -1), tokens], 1)
+        pad = torch.cat([sk.mask.new_zeros(B, 2), ~sk.mask], 1)
+        out = self.encoder(seq, src_key_padding_mask=pad)
+        return self.to_mu(out[:, 0]), self.to_logvar(out[:, 1]).clamp(-12.0, 6.0)
+
+    def decode(self, z: torch.Tensor, sk: SkeletonBatch, T: int | None = None) -> torch.Tensor:
+        """z (B, Z) -> 6D rotations (B, T, J, 6)."""
+        L = self.cfg.length
+        self._check(T or L)
+        B, J = z.shape[0], sk.mask.shape[1]
+        # Every bone query of a window attends to the window's one z token.
+        h = decode_single_memory(self.decoder, self.bone_query(sk.static), self.z_in(z)[:, None], ~sk.mask)
+        out = self.traj_out(self.norm_out(h[:, 0])).reshape(B, J, L, 6).permute(0, 2, 1, 3)
+        return out + self.identity6d
+
+    def forward(self, rot6d: torch.Tensor, sk: SkeletonBatch, sample: bool = True):
+        mu, logvar = self.encode(rot6d, sk)
+        z = mu + torch.randn_like(mu) * torch.exp(0.5 * logvar) if sample else mu
+        return self.decode(z, sk), mu, logvar
+
+    def frame_features(self, z: torch.Tensor, sk: SkeletonBatch) -> torch.Tensor:
+        """The decoded poses themselves, flattened: (B, L, J * 6)."""
+        r = self.decode(z, sk)
+        return r.reshape(*r.shape[:2], -1)
+
+    def features_to_rot6d(self, feats: torch.Tensor, sk: SkeletonBatch) -> torch.Tensor:
+        return feats.reshape(*feats.shape[:2], -1, 6)
+
+
+def build_model(cfg: MotionConfig) -> nn.Module:
+    return TrajectoryVAE(cfg) if cfg.arch == "trajectory" else MotionVAE(cfg)

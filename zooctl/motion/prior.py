@@ -29,12 +29,14 @@ from ..errors import InputError, StoreError
 from ..geometry import decompose_trs, matrix_to_quat
 from .calibrate import calibrate_temperature
 from .dataset import MotionDataset, MotionSequence, quat_mul
-from .model import MotionConfig, MotionVAE
+from .latents import LatentGaussians
+from .model import MotionConfig, build_model
 from .skeleton import Skeleton, SkeletonBatch
 from .train import TrainHistory, TrainOptions, train_vae
 
 WEIGHTS = "weights.pt"
 CONFIG = "config.json"
+LATENTS = "latents.npz"
 SCHEMA_VERSION = 1
 
 
@@ -48,9 +50,10 @@ class PonymationPrior:
             config = MotionConfig.from_json(config)
         self.cfg = config or MotionConfig(**options)
         self.device = torch.device(device)
-        self.model = MotionVAE(self.cfg).to(self.device).eval()
+        self.model = build_model(self.cfg).to(self.device).eval()
         self.training: dict[str, Any] = {}
         self.history: TrainHistory | None = None
+        self.latents: LatentGaussians | None = None  # aggregate posterior (`latents`), set by `fit`
 
     # -- training ---------------------------------------------------------------------------
     def dataset(
@@ -88,6 +91,7 @@ class PonymationPrior:
                 "final_loss": self.history.to_json()["final"],
             }
         )
+        self.latents = LatentGaussians.fit(self.model, ds) if self.cfg.sampler != "normal" else None
         cal = calibrate_temperature(self, ds)
         self.training["sample_temperature"] = cal["temperature"]
         self.training["calibration"] = cal
@@ -121,6 +125,9 @@ class PonymationPrior:
         d.mkdir(parents=True, exist_ok=True)
         torch.save({k: v.detach().cpu() for k, v in self.model.state_dict().items()}, d / WEIGHTS)
         cfg = self.config_json(name or d.name, extra)
+        if self.latents is not None:
+            self.latents.save(d / LATENTS)
+            cfg["files"] = {**cfg["files"], "latents": LATENTS}
         (d / CONFIG).write_text(json.dumps(cfg, indent=1, sort_keys=True) + "\n")
 
     @classmethod
@@ -149,6 +156,14 @@ class PonymationPrior:
             ) from None
         prior.model.to(prior.device).eval()
         prior.training = cfg.get("training", {})
+        if "latents" in cfg.get("files", {}):
+            try:
+                prior.latents = LatentGaussians.load(d / cfg["files"]["latents"])
+            except (OSError, KeyError, ValueError) as exc:
+                raise StoreError(
+                    f"the latent statistics of motion prior {d.name!r} are unreadable: {exc}",
+                    hint="train it again",
+                ) from None
         return prior
 
     # -- sampling -----------------------------------------------------------------------------
@@ -187,25 +202,45 @@ class PonymationPrior:
             raise InputError(f"need at least one sample of one frame, got n={n}, frames={frames}")
         if not temperature >= 0:
             raise InputError(f"temperature must be >= 0, got {temperature}")
-        L, Z = self.cfg.length, self.cfg.latent
+        L = self.cfg.length
         gen = torch.Generator().manual_seed(int(seed))
         K = 1 if frames <= L else int(np.ceil((frames + L - 2) / (2 * L - 2)))
-        z_content = (torch.randn(n * K, Z, generator=gen) * temperature).to(self.device)
+        z_content = self._draw(skeleton, n * K, temperature, gen)
         with torch.no_grad():
-            content = self.model.decode_frames(z_content, L).reshape(n, K, L, -1)  # (n, K, L, W)
+            content = self.model.frame_features(z_content, self._skeletons(skeleton, n * K))
+            content = content.reshape(n, K, L, -1)  # (n, K, L, W)
         feats = content[:, 0]
         if K > 1:
-            z_trans = (torch.randn(n * (K - 1), Z, generator=gen) * temperature).to(self.device)
-            z_trans = self._optimise_transitions(z_trans, content, transition_steps)
-            trans = self._transition_frames(z_trans, content)  # (n, K-1, L, W)
+            z_trans = self._draw(skeleton, n * (K - 1), temperature, gen)
+            sk_t = self._skeletons(skeleton, n * (K - 1))
+            z_trans = self._optimise_transitions(z_trans, content, transition_steps, sk_t)
+            trans = self._transition_frames(z_trans, content, sk_t)  # (n, K-1, L, W)
             parts = [content[:, 0]]
             for k in range(K - 1):
                 parts += [trans[:, k, 1 : L - 1], content[:, k + 1]]
             feats = torch.cat(parts, 1)
         # One spatial decode for every kept frame: it costs T * J tokens, the bulk of sampling.
         with torch.no_grad():
-            rot = self.model.decode_bones(feats[:, :frames], self._skeletons(skeleton, n))
+            rot = self.model.features_to_rot6d(feats[:, :frames], self._skeletons(skeleton, n))
         return self._to_quat(rot)
+
+    def _draw(self, skeleton: Skeleton, n: int, temperature: float, gen: torch.Generator) -> torch.Tensor:
+        """(n, Z) latents: from the skeleton's aggregate posterior when the prior has one, else
+        from N(0, temperature^2 I)."""
+        if self.latents is not None:
+            mixture = self.cfg.sampler == "mixture"
+            return self.latents.sample(skeleton, n, temperature, gen, mixture).to(self.device)
+        return (torch.randn(n, self.cfg.latent, generator=gen) * temperature).to(self.device)
+
+    def seams(self, frames: int) -> list[int]:
+        """Frames of a ``frames``-long sample where a new segment starts (content, transition,
+        content, ...): where chaining could show."""
+        L, out, t, k = self.cfg.length, [], self.cfg.length, 0
+        while t < frames:
+            out.append(t)
+            t += L - 2 if k % 2 == 0 else L
+            k += 1
+        return out
 
     @staticmethod
     def _ends(content: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -213,7 +248,9 @@ class PonymationPrior:
         n, K, L, W = content.shape
         return content[:, :-1].reshape(-1, L, W), content[:, 1:].reshape(-1, L, W)
 
-    def _optimise_transitions(self, z: torch.Tensor, content: torch.Tensor, steps: int) -> torch.Tensor:
+    def _optimise_transitions(
+        self, z: torch.Tensor, content: torch.Tensor, steps: int, sk: SkeletonBatch
+    ) -> torch.Tensor:
         """Transition latents (Ponymation appendix A): z (n*(K-1), Z) initial latents, content
         (n, K, L, W) frame features of the content segments -> optimised z.
 
@@ -222,7 +259,6 @@ class PonymationPrior:
         differences, for velocity) matches the poses without running the J-token spatial decoder in
         the loop (which made this step ~20 s for a 53-joint skeleton at width 256).
         """
-        L = content.shape[2]
         prev, nxt = self._ends(content)
         scale = content.reshape(-1, content.shape[-1]).var(0).mean().clamp_min(1e-8)  # scale-free loss
         z = z.detach().clone().requires_grad_(True)
@@ -234,7 +270,7 @@ class PonymationPrior:
             p.requires_grad_(False)
         try:
             for i in range(1, steps + 1):
-                loss = transition_error(self.model.decode_frames(z, L), prev, nxt).mean() / scale
+                loss = transition_error(self.model.frame_features(z, sk), prev, nxt).mean() / scale
                 loss = loss + 1e-3 * (z**2).mean()  # the Gaussian prior keeps z plausible
                 (g,) = torch.autograd.grad(loss, z)
                 with torch.no_grad():
@@ -248,14 +284,21 @@ class PonymationPrior:
         return z.detach()
 
     @torch.no_grad()
-    def _transition_frames(self, z: torch.Tensor, content: torch.Tensor) -> torch.Tensor:
-        """Decoded transition features (n, K-1, L, W) for latents z (n*(K-1), Z); the residual
-        left at both ends is spread linearly over the transition, so segments join exactly."""
+    def _transition_frames(self, z: torch.Tensor, content: torch.Tensor, sk: SkeletonBatch) -> torch.Tensor:
+        """Decoded transition features (n, K-1, L, W) for latents z (n*(K-1), Z). What is left of
+        the mismatch at both ends, in position and in velocity, is removed by a cubic Hermite
+        correction, so segments join exactly and without a kink (a linear correction left a
+        velocity jump at every seam)."""
         n, K, L, W = content.shape
         prev, nxt = self._ends(content)
-        t = self.model.decode_frames(z, L)
-        w = torch.linspace(0.0, 1.0, L, device=t.device)[None, :, None]
-        t = t + (1 - w) * (prev[:, -1:] - t[:, :1]) + w * (nxt[:, :1] - t[:, -1:])
+        t = self.model.frame_features(z, sk)
+        dp0, dp1 = prev[:, -1:] - t[:, :1], nxt[:, :1] - t[:, -1:]
+        dv0 = (prev[:, -1:] - prev[:, -2:-1]) - (t[:, 1:2] - t[:, :1])
+        dv1 = (nxt[:, 1:2] - nxt[:, :1]) - (t[:, -1:] - t[:, -2:-1])
+        s = torch.linspace(0.0, 1.0, L, device=t.device)[None, :, None]
+        h00, h10 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s
+        h01, h11 = -2 * s**3 + 3 * s**2, s**3 - s**2
+        t = t + h00 * dp0 + h01 * dp1 + (L - 1) * (h10 * dv0 + h11 * dv1)
         return t.reshape(n, K - 1, L, W)
 
     def sample(self, asset: Any, n: int = 5, frames: int = 60, seed: int = 0, **options: Any) -> np.ndarray:

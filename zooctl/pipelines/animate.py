@@ -115,9 +115,10 @@ def sample_and_export(
             files[f].append(str(path))
     t_export = time.perf_counter() - t0
     if opts.preview:
-        files.update(_preview(animated, names, out, label, opts.size, fps, opts.device))
+        files.update(_preview(animated, names, out, label, opts.size, fps, opts.device, asset))
     manifest = {
         "target": label,
+        "amplitude_deg": [round(motion_amplitude(asset, r), 2) for r in rots],
         "prior": prior_name,
         "samples": opts.sample,
         "frames": opts.frames,
@@ -137,23 +138,59 @@ def sample_and_export(
     return manifest
 
 
+def motion_amplitude(asset, rotations: np.ndarray) -> float:
+    """Mean over joints of how far each turns from its first pose (degrees): local rotations
+    (T, J, 4) of ``asset`` -> a number (~0 for a statue; `zooctl.motion.metrics.joint_amplitude`)."""
+    from ..motion import metrics as M
+    from ..motion.dataset import quat_conj, quat_mul
+    from ..motion.skeleton import Skeleton
+
+    rest = Skeleton.from_asset(asset).rest_rotations
+    return float(M.joint_amplitude(quat_mul(quat_conj(rest)[None, None], rotations[None])).mean())
+
+
+def reference_clip(asset) -> str | None:
+    """The asset's own clip that moves most (a fit's ``fit`` clip, a bank asset's walk or
+    gallop...), shown beside the samples; None when it has none."""
+    if not asset.clips:
+        return None
+    return max(asset.clips, key=lambda c: motion_amplitude(asset, asset.clips[c].rotations))
+
+
 def _preview(
-    asset, clips: list[str], out: Path, label: str, size: int, fps: float, device: str
+    asset, clips: list[str], out: Path, label: str, size: int, fps: float, device: str, original=None
 ) -> dict[str, list[str]]:
-    """A video with every sample side by side, and a contact sheet (one row of frames per sample)."""
+    """A video with every sample in motion beside a real clip of the same skeleton (``original``'s
+    most moving clip, looped), and a contact sheet (one row of frames per sample) whose labels give
+    each motion's amplitude (mean degrees a joint turns from the first frame)."""
+    import dataclasses
+
     from ..io.video import write_mp4
     from ..render.preview import contact_sheet, render_asset, save_png
 
-    videos = [
-        render_asset(asset, c, size=size, supersample=1, device=device) for c in clips
-    ]  # (T, H, W, 3) each
-    cols = min(len(clips), 5)
-    grid = [contact_sheet([v[t] for v in videos], labels=clips, columns=cols) for t in range(len(videos[0]))]
+    T = asset.clips[clips[0]].num_frames
+    amp = {c: motion_amplitude(asset, asset.clips[c].rotations) for c in clips}
+    videos = [render_asset(asset, c, size=size, supersample=1, device=device) for c in clips]  # (T, H, W, 3)
+    names = [f"{c} {amp[c]:.1f} deg" for c in clips]
+    ref = reference_clip(original) if original is not None else None
+    if ref is not None:
+        # The real clip played with the samples' skeleton: same size and framing as they are.
+        real = dataclasses.replace(asset, clips={ref: original.clips[ref]})
+        n = real.clips[ref].num_frames
+        videos.insert(
+            0,
+            render_asset(
+                real, ref, frames=[t % n for t in range(T)], size=size, supersample=1, device=device
+            ),
+        )
+        ref_amp = motion_amplitude(original, original.clips[ref].rotations)
+        names.insert(0, f"real {ref.split('|')[-1]} {ref_amp:.1f} deg")
+    cols = min(len(videos), 6)
+    grid = [contact_sheet([v[t] for v in videos], labels=names, columns=cols) for t in range(T)]
     video = write_mp4(out / f"{label}_samples.mp4", np.stack(grid), fps=fps)
-    T = len(videos[0])
     picks = np.linspace(0, T - 1, min(T, 6)).round().astype(int)
     tiles = [v[t] for v in videos for t in picks]
-    labels = [f"{c} f{t}" for c in clips for t in picks]
+    labels = [f"{nm} f{t}" if t == picks[0] else f"f{t}" for nm in names for t in picks]
     sheet = save_png(
         out / f"{label}_contact_sheet.png", contact_sheet(tiles, labels=labels, columns=len(picks))
     )

@@ -1,0 +1,122 @@
+"""Where the trained VAE's latents live: one Gaussian per skeleton fitted to the posterior means
+of its training windows (the *aggregate posterior*), sampled instead of N(0, I).
+
+With enough information in z to reconstruct motion (not just the window's mean pose), the
+posteriors fill only a small, skeleton-dependent part of N(0, I): a draw from N(0, I) decodes
+to something between every skeleton's motions, a still pose. Drawing from the Gaussian of the
+skeleton's own posteriors decodes to motions like its clips, and new ones where the Gaussian
+interpolates between them. A skeleton the prior never saw uses its nearest trained skeleton
+(same joint count, nearest rest pose), else the Gaussian of every window.
+
+Shapes: Z latent size; ``mean`` (Z,), ``factor`` (Z, Z) with ``factor @ factor.T`` the covariance.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from .skeleton import Skeleton
+
+ALL = "*"  # key of the pooled Gaussian
+
+
+class LatentGaussians:
+    def __init__(self) -> None:
+        self.mean: dict[str, np.ndarray] = {}
+        self.factor: dict[str, np.ndarray] = {}
+        self.rest: dict[str, np.ndarray] = {}  # normalised rest joint positions (J, 3) per key
+        # "mixture" sampling: the posterior means (N, Z) themselves and the mean posterior sigma (Z,)
+        self.points: dict[str, np.ndarray] = {}
+        self.sigma: dict[str, np.ndarray] = {}
+
+    def __len__(self) -> int:
+        return len(self.mean)
+
+    @staticmethod
+    def _gaussian(mu: np.ndarray, ridge: float = 1e-4) -> tuple[np.ndarray, np.ndarray]:
+        """mu (N, Z) -> (mean (Z,), factor (Z, Z)); a small ridge keeps the factor defined for
+        fewer windows than latent dimensions."""
+        m = mu.mean(0)
+        c = np.cov(mu - m, rowvar=False) if len(mu) > 1 else np.zeros((mu.shape[1],) * 2)
+        c = np.atleast_2d(c) + ridge * np.eye(mu.shape[1])
+        return m, np.linalg.cholesky(c)
+
+    @classmethod
+    @torch.no_grad()
+    def fit(cls, model, dataset, batch_size: int = 256) -> LatentGaussians:
+        """Posterior means of every window of ``dataset`` (a `MotionDataset`) under ``model``."""
+        dev = next(model.parameters()).device
+        mus, sig = [], []
+        for s in range(0, len(dataset), batch_size):
+            b = dataset.batch(np.arange(s, min(len(dataset), s + batch_size)), dev)
+            m, lv = model.encode(b.rot6d, b.skeletons)
+            mus.append(m.double().cpu().numpy())
+            sig.append(torch.exp(0.5 * lv).double().cpu().numpy())
+        mu, sigma = np.concatenate(mus), np.concatenate(sig)
+        out = cls()
+        ids = np.asarray(dataset.skel_ids)
+        for sid, sk in enumerate(dataset.skeletons):
+            sel = mu[ids == sid]
+            if len(sel):
+                out.mean[sk.key], out.factor[sk.key] = cls._gaussian(sel)
+                out.rest[sk.key] = sk.rest_positions
+                out.points[sk.key] = sel.astype(np.float32)
+                out.sigma[sk.key] = sigma[ids == sid].mean(0)
+        out.mean[ALL], out.factor[ALL] = cls._gaussian(mu)
+        return out
+
+    def key_for(self, skeleton: Skeleton) -> str:
+        """The trained skeleton to sample for ``skeleton``: itself, the nearest of the same joint
+        count, or the pooled Gaussian."""
+        if skeleton.key in self.mean:
+            return skeleton.key
+        same = [k for k, r in self.rest.items() if r.shape == skeleton.rest_positions.shape]
+        if not same:
+            return ALL
+        return min(same, key=lambda k: float(np.abs(self.rest[k] - skeleton.rest_positions).sum()))
+
+    def sample(
+        self, skeleton: Skeleton, n: int, temperature: float, gen: torch.Generator, mixture: bool = False
+    ) -> torch.Tensor:
+        """(n, Z) latents; ``temperature`` scales the spread around the skeleton's mean latent, or
+        with ``mixture`` around a random training window's posterior mean (the aggregate posterior
+        itself, a mixture of the windows' posteriors: a single Gaussian blends a walk's latents
+        with an eating's into poses of neither)."""
+        k = self.key_for(skeleton)
+        if mixture and k in self.points:
+            pts = torch.as_tensor(self.points[k], dtype=torch.float32)
+            pick = torch.randint(len(pts), (n,), generator=gen)
+            eps = torch.randn(n, pts.shape[1], generator=gen)
+            return pts[pick] + temperature * eps * torch.as_tensor(self.sigma[k], dtype=torch.float32)
+        m = torch.as_tensor(self.mean[k], dtype=torch.float32)
+        f = torch.as_tensor(self.factor[k], dtype=torch.float32)
+        eps = torch.randn(n, len(m), generator=gen)
+        return m + temperature * eps @ f.T
+
+    # -- persistence ------------------------------------------------------------------------
+    def save(self, path: str | Path) -> None:
+        arrays = {}
+        for i, k in enumerate(self.mean):
+            arrays[f"mean_{i}"], arrays[f"factor_{i}"] = self.mean[k], self.factor[k]
+            if k in self.rest:
+                arrays[f"rest_{i}"] = self.rest[k]
+            if k in self.points:
+                arrays[f"points_{i}"], arrays[f"sigma_{i}"] = self.points[k], self.sigma[k]
+        keys = np.array(list(self.mean), dtype=object)
+        with open(path, "wb") as fh:
+            np.savez(fh, keys=np.array([str(k) for k in keys]), **arrays)
+
+    @classmethod
+    def load(cls, path: str | Path) -> LatentGaussians:
+        out = cls()
+        with np.load(path, allow_pickle=False) as z:
+            for i, k in enumerate(z["keys"].tolist()):
+                out.mean[k], out.factor[k] = z[f"mean_{i}"], z[f"factor_{i}"]
+                if f"rest_{i}" in z:
+                    out.rest[k] = z[f"rest_{i}"]
+                if f"points_{i}" in z:
+                    out.points[k], out.sigma[k] = z[f"points_{i}"], z[f"sigma_{i}"]
+        return out
