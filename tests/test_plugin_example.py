@@ -1,6 +1,7 @@
 """The example plugin package's renderer, articulation model, exporter, segmenter and flow estimator
 are used by the commands that should use them: `zooctl fit --renderer pointsplat --articulation
-rigid` (a tiny fit), `bank export --format ply` and `video add --segmenter backdrop --flow farneback`.
+rigid` (a tiny fit), `bank export --format ply`, `video add --segmenter backdrop --flow farneback`
+and `motion train --kind example-loop` then `animate`.
 
 The package is pip-installed into a private folder put on PYTHONPATH (not into the venv), so
 tests running at the same time never see it; `tests/test_plugins.py` covers the venv install."""
@@ -130,3 +131,16 @@ def test_video_add_through_the_plugin_segmenter_and_flow_estimator(example, tmp_
     disc = math.pi * 12**2 / (w * h)
     assert 0.7 * disc < got["cov"] < 1.3 * disc
     assert got["u"] > 1.5  # about 4 px a frame to the right
+
+
+def test_motion_train_and_animate_through_the_plugin_motion_prior(example, tmp_path):
+    """`motion train --kind example-loop` trains the installed package's prior; `animate` samples it."""
+    env, store, _ = example
+    r = zooctl(*"motion train --assets worm --kind example-loop --name loop".split(), store=store, env=env)
+    assert r.code == 0, r.err
+    cfg = json.loads((store / "motion" / "loop" / "config.json").read_text())
+    assert cfg["plugin"] == "example-loop"
+    args = f"animate worm --prior loop --sample 2 --frames 30 --no-preview --json --out {tmp_path / 'a'}"
+    r = zooctl(*args.split(), store=store, env=env)
+    assert r.code == 0, r.err
+    assert all(a > 1.0 for a in r.json()["amplitude_deg"])
