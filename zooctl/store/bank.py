@@ -181,28 +181,21 @@ class Bank(IndexedStore):
             index["assets"][name].update(fields)
             write_json_atomic(self.index_path, index)
 
-    def cleanup(self) -> dict[str, Any]:
-        """Remove what killed writers left: temporaries of dead processes, cards and retrieval
-        sidecars of assets that are gone, pack files nothing refers to. Asset files the index does
-        not name are kept and reported (`repair` indexes the valid ones)."""
+    def remove_leftovers(self, keep: set[str]) -> tuple[int, int]:
+        """Cards and retrieval sidecars of assets that are gone, pack files nothing refers to."""
         from .fs import remove_stale_temps
         from .views_h5 import unreferenced_files, views_dir
 
-        with store_lock(self.root), writing("cleaning the bank"):
-            index = self._read_index()  # a missing or damaged index stops here: nothing is deleted
-            temps = self._clean_temps() + remove_stale_temps(views_dir(self.root))
-            stored = set(self.item_files())
-            keep = set(index["assets"]) | stored
-            orphans = 0
-            for p in unreferenced_files(self.root, keep):
-                p.unlink(missing_ok=True)
-                orphans += 1
-            if self.assets_dir.is_dir():
-                for p in self.assets_dir.glob("*.json"):
-                    if not p.name.startswith(".") and p.stem not in keep:
-                        p.unlink(missing_ok=True)
-                        orphans += 1
-        return {"temporaries": temps, "orphans": orphans, "unindexed": self.unindexed(index["assets"])}
+        temps, orphans = remove_stale_temps(views_dir(self.root)), 0
+        for p in unreferenced_files(self.root, keep):
+            p.unlink(missing_ok=True)
+            orphans += 1
+        if self.assets_dir.is_dir():
+            for p in self.assets_dir.glob("*.json"):
+                if not p.name.startswith(".") and p.stem not in keep:
+                    p.unlink(missing_ok=True)
+                    orphans += 1
+        return temps, orphans
 
     # -- repair ----------------------------------------------------------------------------
     def rebuild_entry(
@@ -210,13 +203,7 @@ class Bank(IndexedStore):
     ) -> tuple[dict[str, Any], list[str]]:
         from .asset_h5 import card_of, read_asset
 
-        asset = read_asset(path)
-        try:
-            asset.validate()
-        except ValueError as exc:
-            raise StoreError(f"the asset in {path.name} is invalid: {exc}") from None
-        if asset.name != name:
-            raise StoreError(f"{path.name} holds an asset named {asset.name!r}")
+        asset = self.checked_item(read_asset(path), name, path)
         entry = asset.summary()
         if old is not None and all(old.get(k) == entry[k] for k in ("vertices", "faces", "joints", "tags")):
             entry = dict(old)  # the same asset: keep what was recorded (its views entry above all)

@@ -165,6 +165,16 @@ class IndexedStore(NamedStore):
         Raises for a file that is not a valid item."""
         raise NotImplementedError  # pragma: no cover
 
+    def checked_item(self, item: Any, name: str, path: Path) -> Any:
+        """``item`` read from ``path``, if it is valid (``item.validate()``) and named ``name``."""
+        try:
+            item.validate()
+        except ValueError as exc:
+            raise StoreError(f"the {self.noun} in {path.name} is invalid: {exc}") from None
+        if item.name != name:
+            raise StoreError(f"{path.name} holds {self.article} {self.noun} named {item.name!r}")
+        return item
+
     def _salvage(self) -> tuple[dict[str, Any], str]:
         """The usable entries of the current index (if any) and what state it was in."""
         try:
@@ -221,10 +231,21 @@ class IndexedStore(NamedStore):
         }
 
     # -- cleaning ------------------------------------------------------------------------------
-    def _clean_temps(self) -> int:
-        return remove_stale_temps(self.files_dir) + (
-            remove_stale_temps(self.dir) if self.dir != self.files_dir else 0
-        )
+    def cleanup(self) -> dict[str, Any]:
+        """Remove what killed writers left: temporaries of dead processes and the leftovers of
+        items that are gone (`remove_leftovers`). Item files the index does not name are kept and
+        reported (`repair` indexes the valid ones)."""
+        with store_lock(self.root), writing(f"cleaning the {self.key}"):
+            items = self._entries()  # a missing or damaged index stops here: nothing is deleted
+            temps = remove_stale_temps(self.files_dir)
+            if self.dir != self.files_dir:
+                temps += remove_stale_temps(self.dir)
+            more_temps, orphans = self.remove_leftovers(set(items) | set(self.item_files()))
+        return {"temporaries": temps + more_temps, "orphans": orphans, "unindexed": self.unindexed(items)}
+
+    def remove_leftovers(self, keep: set[str]) -> tuple[int, int]:
+        """Delete side files (cards, caches...) of items not in ``keep``; (temporaries, orphans)."""
+        return 0, 0
 
     def unindexed(self, items: dict[str, Any]) -> list[str]:
         """Item files the index does not name: kept by `cleanup`, indexed by `repair` if valid."""

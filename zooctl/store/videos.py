@@ -364,32 +364,19 @@ class VideoStore(IndexedStore):
             self.path(name).unlink(missing_ok=True)
             shutil.rmtree(self.cache_dir(name), ignore_errors=True)
 
-    def cleanup(self) -> dict[str, Any]:
-        """Remove what killed writers left: temporaries of dead processes and caches of videos
-        that are gone. Video files the index does not name are kept and reported (`repair`
-        indexes the valid ones)."""
-        with store_lock(self.root), writing("cleaning the videos"):
-            index = self._read_index()  # a missing or damaged index stops here: nothing is deleted
-            temps = self._clean_temps()
-            keep = set(index["videos"]) | set(self.item_files())
-            orphans = 0
-            if self.dir.is_dir():
-                for p in self.dir.glob("*.cache"):
-                    if p.is_dir() and p.name[: -len(".cache")] not in keep:
-                        shutil.rmtree(p, ignore_errors=True)
-                        orphans += 1
-        return {"temporaries": temps, "orphans": orphans, "unindexed": self.unindexed(index["videos"])}
+    def remove_leftovers(self, keep: set[str]) -> tuple[int, int]:
+        """Query caches of videos that are gone."""
+        orphans = 0
+        if self.dir.is_dir():
+            for p in self.dir.glob("*.cache"):
+                if p.is_dir() and p.name[: -len(".cache")] not in keep:
+                    shutil.rmtree(p, ignore_errors=True)
+                    orphans += 1
+        return 0, orphans
 
     def rebuild_entry(
         self, name: str, path: Path, old: dict[str, Any] | None
     ) -> tuple[dict[str, Any], list[str]]:
-        rec = read_video_h5(path)
-        try:
-            rec.validate()
-        except ValueError as exc:
-            raise StoreError(f"the video in {path.name} is invalid: {exc}") from None
-        if rec.name != name:
-            raise StoreError(f"{path.name} holds a video named {rec.name!r}")
-        summary = rec.summary()
+        summary = self.checked_item(read_video_h5(path), name, path).summary()
         summary["bytes"] = path.stat().st_size
         return summary, []
