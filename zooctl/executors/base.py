@@ -96,6 +96,35 @@ def call_task(
         return "error", exc.message, exc.hint, where()
 
 
+def finished(i: int, result: tuple[str, Any, Any, str], attempts: int) -> TaskOutcome:
+    """The outcome of item ``i`` whose task returned ``result`` (what `call_task` returns)."""
+    status, a, b, w = result
+    if status == "ok":
+        return TaskOutcome(i, value=a, attempts=attempts, where=w)
+    return TaskOutcome(i, error=a, hint=b, attempts=attempts, where=w)
+
+
+def crashed(i: int, attempts: int, reason: str) -> TaskOutcome:
+    """The outcome of item ``i`` whose every attempt crashed (``reason``: the last one's)."""
+    return TaskOutcome(
+        i,
+        error=f"crashed {attempts} times; last: {reason}",
+        hint="run it alone with ZOOCTL_DEBUG=1 to see the traceback",
+        attempts=attempts,
+    )
+
+
+def retry_or_fail(
+    i: int, reason: str, attempts: list[int], todo: list[int], retries: int
+) -> TaskOutcome | None:
+    """After a crash of item ``i``: queue it on ``todo`` again while ``attempts[i] <= retries``
+    (returns None), else its failure."""
+    if attempts[i] <= retries:
+        todo.append(i)
+        return None
+    return crashed(i, attempts[i], reason)
+
+
 def task_env() -> dict[str, str]:
     """The driver's settings a worker must share: zooctl's own variables and thread limits."""
     keep = ("ZOOCTL_", "OMP_WAIT_POLICY")

@@ -18,7 +18,7 @@ from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 from ..errors import UsageError
-from .base import StageCallback, Task, TaskOutcome, call_task, task_env
+from .base import StageCallback, Task, TaskOutcome, call_task, crashed, finished, retry_or_fail, task_env
 
 _STAGES: Any = None  # the worker's end of the driver's stage queue (set by _init_worker)
 
@@ -73,14 +73,14 @@ class LocalExecutor:
                         on_stage(_i, stage)
 
                 try:
-                    status, a, b, w = call_task(fn, item, report, self.env, self.threads)
+                    result = call_task(fn, item, report, self.env, self.threads)
                 except Exception as exc:  # a crash: retried, bounded
                     last = f"{type(exc).__name__}: {exc}"
                     continue
-                yield _outcome(i, status, a, b, w, attempt)
+                yield finished(i, result, attempt)
                 break
             else:
-                yield _crashed(i, self.retries + 1, last)
+                yield crashed(i, self.retries + 1, last)
 
     # -- process pool ----------------------------------------------------------------------
     def _new_pool(self, stages: Any) -> ProcessPoolExecutor:
@@ -106,14 +106,14 @@ class LocalExecutor:
                 for fut in done:
                     i = running.pop(fut)
                     try:
-                        status, a, b, w = fut.result()
+                        result = fut.result()
                     except BrokenProcessPool:
                         broken = True
                         failed = self._retry(i, "its worker process died", attempts, todo)
                     except Exception as exc:
                         failed = self._retry(i, f"{type(exc).__name__}: {exc}", attempts, todo)
                     else:
-                        failed = _outcome(i, status, a, b, w, attempts[i])
+                        failed = finished(i, result, attempts[i])
                     if failed is not None:
                         yield failed
                 if broken:  # every other task of the dead pool fails too: collect and rebuild
@@ -130,11 +130,7 @@ class LocalExecutor:
             _drain(stages, on_stage)
 
     def _retry(self, i: int, reason: str, attempts: list[int], todo: list[int]) -> TaskOutcome | None:
-        """Queue item ``i`` again, or (attempts spent) its failure."""
-        if attempts[i] <= self.retries:
-            todo.append(i)
-            return None
-        return _crashed(i, attempts[i], reason)
+        return retry_or_fail(i, reason, attempts, todo, self.retries)
 
     def _stop_pool(self) -> None:
         pool, self._pool = self._pool, None
@@ -163,18 +159,3 @@ def _drain(stages: Any, on_stage: StageCallback | None) -> None:
             return
         if on_stage is not None:
             on_stage(i, stage)
-
-
-def _outcome(i: int, status: str, a: Any, b: Any, w: str, attempts: int) -> TaskOutcome:
-    if status == "ok":
-        return TaskOutcome(i, value=a, attempts=attempts, where=w)
-    return TaskOutcome(i, error=a, hint=b, attempts=attempts, where=w)
-
-
-def _crashed(i: int, attempts: int, reason: str) -> TaskOutcome:
-    return TaskOutcome(
-        i,
-        error=f"crashed {attempts} times; last: {reason}",
-        hint="run it alone with ZOOCTL_DEBUG=1 to see the traceback",
-        attempts=attempts,
-    )

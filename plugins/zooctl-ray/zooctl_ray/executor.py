@@ -18,7 +18,15 @@ from collections.abc import Iterator
 from typing import Any
 
 from zooctl.errors import MissingDependencyError, UsageError
-from zooctl.executors.base import StageCallback, Task, TaskOutcome, call_task, task_env
+from zooctl.executors.base import (
+    StageCallback,
+    Task,
+    TaskOutcome,
+    call_task,
+    finished,
+    retry_or_fail,
+    task_env,
+)
 
 # Small by default: the results are files of a few MB, and the machine is shared.
 OBJECT_STORE_MB = int(os.environ.get("ZOOCTL_RAY_OBJECT_STORE_MB", "300"))
@@ -139,18 +147,14 @@ class RayExecutor:
                 for ref in ready:
                     i = running.pop(ref)
                     try:
-                        status, a, b, w = ray.get(ref)
+                        result = ray.get(ref)
                     except ray.exceptions.RayTaskError as exc:  # the task's own code raised
                         cause = getattr(exc, "cause", None) or exc
                         out = self._retry(i, f"{type(cause).__name__}: {cause}", attempts, todo)
                     except ray.exceptions.RayError as exc:  # worker, node or object lost
                         out = self._retry(i, f"{type(exc).__name__} (worker or node lost)", attempts, todo)
                     else:
-                        out = TaskOutcome(i, attempts=attempts[i], where=w)
-                        if status == "ok":
-                            out.value = a
-                        else:
-                            out.error, out.hint = a, b
+                        out = finished(i, result, attempts[i])
                     if out is not None:
                         yield out
             self._poll(board, on_stage)
@@ -164,15 +168,7 @@ class RayExecutor:
                 ray.kill(board)
 
     def _retry(self, i: int, reason: str, attempts: list[int], todo: list[int]) -> TaskOutcome | None:
-        if attempts[i] <= self.retries:
-            todo.append(i)
-            return None
-        return TaskOutcome(
-            i,
-            error=f"crashed {attempts[i]} times; last: {reason}",
-            hint="run it alone with ZOOCTL_DEBUG=1 to see the traceback",
-            attempts=attempts[i],
-        )
+        return retry_or_fail(i, reason, attempts, todo, self.retries)
 
     @staticmethod
     def _poll(board: Any, on_stage: StageCallback | None) -> None:
