@@ -94,3 +94,21 @@ def write_tiny_glb(path: Path, **kw) -> Path:
     doc, binary = tiny_gltf(**kw)
     path.write_bytes(glb_bytes(doc, binary))
     return path
+
+
+def with_texture(doc, binary, image_uri):
+    """Add UVs, a material with a base-colour texture and an image at ``image_uri``."""
+    uv = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], np.float32).tobytes()
+    doc["bufferViews"].append({"buffer": 0, "byteOffset": len(binary), "byteLength": len(uv)})
+    doc["accessors"].append(
+        {"bufferView": len(doc["bufferViews"]) - 1, "componentType": 5126, "count": 4, "type": "VEC2"}
+    )
+    binary = binary + uv
+    doc["buffers"][0]["byteLength"] = len(binary)
+    prim = doc["meshes"][0]["primitives"][0]
+    prim["attributes"]["TEXCOORD_0"] = len(doc["accessors"]) - 1
+    prim["material"] = 0
+    doc["materials"] = [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]
+    doc["textures"] = [{"source": 0}]
+    doc["images"] = [{"uri": image_uri}]
+    return doc, binary

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from conftest import needs_shared_assets, shared_assets
 from gltf_builder import glb_bytes as _glb
-from gltf_builder import tiny_gltf
+from gltf_builder import tiny_gltf, with_texture
 from gltf_reference import Reference
 
 from zooctl.errors import InputError
@@ -236,24 +236,6 @@ def test_deep_node_chain_and_strips(tmp_path):
 # -- URIs stay inside the glTF file's folder (issue 18, security) ----------------------------------
 
 
-def _with_texture(doc, binary, image_uri):
-    """Add UVs, a material with a base-colour texture and an image at ``image_uri``."""
-    uv = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], np.float32).tobytes()
-    doc["bufferViews"].append({"buffer": 0, "byteOffset": len(binary), "byteLength": len(uv)})
-    doc["accessors"].append(
-        {"bufferView": len(doc["bufferViews"]) - 1, "componentType": 5126, "count": 4, "type": "VEC2"}
-    )
-    binary = binary + uv
-    doc["buffers"][0]["byteLength"] = len(binary)
-    prim = doc["meshes"][0]["primitives"][0]
-    prim["attributes"]["TEXCOORD_0"] = len(doc["accessors"]) - 1
-    prim["material"] = 0
-    doc["materials"] = [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]
-    doc["textures"] = [{"source": 0}]
-    doc["images"] = [{"uri": image_uri}]
-    return doc, binary
-
-
 def _png() -> bytes:
     import io
 
@@ -299,7 +281,7 @@ def test_image_uris_are_checked_and_relative_files_work(tmp_path):
     (folder / "tex" / "ok.png").write_bytes(_png())
     (folder / "tex" / "inside_link.png").symlink_to(folder / "tex" / "ok.png")
     for uri, ok in (("tex/ok.png", True), ("tex/inside_link.png", True), ("../secret.png", False)):
-        doc, binary = _with_texture(*tiny_gltf(), uri)
+        doc, binary = with_texture(*tiny_gltf(), uri)
         doc["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(binary).decode()
         (folder / "m.gltf").write_text(json.dumps(doc))
         if ok:

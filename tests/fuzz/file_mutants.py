@@ -37,7 +37,7 @@ REPO = TESTS.parent
 SHARED_ASSETS = REPO.parent / "shared" / "data" / "assets" / "quaternius"
 sys.path[:0] = [str(TESTS)] if str(TESTS) not in sys.path else []
 
-from gltf_builder import glb_bytes, tiny_gltf  # noqa: E402
+from gltf_builder import glb_bytes, tiny_gltf, with_texture  # noqa: E402
 
 TIMEOUT_S = 60
 MAX_RSS_KB = 2 * 1024 * 1024
@@ -377,20 +377,8 @@ def _uri_case(rng, folder: Path, i: int) -> Case:
         doc["buffers"][0]["uri"] = uri
     else:
         # a textured mesh whose image URI is the edit; the buffer itself is fine
-        uv = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], np.float32).tobytes()
-        doc["bufferViews"].append({"buffer": 0, "byteOffset": len(binary), "byteLength": len(uv)})
-        doc["accessors"].append(
-            {"bufferView": len(doc["bufferViews"]) - 1, "componentType": 5126, "count": 4, "type": "VEC2"}
-        )
-        binary = binary + uv
+        doc, binary = with_texture(doc, binary, uri)
         (folder / "m.bin").write_bytes(binary)
-        doc["buffers"][0]["byteLength"] = len(binary)
-        prim = doc["meshes"][0]["primitives"][0]
-        prim["attributes"]["TEXCOORD_0"] = len(doc["accessors"]) - 1
-        prim["material"] = 0
-        doc["materials"] = [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]
-        doc["textures"] = [{"source": 0}]
-        doc["images"] = [{"uri": uri}]
     path = folder / "m.gltf"
     path.write_text(json.dumps(doc))
     # the image of a secret is a valid PNG: an escaping image URI would import "successfully"
