@@ -47,7 +47,9 @@ def test_pool_retries_a_dead_worker_and_reports_bad_input(tmp_path):
     by = {r.key: r for r in report.results}
     assert [r.key for r in report.results] == ["i0", "i1", "i2", "i3"]
     assert by["i1"].status == "done" and by["i1"].attempts >= 2  # its worker died once
-    assert by["i2"].status == "failed" and by["i2"].error == "this item is bad" and by["i2"].attempts == 1
+    # Bad input is never retried for its own error; a pool that loses a worker fails every task in
+    # flight (Python's ProcessPoolExecutor), so i2 may have run once more if it ran beside i1's death.
+    assert by["i2"].status == "failed" and by["i2"].error == "this item is bad" and by["i2"].attempts <= 2
     assert sorted(committed) == ["i0", "i1", "i3"]  # each good result committed exactly once
     assert ("i0", "working") in stages
 

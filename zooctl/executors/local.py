@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 import multiprocessing
-import queue as queue_mod
 from collections.abc import Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -31,7 +30,7 @@ def _init_worker(stages: Any) -> None:
 def _report_to_queue(index: int):
     def report(stage: str) -> None:
         try:
-            _STAGES.put_nowait((index, stage))
+            _STAGES.put((index, stage))  # written before it returns: a worker killed later loses nothing
         except Exception:  # progress is a nicety, never a reason to fail a task
             pass
 
@@ -88,7 +87,7 @@ class LocalExecutor:
         return ProcessPoolExecutor(self.slots, mp_context=ctx, initializer=_init_worker, initargs=(stages,))
 
     def _map_pool(self, fn: Task, items: list[Any], on_stage: StageCallback | None):
-        stages = multiprocessing.get_context("spawn").Queue()
+        stages = multiprocessing.get_context("spawn").SimpleQueue()
         self._pool = self._new_pool(stages)
         todo = list(range(len(items)))[::-1]  # a stack: pop() takes the first item first
         attempts = [0] * len(items)
@@ -116,11 +115,13 @@ class LocalExecutor:
                         failed = finished(i, result, attempts[i])
                     if failed is not None:
                         yield failed
-                if broken:  # every other task of the dead pool fails too: collect and rebuild
+                if broken:  # the other tasks of the dead pool: keep what returned, retry the rest
                     for fut in list(running):
-                        failed = self._retry(
-                            running.pop(fut), "its worker pool lost a process", attempts, todo
-                        )
+                        i = running.pop(fut)
+                        if fut.done() and fut.exception() is None:
+                            yield finished(i, fut.result(), attempts[i])
+                            continue
+                        failed = self._retry(i, "its worker pool lost a process", attempts, todo)
                         if failed is not None:
                             yield failed
                     self._pool.shutdown(wait=False, cancel_futures=True)
@@ -154,8 +155,10 @@ class LocalExecutor:
 def _drain(stages: Any, on_stage: StageCallback | None) -> None:
     while True:
         try:
-            i, stage = stages.get_nowait()
-        except (queue_mod.Empty, OSError, ValueError):
+            if stages.empty():
+                return
+            i, stage = stages.get()
+        except (EOFError, OSError, ValueError):
             return
         if on_stage is not None:
             on_stage(i, stage)
