@@ -9,11 +9,11 @@ import typer
 from . import batch_opts
 from ._common import (
     JsonOpt,
+    add_rm_command,
+    add_upkeep_commands,
     console,
     err_console,
-    print_clean,
     print_json,
-    print_repair,
     print_skipped,
     print_table,
     stage_progress,
@@ -32,6 +32,7 @@ def _bank():
 
 
 @app.command("add")
+@batch_opts.with_batch_options
 def add(
     paths: list[Path] = typer.Argument(
         ..., help="Model files to import (.glb, .gltf, and whatever plugins add)."
@@ -74,11 +75,7 @@ def add(
         show_default=False,
     ),
     json_out: bool = JsonOpt,
-    executor: str = batch_opts.ExecutorOpt,
-    jobs: int = batch_opts.JobsOpt,
-    address: str = batch_opts.AddressOpt,
-    cpus_per_task: float = batch_opts.CpusOpt,
-    gpus_per_task: float = batch_opts.GpusOpt,
+    batch: batch_opts.BatchOptions = batch_opts.BatchOpts,
     resume: bool = typer.Option(
         False, "--resume", help="Skip files whose asset (and views) the bank holds already (runs as a batch)."
     ),
@@ -99,13 +96,12 @@ def add(
         max_vertices=max_vertices,
         max_elements=max_elements,
     )
-    if executor is not None or resume:  # a batch: import and views in workers, stored here
+    if batch.executor is not None or resume:  # a batch: import and views in workers, stored here
         from .bank_batch import add_many
 
         opts = dict(name=name, tags=tag, license=license, replace=replace, views=views, resume=resume)
-        run = dict(executor=executor, jobs=jobs, address=address, cpus=cpus_per_task, gpus=gpus_per_task)
         limits_with(**limits)  # a bad value is one error here; the workers apply them
-        return add_many(paths, json_out=json_out, limits=limits, **opts, **run)
+        return add_many(paths, json_out=json_out, limits=limits, batch=batch, **opts)
 
     with import_limits(**limits), stage_progress(not json_out and len(paths) > 1) as progress:
         results = add_files(
@@ -227,13 +223,7 @@ def show(name: str = typer.Argument(..., help="Asset name."), json_out: bool = J
     console.print(tree)
 
 
-@app.command("rm")
-def rm(names: list[str] = typer.Argument(..., help="Asset names to remove.")) -> None:
-    """Remove assets from the bank."""
-    bank = _bank()
-    for n in names:
-        bank.remove(n)
-        console.print(f"removed {n}", highlight=False, markup=False)
+add_rm_command(app, _bank, "Remove assets from the bank.", "Asset names to remove.")
 
 
 @app.command("migrate")
@@ -251,30 +241,19 @@ def migrate(json_out: bool = JsonOpt) -> None:
         print_skipped(report["skipped"], "left as they are")
 
 
-@app.command("clean")
-def clean(json_out: bool = JsonOpt) -> None:
-    """Remove leftovers of killed writers (temporary files; cards and views of removed assets).
+add_upkeep_commands(
+    app,
+    _bank,
+    "assets",
+    clean_help="""Remove leftovers of killed writers (temporary files; cards and views of removed assets).
 
-    Never deletes an asset file: ones the index does not name are listed (`zooctl bank repair`
-    indexes the valid ones)."""
-    report = _bank().cleanup()
-    if json_out:
-        print_json(report)
-    else:
-        print_clean(report, "asset", "zooctl bank repair")
+Never deletes an asset file: ones the index does not name are listed (`zooctl bank repair`
+indexes the valid ones).""",
+    repair_help="""Rebuild the bank index from the asset files (after it was lost or damaged).
 
-
-@app.command("repair")
-def repair(json_out: bool = JsonOpt) -> None:
-    """Rebuild the bank index from the asset files (after it was lost or damaged).
-
-    Every valid asset file is indexed (its retrieval views too, when their sidecar is intact);
-    invalid files are listed with the reason and left where they are. Missing cards are rewritten."""
-    report = _bank().repair()
-    if json_out:
-        print_json(report)
-    else:
-        print_repair(report, "assets")
+Every valid asset file is indexed (its retrieval views too, when their sidecar is intact);
+invalid files are listed with the reason and left where they are. Missing cards are rewritten.""",
+)
 
 
 from . import bank_export, bank_preview, bank_seed  # noqa: E402  (one module per command)
