@@ -31,6 +31,15 @@ def _bank():
     return Bank.open(store_root())
 
 
+def _limit_option(key: str, refuse: str):
+    """A `bank add --max-*` option: None keeps the import limit ``key`` of `zooctl.limits`."""
+    from ..limits import DEFAULT, OPTION
+
+    return typer.Option(
+        None, OPTION[key], help=f"{refuse} (default: {getattr(DEFAULT, key):.0f}).", show_default=False
+    )
+
+
 @app.command("add")
 @batch_opts.with_batch_options
 def add(
@@ -50,29 +59,13 @@ def add(
         "`bank reindex --missing` adds them later.",
         show_default=False,
     ),
-    max_clip_seconds: float = typer.Option(
-        None,
-        "--max-clip-seconds",
-        help="Refuse a clip longer than this many seconds (default: 600).",
-        show_default=False,
+    max_clip_seconds: float = _limit_option(
+        "max_clip_seconds", "Refuse a clip longer than this many seconds"
     ),
-    max_frames: int = typer.Option(
-        None,
-        "--max-frames",
-        help="Refuse an asset whose clips have more frames in all (default: 100000).",
-        show_default=False,
-    ),
-    max_vertices: int = typer.Option(
-        None,
-        "--max-vertices",
-        help="Refuse an asset with more vertices (default: 500000).",
-        show_default=False,
-    ),
-    max_elements: int = typer.Option(
-        None,
-        "--max-elements",
-        help="Refuse larger arrays: one glTF accessor, or frames x joints of all clips (default: 5000000).",
-        show_default=False,
+    max_frames: int = _limit_option("max_frames", "Refuse an asset whose clips have more frames in all"),
+    max_vertices: int = _limit_option("max_vertices", "Refuse an asset with more vertices"),
+    max_elements: int = _limit_option(
+        "max_elements", "Refuse larger arrays: one glTF accessor, or frames x joints of all clips"
     ),
     json_out: bool = JsonOpt,
     batch: batch_opts.BatchOptions = batch_opts.BatchOpts,
