@@ -4,22 +4,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from fit_helpers import tiny_fit_config
+
 from zooctl.benchdata.make import make_video
-from zooctl.fit.config import FitConfig, preset
 from zooctl.rig.synthetic import tube_asset
 from zooctl.store.bank import Bank
 
-# A fit of a few seconds: 3 frames of 32 px, 2 iterations per stage, 4 camera candidates.
-TINY = {
-    "fit_size": 32,
-    "stage1": {"iters": 2, "batch": 4},
-    "stage2": {"iters": 2, "batch": 3},
-    "camera": {"azimuths": 4, "elevations": [10.0], "search_size": 32},
-}
-
 
 def tiny_config() -> dict:
-    return FitConfig.from_dict(TINY, preset("fast")).to_dict()
+    """A fit of a few seconds (3 frames of 32 px with `fit_inputs`), as a config dict."""
+    return tiny_fit_config().to_dict()
 
 
 def fit_inputs(tmp: Path, store: Path, n: int) -> list[str]:

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import subprocess
 import sys
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -59,3 +61,14 @@ def pip(*args: str) -> None:
         capture_output=True,
         timeout=300,
     )
+
+
+@contextlib.contextmanager
+def plugin_installed(folder: Path, dist: str) -> Iterator[None]:
+    """pip-install the plugin package in ``folder`` into this venv, exactly as a user would; uninstall
+    the distribution ``dist`` after."""
+    pip("install", "--no-deps", "--no-build-isolation", str(folder))
+    try:
+        yield
+    finally:
+        pip("uninstall", "-y", dist)

@@ -14,8 +14,9 @@ from gltf_builder import glb_bytes, tiny_gltf, write_tiny_glb
 
 from zooctl.errors import AlreadyExistsError, NotFoundError, StoreError
 from zooctl.io.gltf_import import load_gltf
-from zooctl.store.asset_h5 import SCHEMA_VERSION, Migration, describe_h5, migrate_file, read_asset
+from zooctl.store.asset_h5 import SCHEMA_VERSION, Migration, migrate_file, read_asset
 from zooctl.store.bank import Bank
+from zooctl.store.h5 import describe_h5
 
 
 def schema(name):

@@ -135,19 +135,14 @@ def test_a_video_folder_is_decoded_in_the_worker_and_stored_once_by_the_driver(t
     """A DAVIS folder: the worker decodes it and computes its flow; the driver stores the video,
     and the next batch fits the stored video instead of decoding the folder again."""
     import numpy as np
-    from PIL import Image
+    from fit_helpers import write_davis_folder
 
     from zooctl.fit.inputs import load_bench_video
     from zooctl.store.videos import VideoStore
 
     videos = fit_inputs(tmp_path, store, 1)
     bench = load_bench_video(Path(videos[0]))
-    folder = tmp_path / "tubecam"
-    (folder / "JPEGImages").mkdir(parents=True)
-    (folder / "Annotations").mkdir()
-    for i, (f, m) in enumerate(zip(bench.frames, bench.masks, strict=True)):
-        Image.fromarray(f).save(folder / "JPEGImages" / f"{i:05d}.jpg", quality=95)
-        Image.fromarray((m * 255).astype(np.uint8)).save(folder / "Annotations" / f"{i:05d}.png")
+    folder = write_davis_folder(tmp_path / "tubecam", bench.frames, bench.masks)
     items = plan_fits([str(folder)], store, tiny_config(), template="a0", out_root=tmp_path / "out")
     assert items[0].key == "tubecam" and items[0].payload.ingest is not None
     report = run_batch(get_executor("local"), fit_task, items, commit_fit)
@@ -160,13 +155,13 @@ def test_a_video_folder_is_decoded_in_the_worker_and_stored_once_by_the_driver(t
 
 
 def test_bench_run_on_an_executor_keeps_the_row_order_and_resumes(tmp_path, store):
-    from batch_helpers import TINY
+    from fit_helpers import tiny_overrides
 
     from zooctl.benchdata.run import run_benchmark
 
     fit_inputs(tmp_path, store, 2)
     folder = tmp_path / "videos"
-    kw = {"ablations": ["full", "no-flow"], "template": "a0", "overrides": TINY}
+    kw = {"ablations": ["full", "no-flow"], "template": "a0", "overrides": tiny_overrides()}
     res = run_benchmark(folder, store, executor=get_executor("local", jobs=2), **kw)
     assert [(r["video"], r["ablation"]) for r in res["rows"]] == [
         ("a0", "full"), ("a1", "full"), ("a0", "no-flow"), ("a1", "no-flow"),

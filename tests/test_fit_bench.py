@@ -6,18 +6,14 @@ import json
 
 import numpy as np
 import pytest
+from fit_helpers import tiny_overrides
 
 from zooctl.benchdata.make import make_video
 from zooctl.benchdata.run import markdown_table, run_benchmark
 from zooctl.errors import UsageError
 from zooctl.rig.synthetic import tube_asset
 
-TINY = {
-    "fit_size": 32,
-    "stage1": {"iters": 2, "batch": 4},
-    "stage2": {"iters": 2, "batch": 3},
-    "camera": {"azimuths": 4, "elevations": [10.0], "search_size": 32},
-}
+TINY = tiny_overrides()
 
 
 def test_bench_make_ground_truth_is_consistent(tmp_path):

@@ -8,18 +8,12 @@ import json
 import numpy as np
 import pytest
 from cli_helpers import run_inprocess
+from fit_helpers import tiny_fit_config
 
 from zooctl.errors import InputError, NotFoundError, UsageError
 from zooctl.fit.config import FitConfig, load_config, preset
 from zooctl.fit.inputs import FitVideo
 from zooctl.fit.run import fit_video
-
-TINY = {
-    "fit_size": 32,
-    "stage1": {"iters": 3, "batch": 4},
-    "stage2": {"iters": 3, "batch": 3},
-    "camera": {"azimuths": 4, "elevations": [10.0], "search_size": 32},
-}
 
 
 @pytest.fixture(scope="module")
@@ -35,7 +29,7 @@ def tube_video(tmp_path_factory):
 
 
 def tiny() -> FitConfig:
-    return FitConfig.from_dict(json.loads(json.dumps(TINY)), preset("fast"))
+    return tiny_fit_config(iters=3)
 
 
 def test_empty_masks_and_out_of_frame(tube_video):

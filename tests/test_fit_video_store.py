@@ -2,25 +2,15 @@
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
-from PIL import Image
+from fit_helpers import tiny_fit_config, write_davis_folder
 
 from zooctl.errors import UsageError
-from zooctl.fit.config import FitConfig, preset
 from zooctl.fit.job import fit_job
 from zooctl.store.bank import Bank
 from zooctl.store.fits import FitStore
 from zooctl.store.videos import VideoStore
-
-TINY = {
-    "fit_size": 32,
-    "stage1": {"iters": 2, "batch": 4},
-    "stage2": {"iters": 2, "batch": 3},
-    "camera": {"azimuths": 4, "elevations": [10.0], "search_size": 32},
-}
 
 
 @pytest.fixture(scope="module")
@@ -33,23 +23,14 @@ def davis_folder(tmp_path_factory):
     root = tmp_path_factory.mktemp("davis")
     asset = tube_asset(bones=3, name="tube")
     video = load_bench_video(make_video(asset, root / "bench", frames=5, size=48, seed=2))
-    folder = root / "tubecam"
-    (folder / "JPEGImages").mkdir(parents=True)
-    (folder / "Annotations").mkdir()
-    for i, (f, m) in enumerate(zip(video.frames, video.masks, strict=True)):
-        Image.fromarray(f).save(folder / "JPEGImages" / f"{i:05d}.jpg", quality=95)
-        Image.fromarray((m * 255).astype(np.uint8)).save(folder / "Annotations" / f"{i:05d}.png")
+    folder = write_davis_folder(root / "tubecam", video.frames, video.masks)
     return asset, folder, video.masks
-
-
-def tiny() -> FitConfig:
-    return FitConfig.from_dict(json.loads(json.dumps(TINY)), preset("fast"))
 
 
 def test_fit_of_a_path_stores_the_video_once(davis_folder, store):
     asset, folder, masks = davis_folder
     Bank(store).add(asset)
-    rec = fit_job(str(folder), store, tiny(), name="a", template="tube", outputs=("loss",))
+    rec = fit_job(str(folder), store, tiny_fit_config(), name="a", template="tube", outputs=("loss",))
     videos = VideoStore(store)
     assert videos.names() == ["tubecam"] and rec["stored_video"] == "tubecam"
     stored = videos.get("tubecam")
@@ -58,7 +39,7 @@ def test_fit_of_a_path_stores_the_video_once(davis_folder, store):
     assert rec["mask_source"] == "masks" and rec["status"] == "done"
 
     before = videos.path("tubecam").stat().st_mtime_ns
-    rec2 = fit_job(str(folder), store, tiny(), name="b", template="tube", outputs=("loss",))
+    rec2 = fit_job(str(folder), store, tiny_fit_config(), name="b", template="tube", outputs=("loss",))
     assert rec2["stored_video"] == "tubecam" and videos.names() == ["tubecam"]  # reused, not re-added
     assert videos.path("tubecam").stat().st_mtime_ns == before
 
@@ -67,14 +48,14 @@ def test_fit_of_a_path_stores_the_video_once(davis_folder, store):
     ys, xs = np.nonzero(masks[0])
     box = (int(xs.min()) - 2, int(ys.min()) - 2, int(np.ptp(xs)) + 5, int(np.ptp(ys)) + 5)
     auto = {"masks": "auto", "box": box, "outputs": ("loss",), "template": "tube"}
-    rec3 = fit_job(str(folder), store, tiny(), name="c", **auto)
+    rec3 = fit_job(str(folder), store, tiny_fit_config(), name="c", **auto)
     assert rec3["stored_video"] == "tubecam-2" and videos.names() == ["tubecam", "tubecam-2"]
-    assert fit_job(str(folder), store, tiny(), name="c2", **auto)["stored_video"] == "tubecam-2"
+    assert fit_job(str(folder), store, tiny_fit_config(), name="c2", **auto)["stored_video"] == "tubecam-2"
     assert videos.get("tubecam-2").segmenter["name"] == "grabcut"
     assert np.array_equal(videos.get("tubecam").masks, masks)
 
     # A stored video can be fitted by name.
-    rec4 = fit_job("tubecam", store, tiny(), name="d", template="tube", outputs=("loss",))
+    rec4 = fit_job("tubecam", store, tiny_fit_config(), name="d", template="tube", outputs=("loss",))
     assert rec4["stored_video"] == "tubecam" and sorted(FitStore(store).names()) == ["a", "b", "c", "c2", "d"]
 
 
@@ -82,5 +63,5 @@ def test_box_needs_grabcut(davis_folder, store):
     asset, folder, _ = davis_folder
     Bank(store).add(asset)
     with pytest.raises(UsageError, match="--box"):
-        fit_job(str(folder), store, tiny(), name="x", template="tube", box=(1, 1, 20, 20))
+        fit_job(str(folder), store, tiny_fit_config(), name="x", template="tube", box=(1, 1, 20, 20))
     assert VideoStore(store).names() == []  # nothing stored on a usage error

@@ -7,7 +7,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
-from cli_helpers import REPO, pip, zooctl
+from cli_helpers import REPO, pip, plugin_installed, zooctl
 
 from zooctl.components import ImporterSpec
 from zooctl.errors import PluginError
@@ -19,9 +19,8 @@ EXAMPLE = REPO / "plugins" / "zooctl-example"
 @pytest.fixture(scope="module")
 def example_installed():
     """pip-install the example plugin into this venv, exactly as a user would; remove it after."""
-    pip("install", "--no-deps", "--no-build-isolation", str(EXAMPLE))
-    yield
-    pip("uninstall", "-y", "zooctl-example")
+    with plugin_installed(EXAMPLE, "zooctl-example"):
+        yield
 
 
 def test_builtins_are_registered_through_entry_points():

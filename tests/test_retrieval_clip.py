@@ -9,16 +9,15 @@ import sys
 import textwrap
 
 import pytest
-from cli_helpers import REPO, pip, zooctl
+from cli_helpers import REPO, plugin_installed, zooctl
 
 CLIP_PLUGIN = REPO / "plugins" / "zooctl-clip"
 
 
 @pytest.fixture(scope="module")
 def clip_installed():
-    pip("install", "--no-deps", "--no-build-isolation", str(CLIP_PLUGIN))
-    yield
-    pip("uninstall", "-y", "zooctl-clip")
+    with plugin_installed(CLIP_PLUGIN, "zooctl-clip"):
+        yield
 
 
 @pytest.fixture(scope="module")

@@ -105,34 +105,11 @@ def test_views_schema_documents_the_sidecar(store, animal):
 
     from zooctl.retrieval.index import index_asset
     from zooctl.store.bank import Bank
+    from zooctl.store.h5 import describe_h5
 
     jsonschema = pytest.importorskip("jsonschema")
     bank = Bank(store)
     bank.add(animal)
     index_asset(bank, animal, ["silhouette"], n_views=2, size=40)
     schema = json.loads((REPO / "schemas" / "asset_views.schema.json").read_text())
-    jsonschema.validate(_describe(store / "bank" / "views" / "Quad.h5"), schema)
-
-
-def _describe(path) -> dict:
-    """groups / datasets (dtype, shape) / attrs of an HDF5 file, as the schema describes it."""
-    import h5py
-
-    def walk(g):
-        out = {
-            "attrs": {k: (v.item() if hasattr(v, "item") else v) for k, v in g.attrs.items()},
-            "groups": {},
-            "datasets": {},
-        }
-        for k, v in g.items():
-            if isinstance(v, h5py.Group):
-                out["groups"][k] = walk(v)
-            else:
-                out["datasets"][k] = {
-                    "dtype": v.dtype.str if v.dtype.kind != "O" else "vlen",
-                    "shape": list(v.shape),
-                }
-        return out
-
-    with h5py.File(path, "r") as f:
-        return walk(f)
+    jsonschema.validate(describe_h5(store / "bank" / "views" / "Quad.h5"), schema)

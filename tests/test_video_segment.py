@@ -110,9 +110,24 @@ def test_grabcut_on_real_davis_frames():
     assert np.mean([iou(g, m) for g, m in zip(got, gt)]) > 0.7
 
 
+def _needs_onnx() -> None:
+    pytest.importorskip("onnxruntime", reason="onnxruntime is not installed (optional dependency)")
+    pytest.importorskip("onnx", reason="the onnx package is needed to build the test model")
+
+
+def _save_onnx(graph, path):
+    """``graph`` as an opset-13, IR-8 model file at ``path``."""
+    import onnx
+    from onnx import helper
+
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 13)])
+    model.ir_version = 8
+    onnx.save(model, str(path))
+    return path
+
+
 def _red_detector_onnx(path):
     """A 1x1 conv scoring "red minus the rest", then a sigmoid: a model built by the test itself."""
-    import onnx
     from onnx import TensorProto, helper, numpy_helper
 
     w = numpy_helper.from_array(np.array([[[[24.0]], [[-12.0]], [[-12.0]]]], np.float32), "w")
@@ -124,15 +139,11 @@ def _red_detector_onnx(path):
         [helper.make_tensor_value_info("p", TensorProto.FLOAT, [1, 1, 64, 64])],
         initializer=[w, b],
     )
-    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 13)])
-    model.ir_version = 8
-    onnx.save(model, str(path))
-    return path
+    return _save_onnx(graph, path)
 
 
 def test_onnx_segmenter_runs_a_local_model(tmp_path, synthetic):
-    pytest.importorskip("onnxruntime", reason="onnxruntime is not installed (optional dependency)")
-    pytest.importorskip("onnx", reason="the onnx package is needed to build the test model")
+    _needs_onnx()
     frames, masks = synthetic
     model = _red_detector_onnx(tmp_path / "red.onnx")
     seg = (
@@ -157,7 +168,6 @@ def _box_prompted_onnx(path, extra_input: str | None = None):
     (1, 1, 2) with its label (1, 1), in input pixels; mask logits (1, 1, 64, 64) positive inside
     the box: min(x - x0, x1 - x, y - y0, y1 - y). The image and the point are used only to show
     they arrive (times zero)."""
-    import onnx
     from onnx import TensorProto, helper, numpy_helper
 
     yy, xx = np.mgrid[0:64, 0:64].astype(np.float32) + 0.5
@@ -196,15 +206,11 @@ def _box_prompted_onnx(path, extra_input: str | None = None):
         [helper.make_tensor_value_info("logits", TensorProto.FLOAT, [1, 1, 64, 64])],
         initializer=init,
     )
-    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 13)])
-    model.ir_version = 8
-    onnx.save(model, str(path))
-    return path
+    return _save_onnx(graph, path)
 
 
 def test_onnx_segmenter_feeds_box_and_point_prompts(tmp_path, synthetic):
-    pytest.importorskip("onnxruntime", reason="onnxruntime is not installed (optional dependency)")
-    pytest.importorskip("onnx", reason="the onnx package is needed to build the test model")
+    _needs_onnx()
     frames = synthetic[0]  # 96 x 128: the 64 x 64 model sees x scaled by 1/2, y by 2/3
     create = get_registry().get("segmenter", "onnx").create
     seg = create(model=_box_prompted_onnx(tmp_path / "p.onnx"), normalize=False, prompt_margin=0.0)

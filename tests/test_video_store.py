@@ -14,7 +14,8 @@ from video_helpers import iou, moving_object_video
 
 from zooctl.errors import AlreadyExistsError, InputError, NotFoundError
 from zooctl.io.video import probe_codec, write_mp4
-from zooctl.store.videos import VideoStore, describe_h5
+from zooctl.store.h5 import describe_h5
+from zooctl.store.videos import VideoStore
 from zooctl.video.ingest import AddOptions, add_video
 
 SCHEMAS = Path(__file__).resolve().parents[1] / "schemas"

@@ -128,6 +128,12 @@ _REFS = [
 ]
 
 
+def _bad_first_value(text: str, rng, prefix: str, value: str, choices: list[str]) -> str:
+    """``text`` with the first value (regex ``value``) after the literal ``prefix`` replaced by one
+    of ``choices`` (picked only when there is one to replace)."""
+    return re.sub(re.escape(prefix) + value, lambda m: prefix + _pick(rng, choices), text, count=1)
+
+
 def _pick(rng, items):
     return items[int(rng.integers(len(items)))]
 
@@ -437,19 +443,9 @@ def _usd_mutation(rng, text: str, folder: Path) -> tuple[str, str]:
     elif kind == "values":
         op = _pick(rng, ["nan_point", "index", "element_size", "tcps", "weights"])
         if op == "nan_point":
-            text = re.sub(
-                r"point3f\[\] points = \[\(([^,]*),",
-                lambda m: f"point3f[] points = [({_pick(rng, ['nan', 'inf', '1e30'])},",
-                text,
-                count=1,
-            )
+            text = _bad_first_value(text, rng, "point3f[] points = [(", r"[^,]*", ["nan", "inf", "1e30"])
         elif op == "index":
-            text = re.sub(
-                r"faceVertexIndices = \[(\d+)",
-                lambda m: f"faceVertexIndices = [{_pick(rng, ['-1', '99999', '4'])}",
-                text,
-                count=1,
-            )
+            text = _bad_first_value(text, rng, "faceVertexIndices = [", r"\d+", ["-1", "99999", "4"])
         elif op == "element_size":
             text = text.replace(
                 "elementSize = ", f"elementSize = {_pick(rng, ['0', '7', '-1', '100'])}  # ", 1
@@ -459,12 +455,7 @@ def _usd_mutation(rng, text: str, folder: Path) -> tuple[str, str]:
                 "timeCodesPerSecond = ", f"timeCodesPerSecond = {_pick(rng, ['0', '-1', '1e-9'])}  # ", 1
             )
         else:
-            text = re.sub(
-                r"jointWeights = \[([^,\]]*)",
-                lambda m: f"jointWeights = [{_pick(rng, ['nan', '-1', '0', '1e38'])}",
-                text,
-                count=1,
-            )
+            text = _bad_first_value(text, rng, "jointWeights = [", r"[^,\]]*", ["nan", "-1", "0", "1e38"])
     elif kind == "time":
         keys = re.findall(r"^\s+(\d+): \[", text, flags=re.M)
         if keys:

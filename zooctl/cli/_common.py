@@ -5,7 +5,7 @@ from __future__ import annotations
 import contextlib
 import json
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -141,6 +141,43 @@ def print_repair(report: dict[str, Any], items: str) -> None:
             highlight=False,
             markup=False,
         )
+
+
+def add_rm_command(app: typer.Typer, open_store: Callable[[], Any], help: str, names_help: str) -> None:
+    """Add `rm NAMES...` of a name-keyed store (``open_store()``) to ``app``."""
+
+    def rm(names: list[str] = typer.Argument(..., help=names_help)) -> None:
+        store = open_store()
+        for n in names:
+            store.remove(n)
+            console.print(f"removed {n}", highlight=False, markup=False)
+
+    app.command("rm", help=help)(rm)
+
+
+def add_upkeep_commands(
+    app: typer.Typer, open_store: Callable[[], Any], items: str, clean_help: str, repair_help: str
+) -> None:
+    """Add `clean` and `repair` of an indexed store (`zooctl.store.indexed.IndexedStore`, from
+    ``open_store()``) to ``app``; ``items`` names what it holds in the output ("assets")."""
+
+    def clean(json_out: bool = JsonOpt) -> None:
+        store = open_store()
+        report = store.cleanup()
+        if json_out:
+            print_json(report)
+        else:
+            print_clean(report, store.noun, store.repair_cmd)
+
+    def repair(json_out: bool = JsonOpt) -> None:
+        report = open_store().repair()
+        if json_out:
+            print_json(report)
+        else:
+            print_repair(report, items)
+
+    app.command("clean", help=clean_help)(clean)
+    app.command("repair", help=repair_help)(repair)
 
 
 def print_clean(report: dict[str, Any], noun: str, repair_cmd: str) -> None:

@@ -9,11 +9,11 @@ import typer
 from . import batch_opts
 from ._common import (
     JsonOpt,
+    add_rm_command,
+    add_upkeep_commands,
     console,
     err_console,
-    print_clean,
     print_json,
-    print_repair,
     print_skipped,
     print_table,
     stage_progress,
@@ -31,7 +31,17 @@ def _bank():
     return Bank.open(store_root())
 
 
+def _limit_option(key: str, refuse: str):
+    """A `bank add --max-*` option: None keeps the import limit ``key`` of `zooctl.limits`."""
+    from ..limits import DEFAULT, OPTION
+
+    return typer.Option(
+        None, OPTION[key], help=f"{refuse} (default: {getattr(DEFAULT, key):.0f}).", show_default=False
+    )
+
+
 @app.command("add")
+@batch_opts.with_batch_options
 def add(
     paths: list[Path] = typer.Argument(
         ..., help="Model files to import (.glb, .gltf, and whatever plugins add)."
@@ -49,36 +59,16 @@ def add(
         "`bank reindex --missing` adds them later.",
         show_default=False,
     ),
-    max_clip_seconds: float = typer.Option(
-        None,
-        "--max-clip-seconds",
-        help="Refuse a clip longer than this many seconds (default: 600).",
-        show_default=False,
+    max_clip_seconds: float = _limit_option(
+        "max_clip_seconds", "Refuse a clip longer than this many seconds"
     ),
-    max_frames: int = typer.Option(
-        None,
-        "--max-frames",
-        help="Refuse an asset whose clips have more frames in all (default: 100000).",
-        show_default=False,
-    ),
-    max_vertices: int = typer.Option(
-        None,
-        "--max-vertices",
-        help="Refuse an asset with more vertices (default: 500000).",
-        show_default=False,
-    ),
-    max_elements: int = typer.Option(
-        None,
-        "--max-elements",
-        help="Refuse larger arrays: one glTF accessor, or frames x joints of all clips (default: 5000000).",
-        show_default=False,
+    max_frames: int = _limit_option("max_frames", "Refuse an asset whose clips have more frames in all"),
+    max_vertices: int = _limit_option("max_vertices", "Refuse an asset with more vertices"),
+    max_elements: int = _limit_option(
+        "max_elements", "Refuse larger arrays: one glTF accessor, or frames x joints of all clips"
     ),
     json_out: bool = JsonOpt,
-    executor: str = batch_opts.ExecutorOpt,
-    jobs: int = batch_opts.JobsOpt,
-    address: str = batch_opts.AddressOpt,
-    cpus_per_task: float = batch_opts.CpusOpt,
-    gpus_per_task: float = batch_opts.GpusOpt,
+    batch: batch_opts.BatchOptions = batch_opts.BatchOpts,
     resume: bool = typer.Option(
         False, "--resume", help="Skip files whose asset (and views) the bank holds already (runs as a batch)."
     ),
@@ -99,13 +89,12 @@ def add(
         max_vertices=max_vertices,
         max_elements=max_elements,
     )
-    if executor is not None or resume:  # a batch: import and views in workers, stored here
+    if batch.executor is not None or resume:  # a batch: import and views in workers, stored here
         from .bank_batch import add_many
 
         opts = dict(name=name, tags=tag, license=license, replace=replace, views=views, resume=resume)
-        run = dict(executor=executor, jobs=jobs, address=address, cpus=cpus_per_task, gpus=gpus_per_task)
         limits_with(**limits)  # a bad value is one error here; the workers apply them
-        return add_many(paths, json_out=json_out, limits=limits, **opts, **run)
+        return add_many(paths, json_out=json_out, limits=limits, batch=batch, **opts)
 
     with import_limits(**limits), stage_progress(not json_out and len(paths) > 1) as progress:
         results = add_files(
@@ -227,13 +216,7 @@ def show(name: str = typer.Argument(..., help="Asset name."), json_out: bool = J
     console.print(tree)
 
 
-@app.command("rm")
-def rm(names: list[str] = typer.Argument(..., help="Asset names to remove.")) -> None:
-    """Remove assets from the bank."""
-    bank = _bank()
-    for n in names:
-        bank.remove(n)
-        console.print(f"removed {n}", highlight=False, markup=False)
+add_rm_command(app, _bank, "Remove assets from the bank.", "Asset names to remove.")
 
 
 @app.command("migrate")
@@ -251,30 +234,19 @@ def migrate(json_out: bool = JsonOpt) -> None:
         print_skipped(report["skipped"], "left as they are")
 
 
-@app.command("clean")
-def clean(json_out: bool = JsonOpt) -> None:
-    """Remove leftovers of killed writers (temporary files; cards and views of removed assets).
+add_upkeep_commands(
+    app,
+    _bank,
+    "assets",
+    clean_help="""Remove leftovers of killed writers (temporary files; cards and views of removed assets).
 
-    Never deletes an asset file: ones the index does not name are listed (`zooctl bank repair`
-    indexes the valid ones)."""
-    report = _bank().cleanup()
-    if json_out:
-        print_json(report)
-    else:
-        print_clean(report, "asset", "zooctl bank repair")
+Never deletes an asset file: ones the index does not name are listed (`zooctl bank repair`
+indexes the valid ones).""",
+    repair_help="""Rebuild the bank index from the asset files (after it was lost or damaged).
 
-
-@app.command("repair")
-def repair(json_out: bool = JsonOpt) -> None:
-    """Rebuild the bank index from the asset files (after it was lost or damaged).
-
-    Every valid asset file is indexed (its retrieval views too, when their sidecar is intact);
-    invalid files are listed with the reason and left where they are. Missing cards are rewritten."""
-    report = _bank().repair()
-    if json_out:
-        print_json(report)
-    else:
-        print_repair(report, "assets")
+Every valid asset file is indexed (its retrieval views too, when their sidecar is intact);
+invalid files are listed with the reason and left where they are. Missing cards are rewritten.""",
+)
 
 
 from . import bank_export, bank_preview, bank_seed  # noqa: E402  (one module per command)

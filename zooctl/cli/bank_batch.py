@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ._common import store_root
-from .batch_opts import make_executor, report_batch, run_cli_batch
+from .batch_opts import BatchOptions, report_batch, run_cli_batch
 
 
 def _row(r) -> list[str]:
@@ -26,11 +26,7 @@ def add_many(
     views: bool | None,
     resume: bool,
     json_out: bool,
-    executor: str,
-    jobs: int | None,
-    address: str | None,
-    cpus: float,
-    gpus: float | None,
+    batch: BatchOptions,
     device: str = "cpu",
     limits: dict | None = None,
 ) -> None:
@@ -41,7 +37,7 @@ def add_many(
     bank = Bank.open(store_root())
     views = _views_default() if views is None else views
     items = plan_add(bank, paths, name, tags, license, replace, views, resume, device, limits)
-    ex = make_executor(executor, jobs, address, cpus, gpus, device)
+    ex = batch.make_executor(device)
     report = run_cli_batch(ex, bank_task, items, commit_bank, skip_stored if resume else None, json_out)
     report_batch(report, json_out, "assets", _COLS, _row)
 
@@ -54,16 +50,12 @@ def reindex_many(
     device: str,
     *,
     json_out: bool,
-    executor: str,
-    jobs: int | None,
-    address: str | None,
-    cpus: float,
-    gpus: float | None,
+    batch: BatchOptions,
 ) -> None:
     from ..pipelines.batch_bank import bank_task, commit_bank, plan_reindex
     from ..store.bank import Bank
 
     items = plan_reindex(Bank.open(store_root()), names, embedders, n_views, size, device)
-    ex = make_executor(executor, jobs, address, cpus, gpus, device)
+    ex = batch.make_executor(device)
     report = run_cli_batch(ex, bank_task, items, commit_bank, None, json_out)
     report_batch(report, json_out, "assets", _COLS, _row)

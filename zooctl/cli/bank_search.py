@@ -88,6 +88,7 @@ def search(
         console.print(f"gallery: {gallery}", highlight=False, markup=False)
 
 
+@batch_opts.with_batch_options
 def reindex(
     names: list[str] = typer.Argument(None, help="Assets to re-render (default: every asset)."),
     embedder: list[str] = typer.Option(
@@ -103,11 +104,7 @@ def reindex(
     ),
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     json_out: bool = JsonOpt,
-    executor: str = batch_opts.ExecutorOpt,
-    jobs: int = batch_opts.JobsOpt,
-    address: str = batch_opts.AddressOpt,
-    cpus_per_task: float = batch_opts.CpusOpt,
-    gpus_per_task: float = batch_opts.GpusOpt,
+    batch: batch_opts.BatchOptions = batch_opts.BatchOpts,
 ) -> None:
     """Render and embed the retrieval views of bank assets (done by `bank add` for new ones)."""
     from rich.markup import escape
@@ -121,11 +118,10 @@ def reindex(
     if missing:
         have = views_entries(bank)
         targets = [n for n in targets if n not in have or not set(embs) <= set(have[n].get("embedders", {}))]
-    if executor is not None:  # a batch: render and embed in workers, stored here
+    if batch.executor is not None:  # a batch: render and embed in workers, stored here
         from .bank_batch import reindex_many
 
-        run = dict(executor=executor, jobs=jobs, address=address, cpus=cpus_per_task, gpus=gpus_per_task)
-        return reindex_many(targets, embs, views, size, device, json_out=json_out, **run)
+        return reindex_many(targets, embs, views, size, device, json_out=json_out, batch=batch)
     report, failed = [], []
     for n in targets:
         try:

@@ -6,7 +6,10 @@ a report into lines and an exit code.
 
 from __future__ import annotations
 
+import functools
+import inspect
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import typer
@@ -33,19 +36,64 @@ GpusOpt = typer.Option(
 )
 
 
-def make_executor(
-    name: str | None,
-    jobs: int | None,
-    address: str | None,
-    cpus: float,
-    gpus: float | None,
-    device: str | None,
-):
-    from ..executors import get_executor
+@dataclass(frozen=True)
+class BatchOptions:
+    """What a batch command's executor options say (`with_batch_options` fills it in)."""
 
-    if gpus is None:
-        gpus = 1.0 if (device or "cpu").startswith("cuda") else 0.0
-    return get_executor(name or "local", jobs=jobs, address=address, cpus_per_task=cpus, gpus_per_task=gpus)
+    executor: str | None = None
+    jobs: int | None = None
+    address: str | None = None
+    cpus: float = 1.0
+    gpus: float | None = None
+
+    def make_executor(self, device: str | None):
+        """The executor these options name (default local); --gpus-per-task defaults to 1 on CUDA."""
+        from ..executors import get_executor
+
+        gpus = self.gpus
+        if gpus is None:
+            gpus = 1.0 if (device or "cpu").startswith("cuda") else 0.0
+        return get_executor(
+            self.executor or "local",
+            jobs=self.jobs,
+            address=self.address,
+            cpus_per_task=self.cpus,
+            gpus_per_task=gpus,
+        )
+
+
+# The default of a command's ``batch: BatchOptions`` parameter: `with_batch_options` puts the
+# options below in its place (same order in --help) and passes the command one `BatchOptions`.
+BatchOpts: Any = object()
+
+_OPTIONS = (  # (parameter, type, option, BatchOptions field)
+    ("executor", str, ExecutorOpt, "executor"),
+    ("jobs", int, JobsOpt, "jobs"),
+    ("address", str, AddressOpt, "address"),
+    ("cpus_per_task", float, CpusOpt, "cpus"),
+    ("gpus_per_task", float, GpusOpt, "gpus"),
+)
+
+
+def with_batch_options(command: Callable[..., Any]) -> Callable[..., Any]:
+    """Give a Typer command the executor options: its ``batch`` parameter (default `BatchOpts`)
+    becomes --executor, --jobs, --address, --cpus-per-task and --gpus-per-task."""
+    sig = inspect.signature(command, eval_str=True)
+    params: list[inspect.Parameter] = []
+    for p in sig.parameters.values():
+        if p.default is BatchOpts:
+            params += [inspect.Parameter(n, p.kind, default=opt, annotation=t) for n, t, opt, _ in _OPTIONS]
+        else:
+            params.append(p)
+
+    @functools.wraps(command)
+    def run(**kwargs: Any) -> Any:
+        batch = BatchOptions(**{field: kwargs.pop(n) for n, _, _, field in _OPTIONS})
+        return command(**kwargs, batch=batch)
+
+    run.__signature__ = sig.replace(parameters=params)  # type: ignore[attr-defined]
+    run.__annotations__ = {p.name: p.annotation for p in params}
+    return run
 
 
 class RichBatchProgress(Progress):

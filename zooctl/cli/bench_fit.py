@@ -51,6 +51,7 @@ def make(
         console.print(f"made {dest}", highlight=False, markup=False)
 
 
+@batch_opts.with_batch_options
 def run(
     folder: Path = typer.Argument(..., help="Folder made by `zooctl bench make`."),
     preset_name: str = typer.Option("fast", "--preset", help="fast or quality."),
@@ -77,11 +78,7 @@ def run(
     articulation: str = ArticulationOpt,
     report: Path = typer.Option(None, "--report", help="Also write the markdown table here."),
     json_out: bool = JsonOpt,
-    executor: str = batch_opts.ExecutorOpt,
-    jobs: int = batch_opts.JobsOpt,
-    address: str = batch_opts.AddressOpt,
-    cpus_per_task: float = batch_opts.CpusOpt,
-    gpus_per_task: float = batch_opts.GpusOpt,
+    batch: batch_opts.BatchOptions = batch_opts.BatchOpts,
     resume: bool = typer.Option(
         False, "--resume", help="Keep the fits a previous run of this benchmark finished (runs as a batch)."
     ),
@@ -108,8 +105,8 @@ def run(
         own_template=own_template,
         overrides=component_overrides(renderer, articulation),
     )
-    if executor is not None or resume:  # a batch: each fit one task
-        ex = batch_opts.make_executor(executor, jobs, address, cpus_per_task, gpus_per_task, None)
+    if batch.executor is not None or resume:  # a batch: each fit one task
+        ex = batch.make_executor(None)
         from ..pipelines.batch import BatchInterrupted
 
         try:
@@ -130,7 +127,7 @@ def run(
     else:
         console.file.write(table)
     failed = [r for r in res["rows"] if "error" in r]
-    if failed and (executor is not None or resume):
+    if failed and (batch.executor is not None or resume):
         from ..errors import UsageError
 
         raise UsageError(

@@ -49,6 +49,7 @@ class RichReporter:
         self.progress.console.print(f"[dim]{text}[/]", highlight=False)
 
 
+@batch_opts.with_batch_options
 def fit(
     videos: list[str] = typer.Argument(
         ...,
@@ -105,11 +106,7 @@ def fit(
     json_out: bool = typer.Option(
         False, "--json", help="Print the fit record (a batch: its report) as JSON."
     ),
-    executor: str = batch_opts.ExecutorOpt,
-    jobs: int = batch_opts.JobsOpt,
-    address: str = batch_opts.AddressOpt,
-    cpus_per_task: float = batch_opts.CpusOpt,
-    gpus_per_task: float = batch_opts.GpusOpt,
+    batch: batch_opts.BatchOptions = batch_opts.BatchOpts,
 ) -> None:
     """Fit a rigged template to a video (CASA): camera search, global placement, articulation."""
     from rich.markup import escape
@@ -136,10 +133,9 @@ def fit(
     if max_frames is not None:
         cfg.max_frames = max_frames
     cfg.validate()
-    if fit_batch.wants_batch(videos, executor):
+    if fit_batch.wants_batch(videos, batch.executor):
         opts = dict(template=template, masks=masks, box=box, out=out, name=name, cameras=cameras)
-        batch = dict(executor=executor, jobs=jobs, address=address, cpus=cpus_per_task, gpus=gpus_per_task)
-        return fit_batch.fit_many(videos, cfg, resume=resume, json_out=json_out, **opts, **batch)
+        return fit_batch.fit_many(videos, cfg, resume=resume, json_out=json_out, batch=batch, **opts)
     video = videos[0]
     with RichReporter() as rep:
         rec = fit_job(

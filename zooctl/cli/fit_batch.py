@@ -7,7 +7,7 @@ from pathlib import Path
 from ..errors import UsageError
 from ..fit.config import FitConfig
 from ._common import store_root
-from .batch_opts import make_executor, report_batch, run_cli_batch
+from .batch_opts import BatchOptions, report_batch, run_cli_batch
 
 
 def wants_batch(videos: list[str], executor: str | None) -> bool:
@@ -28,11 +28,7 @@ def fit_many(
     cameras: str | None,
     resume: bool,
     json_out: bool,
-    executor: str | None,
-    jobs: int | None,
-    address: str | None,
-    cpus: float,
-    gpus: float | None,
+    batch: BatchOptions,
 ) -> None:
     from ..pipelines.batch_fit import (
         commit_fit,
@@ -58,7 +54,7 @@ def fit_many(
     )
     if template is None:
         refresh_search_packs(store_root())
-    ex = make_executor(executor, jobs, address, cpus, gpus, cfg.device)
+    ex = batch.make_executor(cfg.device)
     report = run_cli_batch(ex, fit_task, items, commit_fit, skip_finished if resume else None, json_out)
 
     def row(r):

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import typer
 
+from . import _common
 from ._common import JsonOpt, console, print_json, print_table, stage_progress, store_root
 
 app = typer.Typer(
@@ -224,13 +225,7 @@ def show(
         console.print(f"preview written to {preview}", highlight=False, markup=False)
 
 
-@app.command("rm")
-def rm(names: list[str] = typer.Argument(..., help="Video names to remove.")) -> None:
-    """Remove stored videos."""
-    store = _store()
-    for n in names:
-        store.remove(n)
-        console.print(f"removed {n}", highlight=False, markup=False)
+_common.add_rm_command(app, _store, "Remove stored videos.", "Video names to remove.")
 
 
 @app.command("export")
@@ -250,30 +245,15 @@ def export(
         console.print(f"wrote {written} files to {out}", highlight=False, markup=False)
 
 
-@app.command("clean")
-def clean(json_out: bool = JsonOpt) -> None:
-    """Remove leftovers of killed writers (temporary files, caches of removed videos).
+_common.add_upkeep_commands(
+    app,
+    _store,
+    "videos",
+    clean_help="""Remove leftovers of killed writers (temporary files, caches of removed videos).
 
-    Never deletes a video file: ones the index does not name are listed (`zooctl video repair`
-    indexes the valid ones)."""
-    from ._common import print_clean
+Never deletes a video file: ones the index does not name are listed (`zooctl video repair`
+indexes the valid ones).""",
+    repair_help="""Rebuild the video index from the video files (after it was lost or damaged).
 
-    report = _store().cleanup()
-    if json_out:
-        print_json(report)
-    else:
-        print_clean(report, "video", "zooctl video repair")
-
-
-@app.command("repair")
-def repair(json_out: bool = JsonOpt) -> None:
-    """Rebuild the video index from the video files (after it was lost or damaged).
-
-    Every valid video file is indexed; invalid ones are listed with the reason and left in place."""
-    from ._common import print_repair
-
-    report = _store().repair()
-    if json_out:
-        print_json(report)
-    else:
-        print_repair(report, "videos")
+Every valid video file is indexed; invalid ones are listed with the reason and left in place.""",
+)

@@ -14,6 +14,7 @@ Failure semantics every executor follows:
 
 from __future__ import annotations
 
+import math
 import os
 import socket
 from collections.abc import Callable, Iterator
@@ -73,6 +74,25 @@ class Executor(Protocol):
         ...
 
     def close(self) -> None: ...
+
+
+class ExecutorBase:
+    """What every executor keeps of its `ExecutorOptions`: the size of the pool it asks for, the
+    torch threads and environment of each task, and how often a crashed task is retried."""
+
+    def __init__(
+        self,
+        jobs: int | None = None,
+        address: str | None = None,
+        cpus_per_task: float = 1.0,
+        gpus_per_task: float = 0.0,
+        retries: int = 2,
+        env: dict[str, str] | None = None,
+    ) -> None:
+        self.jobs, self.address = jobs, address
+        self.cpus, self.gpus, self.retries = cpus_per_task, gpus_per_task, retries
+        self.threads = max(1, math.floor(cpus_per_task))
+        self.env = {**task_env(), **(env or {})}
 
 
 def where() -> str:

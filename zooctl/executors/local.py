@@ -9,7 +9,6 @@ event counting as an attempt of every task that was in flight.
 
 from __future__ import annotations
 
-import math
 import multiprocessing
 from collections.abc import Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -17,7 +16,7 @@ from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 from ..errors import UsageError
-from .base import StageCallback, Task, TaskOutcome, call_task, crashed, finished, retry_or_fail, task_env
+from .base import ExecutorBase, StageCallback, Task, TaskOutcome, call_task, crashed, finished, retry_or_fail
 
 _STAGES: Any = None  # the worker's end of the driver's stage queue (set by _init_worker)
 
@@ -41,24 +40,15 @@ def _pool_task(fn: Task, item: Any, index: int, env: dict[str, str], threads: in
     return call_task(fn, item, _report_to_queue(index), env, threads)
 
 
-class LocalExecutor:
+class LocalExecutor(ExecutorBase):
     name = "local"
 
-    def __init__(
-        self,
-        jobs: int | None = None,
-        address: str | None = None,
-        cpus_per_task: float = 1.0,
-        gpus_per_task: float = 0.0,
-        retries: int = 2,
-        env: dict[str, str] | None = None,
-    ) -> None:
-        if address:
+    def __init__(self, **options: Any) -> None:
+        """Takes the `ExecutorOptions` fields; ``address`` is refused (no cluster here)."""
+        super().__init__(**options)
+        if self.address:
             raise UsageError("--address is for a cluster executor", hint="use --executor ray --address ...")
-        self.slots = jobs or 1
-        self.threads = max(1, math.floor(cpus_per_task))
-        self.retries = retries
-        self.env = {**task_env(), **(env or {})}
+        self.slots = self.jobs or 1
         self._pool: ProcessPoolExecutor | None = None
 
     # -- sequential ----------------------------------------------------------------------

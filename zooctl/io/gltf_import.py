@@ -565,11 +565,8 @@ def _load(path: Path, name: str, fps: float) -> RiggedAsset:
     _check_invertible(path, world[np.array(order)[free]], [names[k] for k in free], "the rest transform")
     ibm[free] = np.linalg.inv(world[np.array(order)[free]])
 
-    verts, faces, sj, sw, cols, uvs, tex_ids = [], [], [], [], [], [], []
+    parts = _MeshParts(path, doc)
     warnings: list[str] = []
-    offset = 0
-    meshes = doc.get("meshes")
-    materials = doc.get("materials")
     per_skin: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     for node_i, node in skinned:
         s = doc.index(node["skin"], "skins", f"node {node_i}")
@@ -581,12 +578,7 @@ def _load(path: Path, name: str, fps: float) -> RiggedAsset:
                 raise InputError(f"{path}: skins {first} and {s} bind the same joints inconsistently")
             per_skin[s] = skin_joints, fix[0]
         skin_joints, M = per_skin[s]
-        for prim in _mesh(doc, meshes, node["mesh"]):
-            got = _primitive(doc, prim, materials)
-            if got is None:
-                continue
-            v, f, col, uv, tex = got
-            check_limit(f"{path}: the meshes have", offset + len(v), "max_vertices", " vertices")
+        for prim, (v, f, col, uv, tex) in parts.primitives(node["mesh"]):
             attrs = prim["attributes"]
             if "JOINTS_0" not in attrs or "WEIGHTS_0" not in attrs:
                 raise InputError(
@@ -611,14 +603,7 @@ def _load(path: Path, name: str, fps: float) -> RiggedAsset:
             jj = skin_joints[np.clip(jj, 0, len(skin_joints) - 1)]
             if not np.allclose(M, np.eye(4), atol=1e-6):
                 v = v @ M[:3, :3].T + M[:3, 3]
-            verts.append(v)
-            faces.append(f + offset)
-            sj.append(jj)
-            sw.append(ww)
-            cols.append(col)
-            uvs.append(uv)
-            tex_ids.append(tex)
-            offset += v.shape[0]
+            parts.add(v, f, jj, ww, col, uv, tex)
 
     # Rigid attachments: unskinned meshes under a joint follow that joint with weight 1.
     anchor, below = _joint_anchors(parent, node_to_joint, rest_m)
@@ -627,27 +612,16 @@ def _load(path: Path, name: str, fps: float) -> RiggedAsset:
             continue
         jj_i = node_to_joint[int(anchor[i])]
         to_bind = np.linalg.inv(ibm[jj_i]) @ below[i]
-        for prim in _mesh(doc, meshes, node["mesh"]):
-            got = _primitive(doc, prim, materials)
-            if got is None:
-                continue
-            v, f, col, uv, tex = got
-            check_limit(f"{path}: the meshes have", offset + len(v), "max_vertices", " vertices")
+        for _, (v, f, col, uv, tex) in parts.primitives(node["mesh"]):
             v = v @ to_bind[:3, :3].T + to_bind[:3, 3]
-            verts.append(v)
-            faces.append(f + offset)
-            sj.append(np.full((v.shape[0], 1), jj_i, dtype=np.int64))
-            sw.append(np.ones((v.shape[0], 1)))
-            cols.append(col)
-            uvs.append(uv)
-            tex_ids.append(tex)
-            offset += v.shape[0]
+            n = v.shape[0]
+            parts.add(v, f, np.full((n, 1), jj_i, dtype=np.int64), np.ones((n, 1)), col, uv, tex)
 
-    if not verts:
+    if not parts.verts:
         raise InputError(f"{path}: the skinned meshes have no triangles")
-    K = max(x.shape[1] for x in sj)
-    sj = [np.pad(x, ((0, 0), (0, K - x.shape[1]))) for x in sj]
-    sw = [np.pad(x, ((0, 0), (0, K - x.shape[1]))) for x in sw]
+    K = max(x.shape[1] for x in parts.joints)
+    sj = [np.pad(x, ((0, 0), (0, K - x.shape[1]))) for x in parts.joints]
+    sw = [np.pad(x, ((0, 0), (0, K - x.shape[1]))) for x in parts.weights]
     joints_all = np.concatenate(sj)
     weights_all = np.concatenate(sw)
     total = weights_all.sum(1)
@@ -661,12 +635,12 @@ def _load(path: Path, name: str, fps: float) -> RiggedAsset:
     joints_all, weights_all = joints_all[:, :keep_k], weights_all[:, :keep_k]
     joints_all[weights_all == 0] = 0
 
-    vertex_colors = np.concatenate(cols).astype(np.float32)
+    vertex_colors = np.concatenate(parts.colors).astype(np.float32)
     uv_all = None
     texture = None
-    distinct_tex = {t for t in tex_ids if t is not None}
-    if len(distinct_tex) == 1 and all(u is not None for u in uvs):
-        uv_all = np.concatenate(uvs).astype(np.float32)
+    distinct_tex = {t for t in parts.textures if t is not None}
+    if len(distinct_tex) == 1 and all(u is not None for u in parts.uvs):
+        uv_all = np.concatenate(parts.uvs).astype(np.float32)
         texture = _texture_png(doc, distinct_tex.pop(), warnings)
         if texture is None:
             uv_all = None
@@ -674,8 +648,8 @@ def _load(path: Path, name: str, fps: float) -> RiggedAsset:
     clips = _clips(doc, nodes, node_to_joint, rest, order, fps)
     asset = RiggedAsset(
         name=name,
-        vertices=np.concatenate(verts).astype(np.float32),
-        faces=np.concatenate(faces).astype(np.int32),
+        vertices=np.concatenate(parts.verts).astype(np.float32),
+        faces=np.concatenate(parts.faces).astype(np.int32),
         joint_names=names,
         parents=parents,
         rest_local=rest_local,
@@ -735,6 +709,45 @@ def _repair_unweighted(
         f"{int(dead.sum())} vertices had no valid skin weights; copied from their nearest neighbours"
     )
     return ww
+
+
+class _MeshParts:
+    """The triangle primitives of a skinned asset as they are gathered, vertex indices offset into
+    one mesh: vertices (n, 3), faces (m, 3), skin joints and weights (n, k), colours, uvs, texture."""
+
+    def __init__(self, path: Path, doc: _Doc) -> None:
+        self.path, self.doc = path, doc
+        self.meshes, self.materials = doc.get("meshes"), doc.get("materials")
+        self.verts: list[np.ndarray] = []
+        self.faces: list[np.ndarray] = []
+        self.joints: list[np.ndarray] = []
+        self.weights: list[np.ndarray] = []
+        self.colors: list[np.ndarray] = []
+        self.uvs: list[np.ndarray | None] = []
+        self.textures: list[Any] = []
+        self.offset = 0
+
+    def primitives(self, mesh_index: Any):
+        """(primitive, (v, f, col, uv, tex)) for each triangle primitive of mesh ``mesh_index``,
+        checked against the vertex limit before it is used."""
+        for prim in _mesh(self.doc, self.meshes, mesh_index):
+            got = _primitive(self.doc, prim, self.materials)
+            if got is None:
+                continue
+            check_limit(
+                f"{self.path}: the meshes have", self.offset + len(got[0]), "max_vertices", " vertices"
+            )
+            yield prim, got
+
+    def add(self, v, f, joints, weights, col, uv, tex) -> None:
+        self.verts.append(v)
+        self.faces.append(f + self.offset)
+        self.joints.append(joints)
+        self.weights.append(weights)
+        self.colors.append(col)
+        self.uvs.append(uv)
+        self.textures.append(tex)
+        self.offset += v.shape[0]
 
 
 def _mesh(doc: _Doc, meshes: list[dict[str, Any]], mi: Any) -> list[dict[str, Any]]:

@@ -256,35 +256,33 @@ class FlowRenderer(nn.Module):
         camera_next: Camera | None = None,
     ) -> dict[str, Tensor]:
         frags = rasterize(vertices, faces, camera)
-        B, H, W = frags.face_ids.shape
-        cam1 = (camera if camera_next is None else camera_next).expand(B)
+        cam1 = (camera if camera_next is None else camera_next).expand(frags.face_ids.shape[0])
         # Interpolate the 3D camera-frame points at t+1, then project (exact for per-face affine motion).
         pts1 = interpolate(cam1.to_camera(vertices_next), faces, frags)  # (B, H, W, 3)
-        fid = frags.face_ids.reshape(-1)
-        if (
-            _kernels.kernel_for("flow_project_forward", pts1, cam1.intrinsics, indices=(fid,)) is not None
-            and cam1.intrinsics.dtype == pts1.dtype
-        ):
-            flow = _FlowProjectKernel.apply(pts1.reshape(-1, 3), cam1.intrinsics, fid, H, W).view(B, H, W, 2)
-            return {
-                "flow": flow,
-                "mask": frags.mask,
-                "depth": frags.depth,
-                "face_ids": frags.face_ids,
-                "bary": frags.bary,
-            }
-        k = cam1.intrinsics[:, None, None, :]
-        z = pts1[..., 2]
-        zs = torch.where(frags.mask, z, torch.ones_like(z))
-        uv1 = pts1[..., :2] / zs[..., None] * k[..., :2] + k[..., 2:]
-        cols = torch.arange(W, dtype=uv1.dtype, device=uv1.device) + 0.5
-        rows = torch.arange(H, dtype=uv1.dtype, device=uv1.device) + 0.5
-        grid = torch.stack(torch.broadcast_tensors(cols[None, :], rows[:, None]), -1)
-        flow = torch.where(frags.mask[..., None], uv1 - grid, torch.zeros_like(uv1))
         return {
-            "flow": flow,
+            "flow": _project_flow(pts1, cam1, frags),
             "mask": frags.mask,
             "depth": frags.depth,
             "face_ids": frags.face_ids,
             "bary": frags.bary,
         }
+
+
+def _project_flow(pts1: Tensor, cam1: Camera, frags: Fragments) -> Tensor:
+    """Flow (B, H, W, 2) from each pixel's centre to the projection of its point at t+1 ``pts1``
+    (B, H, W, 3) through ``cam1``; zero on background. The C++ kernel where it applies."""
+    B, H, W = frags.face_ids.shape
+    fid = frags.face_ids.reshape(-1)
+    if (
+        _kernels.kernel_for("flow_project_forward", pts1, cam1.intrinsics, indices=(fid,)) is not None
+        and cam1.intrinsics.dtype == pts1.dtype
+    ):
+        return _FlowProjectKernel.apply(pts1.reshape(-1, 3), cam1.intrinsics, fid, H, W).view(B, H, W, 2)
+    k = cam1.intrinsics[:, None, None, :]
+    z = pts1[..., 2]
+    zs = torch.where(frags.mask, z, torch.ones_like(z))
+    uv1 = pts1[..., :2] / zs[..., None] * k[..., :2] + k[..., 2:]
+    cols = torch.arange(W, dtype=uv1.dtype, device=uv1.device) + 0.5
+    rows = torch.arange(H, dtype=uv1.dtype, device=uv1.device) + 0.5
+    grid = torch.stack(torch.broadcast_tensors(cols[None, :], rows[:, None]), -1)
+    return torch.where(frags.mask[..., None], uv1 - grid, torch.zeros_like(uv1))

@@ -10,6 +10,8 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
+from ..geometry import hamilton
+
 Tensor = torch.Tensor
 
 
@@ -29,17 +31,7 @@ def quat_normalize(q: Tensor, eps: float = 1e-12) -> Tensor:
 
 def quat_mul(a: Tensor, b: Tensor) -> Tensor:
     """Hamilton product a * b of (..., 4) quaternions (broadcasting): rotate by b, then by a."""
-    aw, ax, ay, az = a.unbind(-1)
-    bw, bx, by, bz = b.unbind(-1)
-    return torch.stack(
-        (
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ),
-        -1,
-    )
+    return torch.stack(hamilton(a.unbind(-1), b.unbind(-1)), -1)
 
 
 def quat_conjugate(q: Tensor) -> Tensor:

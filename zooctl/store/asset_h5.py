@@ -33,6 +33,7 @@ import numpy as np
 
 from ..asset import Clip, RiggedAsset
 from ..errors import StoreError
+from .h5 import read_h5
 
 SCHEMA_VERSION = 1
 _STR = h5py.string_dtype("utf-8")
@@ -95,23 +96,15 @@ def fill_asset(f: h5py.File, asset: RiggedAsset) -> None:
 
 
 def read_asset(path: Path) -> RiggedAsset:
-    try:
-        f = h5py.File(path, "r")
-    except (OSError, FileNotFoundError) as exc:
-        raise StoreError(
-            f"asset file {path} is unreadable: {exc}", hint="re-add the asset with --replace"
-        ) from None
-    with f:
-        try:
-            if f.attrs.get("zooctl_kind") != "asset":
-                raise StoreError(f"{path} is not a zooctl asset file", hint="re-add the asset with --replace")
-            _check_version(f, path)
-            return _read(f)
-        except (OSError, KeyError, ValueError, TypeError, AttributeError) as exc:  # damaged inside
-            raise StoreError(
-                f"asset file {path} is damaged: {type(exc).__name__}: {exc}",
-                hint="re-add the asset with --replace",
-            ) from None
+    hint = "re-add the asset with --replace"
+
+    def read(f: h5py.File) -> RiggedAsset:
+        if f.attrs.get("zooctl_kind") != "asset":
+            raise StoreError(f"{path} is not a zooctl asset file", hint=hint)
+        _check_version(f, path)
+        return _read(f)
+
+    return read_h5(path, "asset file", hint, read)
 
 
 def _read(f: h5py.File) -> RiggedAsset:
@@ -193,30 +186,3 @@ def card_of(asset: RiggedAsset) -> dict[str, Any]:
         "skin_influences": int(asset.skin_joints.shape[1]),
         "meta": json.loads(json.dumps(asset.meta, default=str)),
     }
-
-
-def describe_h5(path: Path) -> dict[str, Any]:
-    """The file's layout as JSON (groups, datasets with dtype and shape, attributes): what the
-    schema test validates."""
-
-    def attrs(obj: Any) -> dict[str, Any]:
-        out = {}
-        for k, v in obj.attrs.items():
-            out[k] = v.item() if isinstance(v, np.generic) else (v.decode() if isinstance(v, bytes) else v)
-        return out
-
-    def walk(g: h5py.Group) -> dict[str, Any]:
-        node: dict[str, Any] = {"attrs": attrs(g), "groups": {}, "datasets": {}}
-        for key, obj in g.items():
-            if isinstance(obj, h5py.Group):
-                node["groups"][key] = walk(obj)
-            else:
-                node["datasets"][key] = {
-                    "dtype": obj.dtype.str if obj.dtype.kind != "O" else "str",
-                    "shape": list(obj.shape),
-                    "attrs": attrs(obj),
-                }
-        return node
-
-    with h5py.File(path, "r") as f:
-        return walk(f)

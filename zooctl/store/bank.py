@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..errors import StoreError
 from ..names import check_name
-from .fs import h5_image, publish, store_lock, temp_path, write_bytes_atomic, write_json_atomic, writing
+from .fs import h5_image, store_lock, write_bytes_atomic, write_json_atomic, writing
 from .indexed import INDEX_VERSION, IndexedStore
 
 if TYPE_CHECKING:  # numpy/h5py stay unimported for `bank list` and `bank show`
@@ -43,6 +43,7 @@ class Bank(IndexedStore):
 
     noun, place, list_cmd = "asset", "the bank", "zooctl bank list"
     key, label, repair_cmd = "assets", "bank index", "zooctl bank repair"
+    folder = "bank"
     required = {
         "name": str,
         "vertices": int,
@@ -56,14 +57,11 @@ class Bank(IndexedStore):
         "has_texture": bool,
     }
 
-    def __init__(self, root: str | Path):
-        self.root = Path(root)
-        self.dir = self.root / "bank"
-        self.assets_dir = self.files_dir = self.dir / "assets"
+    @property
+    def files_dir(self) -> Path:
+        return self.dir / "assets"
 
-    @classmethod
-    def open(cls, root: str | Path) -> Bank:
-        return cls(root)
+    assets_dir = files_dir
 
     def check_entry(self, name: str, entry: Any) -> str | None:
         problem = super().check_entry(name, entry)
@@ -133,44 +131,16 @@ class Bank(IndexedStore):
         image = h5_image(lambda f: fill_asset(f, asset), libver="latest")
         summary = asset.summary()
         card = json.dumps(card_of(asset), indent=1).encode()
-        final = self.asset_path(name)
-        tmp = temp_path(final)
-        card_tmp = temp_path(self.card_path(name))
-        try:
-            with writing(f"adding asset {name!r}"):
-                tmp.write_bytes(image)
-                card_tmp.write_bytes(card)
-                with store_lock(self.root):
-                    index = self._read_index()
-                    if not replace and name in index["assets"]:
-                        raise self.exists_error(name)
-                    index["assets"][name] = summary
-                    # The index is checked for room before any file is replaced, so a full disk
-                    # fails here with the bank as it was.
-                    idx_tmp = temp_path(self.index_path)
-                    try:
-                        idx_tmp.write_bytes(_index_bytes(index))
-                        publish(tmp, final)
-                        publish(card_tmp, self.card_path(name))
-                        publish(idx_tmp, self.index_path)
-                    finally:
-                        idx_tmp.unlink(missing_ok=True)
-        finally:
-            tmp.unlink(missing_ok=True)
-            card_tmp.unlink(missing_ok=True)
+        self.publish_item(
+            name, summary, [(self.asset_path(name), image), (self.card_path(name), card)], replace
+        )
         return summary
 
-    def remove(self, name: str) -> None:
-        with store_lock(self.root), writing(f"removing asset {name!r}"):
-            index = self._read_index()
-            if name not in index["assets"]:
-                raise self._not_found(name, index["assets"])
-            del index["assets"][name]
-            write_json_atomic(self.index_path, index)  # the asset is gone once the index says so
-            from .views_h5 import views_path
+    def remove_files(self, name: str) -> None:
+        from .views_h5 import views_path
 
-            for p in (self.asset_path(name), self.card_path(name), views_path(self.root, name)):
-                p.unlink(missing_ok=True)
+        for p in (self.asset_path(name), self.card_path(name), views_path(self.root, name)):
+            p.unlink(missing_ok=True)
 
     def update_summary(self, name: str, **fields: Any) -> None:
         """Change fields of an asset's index entry (tags, license) under the lock."""
@@ -248,7 +218,3 @@ class Bank(IndexedStore):
             "embedders": {e: int(a.shape[1]) for e, a in sv.embeddings.items()},
             "views_id": sv.views_id,
         }
-
-
-def _index_bytes(index: dict[str, Any]) -> bytes:
-    return (json.dumps(index, sort_keys=True, separators=(",", ":")) + "\n").encode()

@@ -30,10 +30,7 @@ class FitStore(NamedStore):
     """The fits of one store root."""
 
     noun, article, place, list_cmd = "fit", "a", "the store", "zooctl fits list"
-
-    def __init__(self, root: str | Path):
-        self.root = Path(root)
-        self.dir = self.root / "fits"
+    folder = "fits"
 
     def path(self, name: str) -> Path:
         return self.dir / check_name(name, "fit name")

@@ -208,9 +208,14 @@ def h5_image(fill: Callable[[Any], None], libver: str | None = None) -> bytes:
     return buf.getvalue()
 
 
+def json_bytes(obj: Any) -> bytes:
+    """How the store writes JSON. No indent: json's C encoder only runs without one (10x faster on
+    a 1,000-asset index)."""
+    return (json.dumps(obj, sort_keys=True, separators=(",", ":")) + "\n").encode()
+
+
 def write_json_atomic(final: Path, obj: Any) -> None:
-    # No indent: json's C encoder only runs without one (10x faster on a 1,000-asset index).
-    write_bytes_atomic(final, (json.dumps(obj, sort_keys=True, separators=(",", ":")) + "\n").encode())
+    write_bytes_atomic(final, json_bytes(obj))
 
 
 def _pid_alive(pid: int) -> bool:

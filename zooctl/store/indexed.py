@@ -1,6 +1,7 @@
 """One base for the name-keyed stores (bank, videos, fits, motion priors) and the index logic that
-the two indexed ones (bank, videos) share: reading and checking ``index.json``, rebuilding it from
-the stored files (`repair`), and cleaning up without ever deleting a stored item.
+the two indexed ones (bank, videos) share: reading and checking ``index.json``, publishing and
+removing an item with its index entry, rebuilding the index from the stored files (`repair`), and
+cleaning up without ever deleting a stored item.
 
 A missing or damaged index is an error naming the repair command, never an empty store: reading it
 as empty once made `clean` delete every stored file and `add` write an index of one. Reads never
@@ -13,13 +14,23 @@ import difflib
 import json
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from ..errors import AlreadyExistsError, NotFoundError, StoreError
 from ..names import check_name
-from .fs import read_regular, remove_stale_temps, store_lock, write_json_atomic, writing
+from .fs import (
+    json_bytes,
+    publish,
+    read_regular,
+    remove_stale_temps,
+    store_lock,
+    temp_path,
+    write_json_atomic,
+    writing,
+)
 
 INDEX_VERSION = 1
+S = TypeVar("S", bound="NamedStore")
 
 
 class NamedStore:
@@ -30,7 +41,15 @@ class NamedStore:
     place = "the store"  # where items live, for messages: "the bank", "the store"
     list_cmd = "zooctl"  # the command that lists them, for hints
     exists_hint = "pass --replace to overwrite it, or --name to choose another name"
-    root: Path
+    folder = "items"  # the store's folder under the root
+
+    def __init__(self, root: str | Path):
+        self.root = Path(root)
+        self.dir = self.root / self.folder
+
+    @classmethod
+    def open(cls: type[S], root: str | Path) -> S:
+        return cls(root)
 
     def names(self) -> list[str]:  # pragma: no cover - every store defines it
         raise NotImplementedError
@@ -57,8 +76,11 @@ class IndexedStore(NamedStore):
     label = "index"  # "bank index"
     repair_cmd = "zooctl repair"
     required: dict[str, type | tuple[type, ...]] = {}
-    dir: Path  # holds index.json
-    files_dir: Path  # holds the <name>.h5 item files
+
+    @property
+    def files_dir(self) -> Path:
+        """The folder of the ``<name>.h5`` item files (`dir` holds index.json)."""
+        return self.dir
 
     @property
     def index_path(self) -> Path:
@@ -155,6 +177,57 @@ class IndexedStore(NamedStore):
         if name not in items:
             raise self._not_found(name, items)
         return items[name]
+
+    # -- writing -------------------------------------------------------------------------------
+    def publish_item(
+        self, name: str, summary: dict[str, Any], files: list[tuple[Path, bytes]], replace: bool
+    ) -> None:
+        """Store an item's ``files`` ((final path, content), the item file first) and its index
+        entry ``summary``, atomically.
+
+        The files are written to temporaries outside the lock (the slow part: concurrent writers
+        proceed in parallel); under it the name is checked again and the index is checked for room
+        before any file is replaced, so a full disk fails with the store as it was. The index is
+        replaced last: the item exists once the index names it."""
+        temps = [temp_path(final) for final, _ in files]
+        try:
+            with writing(f"adding {self.noun} {name!r}"):
+                for tmp, (_, content) in zip(temps, files):
+                    tmp.write_bytes(content)
+                with store_lock(self.root):
+                    index = self._read_index()
+                    if not replace and name in index[self.key]:
+                        raise self.exists_error(name)
+                    index[self.key][name] = summary
+                    idx_tmp = temp_path(self.index_path)
+                    try:
+                        idx_tmp.write_bytes(json_bytes(index))
+                        for tmp, (final, _) in zip(temps, files):
+                            publish(tmp, final)
+                        self.remove_side_data(name)
+                        publish(idx_tmp, self.index_path)
+                    finally:
+                        idx_tmp.unlink(missing_ok=True)
+        finally:
+            for tmp in temps:
+                tmp.unlink(missing_ok=True)
+
+    def remove(self, name: str) -> None:
+        """Remove an item: its index entry first (it is gone once the index says so), then its files."""
+        with store_lock(self.root), writing(f"removing {self.noun} {name!r}"):
+            index = self._read_index()
+            if name not in index[self.key]:
+                raise self._not_found(name, index[self.key])
+            del index[self.key][name]
+            write_json_atomic(self.index_path, index)
+            self.remove_files(name)
+
+    def remove_files(self, name: str) -> None:
+        """Delete what a removed item leaves: its file and side data."""
+        raise NotImplementedError  # pragma: no cover
+
+    def remove_side_data(self, name: str) -> None:
+        """Drop data derived from the item ``name`` when a new one is published under it (caches)."""
 
     # -- repair --------------------------------------------------------------------------------
     def rebuild_entry(

@@ -28,14 +28,7 @@ CONFIG = "config.json"
 class MotionStore(NamedStore):
     noun, article, place, list_cmd = "motion prior", "a", "the store", "zooctl motion list"
     exists_hint = "use --replace or another --name"
-
-    def __init__(self, root: str | Path):
-        self.root = Path(root)
-        self.dir = self.root / "motion"
-
-    @classmethod
-    def open(cls, root: str | Path) -> MotionStore:
-        return cls(root)
+    folder = "motion"
 
     def path(self, name: str) -> Path:
         return self.dir / check_name(name, "motion prior name")

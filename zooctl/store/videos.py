@@ -27,7 +27,8 @@ import numpy as np
 
 from ..errors import StoreError
 from ..names import check_name
-from .fs import h5_image, publish, store_lock, temp_path, write_json_atomic, writing
+from .fs import h5_image, writing
+from .h5 import read_h5
 from .indexed import INDEX_VERSION, IndexedStore
 
 __all__ = ["INDEX_VERSION", "FILE_VERSION", "VideoRecord", "VideoStore"]
@@ -172,23 +173,8 @@ def _fill_video(f: Any, rec: VideoRecord) -> None:
 
 def read_video_h5(path: Path, what: tuple[str, ...] = ("frames", "masks", "flow")) -> VideoRecord:
     """Read a stored video; leave out parts with ``what`` (missing parts come back as empty arrays)."""
-    import h5py
-
-    try:
-        f = h5py.File(path, "r")
-    except OSError as exc:
-        raise StoreError(
-            f"the video file {path} is unreadable: {exc}",
-            hint="remove it with `zooctl video rm` and add it again",
-        ) from None
-    with f:
-        try:
-            return _read_video(f, path, what)
-        except (OSError, KeyError, ValueError, TypeError, AttributeError) as exc:  # damaged inside
-            raise StoreError(
-                f"the video file {path} is damaged: {type(exc).__name__}: {exc}",
-                hint="remove it with `zooctl video rm` and add it again",
-            ) from None
+    hint = "remove it with `zooctl video rm` and add it again"
+    return read_h5(path, "the video file", hint, lambda f: _read_video(f, path, what))
 
 
 def _read_video(f: Any, path: Path, what: tuple[str, ...]) -> VideoRecord:
@@ -214,34 +200,6 @@ def _read_video(f: Any, path: Path, what: tuple[str, ...]) -> VideoRecord:
     )
 
 
-def describe_h5(path: Path) -> dict[str, Any]:
-    """The file's layout as JSON (groups, datasets with dtype and shape, attributes): what the schema test validates."""
-    import h5py
-
-    def attrs(obj: Any) -> dict[str, Any]:
-        return {
-            k: (v.item() if isinstance(v, np.generic) else v.decode() if isinstance(v, bytes) else v)
-            for k, v in obj.attrs.items()
-        }
-
-    def walk(g: Any) -> dict[str, Any]:
-        node: dict[str, Any] = {"attrs": attrs(g), "groups": {}, "datasets": {}}
-        for key, obj in g.items():
-            if isinstance(obj, h5py.Group):
-                node["groups"][key] = walk(obj)
-            else:
-                node["datasets"][key] = {
-                    "dtype": obj.dtype.str,
-                    "shape": list(obj.shape),
-                    "attrs": attrs(obj),
-                    "compression": obj.compression,
-                }
-        return node
-
-    with h5py.File(path, "r") as f:
-        return walk(f)
-
-
 # -- the store -------------------------------------------------------------------------------------
 
 
@@ -250,6 +208,7 @@ class VideoStore(IndexedStore):
 
     noun, article, place, list_cmd = "video", "a", "the store", "zooctl video list"
     key, label, repair_cmd = "videos", "video index", "zooctl video repair"
+    folder = "videos"
     required = {
         "name": str,
         "frames": int,
@@ -264,14 +223,6 @@ class VideoStore(IndexedStore):
         "source": dict,
         "bytes": int,
     }
-
-    def __init__(self, root: str | Path):
-        self.root = Path(root)
-        self.dir = self.files_dir = self.root / "videos"
-
-    @classmethod
-    def open(cls, root: str | Path) -> VideoStore:
-        return cls(root)
 
     def check_entry(self, name: str, entry: Any) -> str | None:
         problem = super().check_entry(name, entry)
@@ -330,39 +281,15 @@ class VideoStore(IndexedStore):
         image = h5_image(lambda f: _fill_video(f, rec))
         summary = rec.summary()
         summary["bytes"] = len(image)
-        final = self.path(name)
-        tmp = temp_path(final)
-        try:
-            with writing(f"adding video {name!r}"):
-                tmp.write_bytes(image)
-                with store_lock(self.root):
-                    index = self._read_index()
-                    if not replace and name in index["videos"]:
-                        raise self.exists_error(name)
-                    index["videos"][name] = summary
-                    idx_tmp = temp_path(self.index_path)  # room for the index before any replace
-                    try:
-                        idx_tmp.write_bytes(
-                            (json.dumps(index, sort_keys=True, separators=(",", ":")) + "\n").encode()
-                        )
-                        publish(tmp, final)
-                        shutil.rmtree(self.cache_dir(name), ignore_errors=True)
-                        publish(idx_tmp, self.index_path)
-                    finally:
-                        idx_tmp.unlink(missing_ok=True)
-        finally:
-            tmp.unlink(missing_ok=True)
+        self.publish_item(name, summary, [(self.path(name), image)], replace)
         return summary
 
-    def remove(self, name: str) -> None:
-        with store_lock(self.root), writing(f"removing video {name!r}"):
-            index = self._read_index()
-            if name not in index["videos"]:
-                raise self._not_found(name, index["videos"])
-            del index["videos"][name]
-            write_json_atomic(self.index_path, index)  # the video is gone once the index says so
-            self.path(name).unlink(missing_ok=True)
-            shutil.rmtree(self.cache_dir(name), ignore_errors=True)
+    def remove_side_data(self, name: str) -> None:
+        shutil.rmtree(self.cache_dir(name), ignore_errors=True)  # query embeddings of the old video
+
+    def remove_files(self, name: str) -> None:
+        self.path(name).unlink(missing_ok=True)
+        self.remove_side_data(name)
 
     def remove_leftovers(self, keep: set[str]) -> tuple[int, int]:
         """Query caches of videos that are gone."""

@@ -42,6 +42,7 @@ import numpy as np
 
 from ..errors import NoSpaceError, ReadOnlyStoreError, StoreError
 from .fs import h5_image, publish, store_lock, temp_path, writing
+from .h5 import read_h5
 
 SCHEMA_VERSION = 1
 JPEG_QUALITY = 90
@@ -200,19 +201,12 @@ def read_views(
 ) -> StoredViews:
     """Read a sidecar. ``images``/``masks`` load those arrays; ``embedders`` limits the embeddings
     read (None: all); ``rows`` limits images and masks to those view indices."""
-    try:
-        f = h5py.File(path, "r")
-    except (OSError, FileNotFoundError) as exc:
-        raise StoreError(
-            f"views file {path} is unreadable: {exc}", hint="run `zooctl bank reindex`"
-        ) from None
-    with f:
-        try:
-            return _read_views(f, path, images, masks, embedders, rows)
-        except (OSError, KeyError, ValueError, TypeError, AttributeError) as exc:  # damaged inside
-            raise StoreError(
-                f"views file {path} is damaged: {type(exc).__name__}: {exc}", hint="run `zooctl bank reindex`"
-            ) from None
+    return read_h5(
+        path,
+        "views file",
+        "run `zooctl bank reindex`",
+        lambda f: _read_views(f, path, images, masks, embedders, rows),
+    )
 
 
 def _read_views(

@@ -19,13 +19,13 @@ from typing import Any
 
 from zooctl.errors import MissingDependencyError, UsageError
 from zooctl.executors.base import (
+    ExecutorBase,
     StageCallback,
     Task,
     TaskOutcome,
     call_task,
     finished,
     retry_or_fail,
-    task_env,
 )
 
 # Small by default: the results are files of a few MB, and the machine is shared.
@@ -64,23 +64,13 @@ class _Board:
         return out
 
 
-class RayExecutor:
+class RayExecutor(ExecutorBase):
     name = "ray"
 
-    def __init__(
-        self,
-        jobs: int | None = None,
-        address: str | None = None,
-        cpus_per_task: float = 1.0,
-        gpus_per_task: float = 0.0,
-        retries: int = 2,
-        env: dict[str, str] | None = None,
-    ) -> None:
+    def __init__(self, **options: Any) -> None:
+        """Takes the `ExecutorOptions` fields."""
         _ray()  # fail now, in one line, when ray is not installed
-        self.jobs, self.address = jobs, address
-        self.cpus, self.gpus, self.retries = cpus_per_task, gpus_per_task, retries
-        self.threads = max(1, math.floor(cpus_per_task))
-        self.env = {**task_env(), **(env or {})}
+        super().__init__(**options)
         self.owned = False
         self._slots: int | None = None
 
