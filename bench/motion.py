@@ -49,6 +49,8 @@ def main() -> None:
     ap.add_argument("--recon-warmup", type=float, default=TrainOptions.recon_warmup)
     ap.add_argument("--kl-anneal", type=float, default=TrainOptions.kl_anneal)
     ap.add_argument("--velocity-weight", type=float, default=MotionConfig.velocity_weight)
+    ap.add_argument("--rot-velocity-weight", type=float, default=MotionConfig.rot_velocity_weight)
+    ap.add_argument("--z-tokens", type=int, default=MotionConfig.z_tokens, help="trajectory model's z tokens")
     ap.add_argument("--sampler", default=MotionConfig.sampler, choices=("mixture", "posterior", "normal"))
     ap.add_argument("--arch", default=MotionConfig.arch, choices=("ponymation", "trajectory"))
     ap.add_argument("--lr", type=float, default=None)
@@ -82,6 +84,8 @@ def main() -> None:
         free_bits=args.free_bits,
         kl_weight=args.kl_weight,
         velocity_weight=args.velocity_weight,
+        rot_velocity_weight=args.rot_velocity_weight,
+        z_tokens=args.z_tokens,
         sampler=args.sampler,
         arch=args.arch,
     )

@@ -54,6 +54,12 @@ def animate(
         True, "--preview/--no-preview", help="Render a preview video and a contact sheet."
     ),
     size: int = typer.Option(192, "--size", help="Preview image size in pixels."),
+    preview_fps: float = typer.Option(
+        10.0,
+        "--preview-fps",
+        min=0.0,
+        help="Frames per second the preview renders and plays (same duration; 0: every frame).",
+    ),
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     json_out: bool = JsonOpt,
 ) -> None:
@@ -78,6 +84,7 @@ def animate(
         formats=tuple(f.strip().lower() for f in formats.split(",") if f.strip()),
         preview=preview,
         size=size,
+        preview_fps=preview_fps,
         device=device,
     )
     if image is not None:

@@ -31,6 +31,9 @@ class LatentGaussians:
         # "mixture" sampling: the posterior means (N, Z) themselves and the mean posterior sigma (Z,)
         self.points: dict[str, np.ndarray] = {}
         self.sigma: dict[str, np.ndarray] = {}
+        # per joint, the largest angle (degrees) its training windows turn away from rest (J,):
+        # samples are kept inside it (`limit_rotations`), so no bone turns further than the data's
+        self.max_angle: dict[str, np.ndarray] = {}
 
     def __len__(self) -> int:
         return len(self.mean)
@@ -65,6 +68,8 @@ class LatentGaussians:
                 out.rest[sk.key] = sk.rest_positions
                 out.points[sk.key] = sel.astype(np.float32)
                 out.sigma[sk.key] = sigma[ids == sid].mean(0)
+                win = np.stack([dataset._rot6d[i][:, : sk.num_joints] for i in np.flatnonzero(ids == sid)])
+                out.max_angle[sk.key] = rot6d_angle_deg(win).max(axis=(0, 1))
         out.mean[ALL], out.factor[ALL] = cls._gaussian(mu)
         return out
 
@@ -96,6 +101,14 @@ class LatentGaussians:
         eps = torch.randn(n, len(m), generator=gen)
         return m + temperature * eps @ f.T
 
+    def limit_rotations(self, skeleton: Skeleton, q: np.ndarray) -> np.ndarray:
+        """Rest-relative rotations q (..., J, 4) with every joint's angle from rest clamped to
+        the largest its skeleton's training windows show (unchanged for an unknown skeleton)."""
+        k = self.key_for(skeleton)
+        if k not in self.max_angle or len(self.max_angle[k]) != q.shape[-2]:
+            return q
+        return clamp_angle(q, self.max_angle[k])
+
     # -- persistence ------------------------------------------------------------------------
     def save(self, path: str | Path) -> None:
         arrays = {}
@@ -105,6 +118,8 @@ class LatentGaussians:
                 arrays[f"rest_{i}"] = self.rest[k]
             if k in self.points:
                 arrays[f"points_{i}"], arrays[f"sigma_{i}"] = self.points[k], self.sigma[k]
+            if k in self.max_angle:
+                arrays[f"max_angle_{i}"] = self.max_angle[k]
         keys = np.array(list(self.mean), dtype=object)
         with open(path, "wb") as fh:
             np.savez(fh, keys=np.array([str(k) for k in keys]), **arrays)
@@ -119,4 +134,29 @@ class LatentGaussians:
                     out.rest[k] = z[f"rest_{i}"]
                 if f"points_{i}" in z:
                     out.points[k], out.sigma[k] = z[f"points_{i}"], z[f"sigma_{i}"]
+                if f"max_angle_{i}" in z:
+                    out.max_angle[k] = z[f"max_angle_{i}"]
         return out
+
+
+def rot6d_angle_deg(r: np.ndarray) -> np.ndarray:
+    """Angle from the identity (degrees) of 6D rotations (..., 6) (first two matrix columns)."""
+    a, b = r[..., :3], r[..., 3:]
+    a = a / np.linalg.norm(a, axis=-1, keepdims=True).clip(1e-9)
+    b = b - (a * b).sum(-1, keepdims=True) * a
+    b = b / np.linalg.norm(b, axis=-1, keepdims=True).clip(1e-9)
+    c = np.cross(a, b)
+    trace = a[..., 0] + b[..., 1] + c[..., 2]
+    return np.degrees(np.arccos(np.clip((trace - 1) / 2, -1.0, 1.0)))
+
+
+def clamp_angle(q: np.ndarray, max_deg: np.ndarray) -> np.ndarray:
+    """Unit quaternions q (..., J, 4) wxyz turned back towards the identity where their angle
+    exceeds max_deg (J,) degrees; the axis is kept."""
+    q = np.where(q[..., :1] < 0, -q, q)
+    half = np.arccos(np.clip(q[..., 0], -1.0, 1.0))  # (..., J): half the angle
+    limit = np.radians(np.asarray(max_deg, dtype=np.float64)) / 2
+    new = np.minimum(half, limit)
+    axis = q[..., 1:] / np.maximum(np.sin(half), 1e-12)[..., None]
+    out = np.concatenate([np.cos(new)[..., None], axis * np.sin(new)[..., None]], -1)
+    return np.where((half > limit)[..., None], out, q)

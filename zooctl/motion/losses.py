@@ -3,6 +3,8 @@
 - rotation: mean squared error of rotation matrices (from the predicted 6D) over real bones;
 - joints: mean squared error of normalised posed joint positions through forward kinematics
   (`SkeletonBatch.joint_positions`, i.e. `zooctl.rig.kinematics`);
+- velocities: relative frame-to-frame error of joint positions and of rotation matrices
+  (`velocity_loss`);
 - KL divergence of the posterior N(mu, sigma^2) from N(0, I), per latent dimension summed; the
   term that is *optimised* uses free bits (Kingma et al. 2016): each dimension's batch-mean KL
   below ``cfg.free_bits`` nats costs nothing, so the KL cannot push every dimension to the prior
@@ -75,15 +77,24 @@ def vae_losses(
     joints = joint_loss(pred_pos, target_pos, sk.mask)
     vel_w = getattr(cfg, "velocity_weight", 0.0)
     vel = velocity_loss(pred_pos, target_pos, sk.mask) if vel_w > 0 else joints.new_zeros(())
+    rvel_w = getattr(cfg, "rot_velocity_weight", 0.0)
+    rvel = velocity_loss(pred_mat, target_mat, sk.mask) if rvel_w > 0 else joints.new_zeros(())
     kl_d = kl_per_dim(mu, logvar)
     kl_opt = kl_d.clamp_min(getattr(cfg, "free_bits", 0.0)).sum()
-    total = cfg.rot_weight * rot + cfg.joint_weight * joints + vel_w * vel + kl_scale * cfg.kl_weight * kl_opt
+    total = (
+        cfg.rot_weight * rot
+        + cfg.joint_weight * joints
+        + vel_w * vel
+        + rvel_w * rvel
+        + kl_scale * cfg.kl_weight * kl_opt
+    )
     active = (kl_d.detach() > 0.01).sum().to(total.dtype)
     return {
         "total": total,
         "rotation": rot,
         "joints": joints,
         "velocity": vel,
+        "rot_velocity": rvel,
         "kl": kl_d.sum(),
         "active": active,
     }

@@ -48,6 +48,10 @@ class MotionConfig:
     # Relative joint-velocity error (`losses.velocity_loss`): pose errors alone let a decoder that
     # outputs each window's mean pose score well, and its samples stand still.
     velocity_weight: float = 1.0
+    # The same relative error on the bones' *rotation matrices*: joint positions do not see a leaf
+    # bone's rotation nor a twist, so with positions alone the most-rotating bones (ears, tail tips,
+    # fins) were reconstructed with a tenth of their motion.
+    rot_velocity_weight: float = 1.0
     # z also added to the decoder's timestamp queries, so it shapes how frames attend to each other.
     z_queries: bool = False
     # Where samples draw z: "posterior", a Gaussian per skeleton fitted to its training windows'
@@ -57,6 +61,11 @@ class MotionConfig:
     # "ponymation": per-frame spatial and temporal transformers (the paper's); "trajectory": one
     # token per bone carrying its whole window (`TrajectoryVAE`), T times fewer tokens.
     arch: str = "ponymation"
+    # Trajectory model: z enters the decoder as this many memory tokens. With one, softmax over a
+    # single key makes cross-attention add the same vector to every bone, and bones differ only
+    # through the feed-forward layers; with 8 each bone attends to its own mix (on the two-motion
+    # toy of tests/test_motion_collapse.py: amplitude / speed ratio 1.0 / 0.9 against 1.3 / 1.6).
+    z_tokens: int = 8
 
     def __post_init__(self) -> None:
         if self.width < 8 or self.width % self.heads:
@@ -69,6 +78,8 @@ class MotionConfig:
             raise InputError(f"arch must be 'ponymation' or 'trajectory', got {self.arch!r}")
         if self.sampler not in ("posterior", "mixture", "normal"):
             raise InputError(f"sampler must be 'posterior', 'mixture' or 'normal', got {self.sampler!r}")
+        if self.z_tokens < 1:
+            raise InputError(f"z_tokens must be >= 1, got {self.z_tokens}")
         if self.layers < 1 or self.latent < 1 or self.length < 2 or not self.fps > 0:
             raise InputError("layers and latent must be >= 1, length >= 2 frames and fps > 0")
 
@@ -78,6 +89,7 @@ class MotionConfig:
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> MotionConfig:
         known = {f.name for f in fields(cls)}
+        d = {"z_tokens": 1, **d}  # priors saved before z_tokens existed decode from one token
         return cls(**{k: v for k, v in d.items() if k in known})
 
 
@@ -249,7 +261,9 @@ class TrajectoryVAE(nn.Module):
         self.to_mu = nn.Linear(W, cfg.latent)
         self.to_logvar = nn.Linear(W, cfg.latent)
         nn.init.constant_(self.to_logvar.bias, -4.0)  # see `MotionVAE`
-        self.z_in = nn.Linear(cfg.latent, W)
+        self.z_in = nn.Linear(cfg.latent, W * cfg.z_tokens)
+        if cfg.z_tokens > 1:
+            self.z_pos = nn.Parameter(torch.randn(cfg.z_tokens, W) * 0.02)
         self.bone_query = nn.Linear(STATIC_FEATURES, W)
         self.decoder = _decoder(cfg)
         self.norm_out = nn.LayerNorm(W)
@@ -279,9 +293,13 @@ class TrajectoryVAE(nn.Module):
         L = self.cfg.length
         self._check(T or L)
         B, J = z.shape[0], sk.mask.shape[1]
-        # Every bone query of a window attends to the window's one z token.
-        h = decode_single_memory(self.decoder, self.bone_query(sk.static), self.z_in(z)[:, None], ~sk.mask)
-        out = self.traj_out(self.norm_out(h[:, 0])).reshape(B, J, L, 6).permute(0, 2, 1, 3)
+        q, M = self.bone_query(sk.static), self.cfg.z_tokens
+        if M == 1:
+            h = decode_single_memory(self.decoder, q, self.z_in(z)[:, None], ~sk.mask)[:, 0]
+        else:  # each bone query attends to its own mix of the z tokens
+            memory = self.z_in(z).reshape(B, M, -1) + self.z_pos
+            h = self.decoder(q, memory, tgt_key_padding_mask=~sk.mask)
+        out = self.traj_out(self.norm_out(h)).reshape(B, J, L, 6).permute(0, 2, 1, 3)
         return out + self.identity6d
 
     def forward(self, rot6d: torch.Tensor, sk: SkeletonBatch, sample: bool = True):

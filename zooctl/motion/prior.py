@@ -222,7 +222,8 @@ class PonymationPrior:
         # One spatial decode for every kept frame: it costs T * J tokens, the bulk of sampling.
         with torch.no_grad():
             rot = self.model.features_to_rot6d(feats[:, :frames], self._skeletons(skeleton, n))
-        return self._to_quat(rot)
+        q = self._to_quat(rot)
+        return q if self.latents is None else self.latents.limit_rotations(skeleton, q)
 
     def _draw(self, skeleton: Skeleton, n: int, temperature: float, gen: torch.Generator) -> torch.Tensor:
         """(n, Z) latents: from the skeleton's aggregate posterior when the prior has one, else

@@ -44,6 +44,7 @@ class TrainHistory:
     rotation: list[float] = field(default_factory=list)
     joints: list[float] = field(default_factory=list)
     velocity: list[float] = field(default_factory=list)
+    rot_velocity: list[float] = field(default_factory=list)
     kl: list[float] = field(default_factory=list)
     active: list[float] = field(default_factory=list)
     epochs: int = 0
@@ -59,7 +60,7 @@ class TrainHistory:
             "stopped_early": self.stopped_early,
             "final": {
                 k: (getattr(self, k)[-1] if getattr(self, k) else None)
-                for k in ("total", "rotation", "joints", "velocity", "kl", "active")
+                for k in ("total", "rotation", "joints", "velocity", "rot_velocity", "kl", "active")
             },
         }
 

@@ -30,6 +30,7 @@ class AnimateOptions:
     formats: tuple[str, ...] = ("usd", "glb")
     preview: bool = True
     size: int = 192
+    preview_fps: float = 10.0  # frames per second the preview renders (rendering dominates the command)
     device: str = "cpu"
 
 
@@ -115,7 +116,9 @@ def sample_and_export(
             files[f].append(str(path))
     t_export = time.perf_counter() - t0
     if opts.preview:
-        files.update(_preview(animated, names, out, label, opts.size, fps, opts.device, asset))
+        files.update(
+            _preview(animated, names, out, label, opts.size, fps, opts.device, asset, opts.preview_fps)
+        )
     manifest = {
         "target": label,
         "amplitude_deg": [round(motion_amplitude(asset, r), 2) for r in rots],
@@ -158,19 +161,31 @@ def reference_clip(asset) -> str | None:
 
 
 def _preview(
-    asset, clips: list[str], out: Path, label: str, size: int, fps: float, device: str, original=None
+    asset,
+    clips: list[str],
+    out: Path,
+    label: str,
+    size: int,
+    fps: float,
+    device: str,
+    original=None,
+    preview_fps: float = 10.0,
 ) -> dict[str, list[str]]:
     """A video with every sample in motion beside a real clip of the same skeleton (``original``'s
     most moving clip, looped), and a contact sheet (one row of frames per sample) whose labels give
-    each motion's amplitude (mean degrees a joint turns from the first frame)."""
+    each motion's amplitude (mean degrees a joint turns from the first frame). Every
+    ``fps / preview_fps``-th frame is rendered and the video plays them at ``preview_fps``: same
+    duration and motion, a fraction of the rendering."""
     import dataclasses
 
     from ..io.video import write_mp4
     from ..render.preview import contact_sheet, render_asset, save_png
 
     T = asset.clips[clips[0]].num_frames
+    step = max(1, int(round(fps / preview_fps))) if preview_fps > 0 else 1
+    shown = list(range(0, T, step))
     amp = {c: motion_amplitude(asset, asset.clips[c].rotations) for c in clips}
-    videos = [render_asset(asset, c, size=size, supersample=1, device=device) for c in clips]  # (T, H, W, 3)
+    videos = [render_asset(asset, c, frames=shown, size=size, supersample=1, device=device) for c in clips]
     names = [f"{c} {amp[c]:.1f} deg" for c in clips]
     ref = reference_clip(original) if original is not None else None
     if ref is not None:
@@ -179,18 +194,16 @@ def _preview(
         n = real.clips[ref].num_frames
         videos.insert(
             0,
-            render_asset(
-                real, ref, frames=[t % n for t in range(T)], size=size, supersample=1, device=device
-            ),
+            render_asset(real, ref, frames=[t % n for t in shown], size=size, supersample=1, device=device),
         )
         ref_amp = motion_amplitude(original, original.clips[ref].rotations)
         names.insert(0, f"real {ref.split('|')[-1]} {ref_amp:.1f} deg")
     cols = min(len(videos), 6)
-    grid = [contact_sheet([v[t] for v in videos], labels=names, columns=cols) for t in range(T)]
-    video = write_mp4(out / f"{label}_samples.mp4", np.stack(grid), fps=fps)
-    picks = np.linspace(0, T - 1, min(T, 6)).round().astype(int)
-    tiles = [v[t] for v in videos for t in picks]
-    labels = [f"{nm} f{t}" if t == picks[0] else f"f{t}" for nm in names for t in picks]
+    grid = [contact_sheet([v[i] for v in videos], labels=names, columns=cols) for i in range(len(shown))]
+    video = write_mp4(out / f"{label}_samples.mp4", np.stack(grid), fps=fps / step)
+    picks = np.linspace(0, len(shown) - 1, min(len(shown), 6)).round().astype(int)
+    tiles = [v[i] for v in videos for i in picks]
+    labels = [f"{nm} f{shown[i]}" if i == picks[0] else f"f{shown[i]}" for nm in names for i in picks]
     sheet = save_png(
         out / f"{label}_contact_sheet.png", contact_sheet(tiles, labels=labels, columns=len(picks))
     )
