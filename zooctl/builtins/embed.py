@@ -1,4 +1,5 @@
-"""Built-in image embedders for retrieval: ``effnet`` (appearance) and ``silhouette`` (mask shape)."""
+"""Built-in image embedders for retrieval: ``effnet`` (appearance), ``silhouette`` (mask shape) and
+``procnet`` (trained on procedural animals)."""
 
 from __future__ import annotations
 
@@ -20,6 +21,12 @@ def _silhouette(device: str = "cpu", **options: Any) -> Any:
     return SilhouetteEmbedder(device=device, **options)
 
 
+def _procnet(device: str = "cpu", **options: Any) -> Any:
+    from ..embed.procnet import ProcnetEmbedder
+
+    return ProcnetEmbedder(device=device, **options)
+
+
 @hookimpl
 def register_embedders(register):
     register(
@@ -29,4 +36,12 @@ def register_embedders(register):
     )
     register(
         ComponentSpec("embedder", "silhouette", _silhouette, "shape descriptor of the animal's mask (576-d)")
+    )
+    register(
+        ComponentSpec(
+            "embedder",
+            "procnet",
+            _procnet,
+            "head trained on procedural animals over effnet + silhouette features (128-d; `zooctl embed train`)",
+        )
     )

@@ -14,7 +14,14 @@ def seed(
     plan: list[str] = typer.Option(
         None,
         "--plan",
-        help="Only this body plan (repeatable): quadruped, biped, bird, fish, snake, insect, spider.",
+        help="Only this body plan (repeatable): quadruped, biped, bird, fish, snake, insect, spider; with "
+        "--random also 'quadruped dinosaur'.",
+    ),
+    random: int = typer.Option(
+        0,
+        "--random",
+        help="Add this many random animals (every plan in turn, random proportions within its range) "
+        "instead of the starter set.",
     ),
     no_variants: bool = typer.Option(
         False, "--no-variants", help="One animal per plan, without the proportion variants."
@@ -29,7 +36,11 @@ def seed(
     ),
     json_out: bool = JsonOpt,
 ) -> None:
-    """Add the procedural starter animals (rigged, skinned, animated; generated, nothing downloaded)."""
+    """Add the procedural starter animals, or --random N random ones (rigged, skinned, animated; generated)."""
+    if random < 0:
+        from ..errors import UsageError
+
+        raise UsageError(f"--random {random} must be 0 or more")
     from ..pipelines.ingest import seed_starter
     from .bank_export import _bank
 
@@ -43,12 +54,13 @@ def seed(
             replace=replace,
             views=views,
             progress=progress,
+            random=random,
         )
     if json_out:
         print_json({"added": added, "bank_size": len(bank.names())})
     else:
         console.print(
-            f"added {len(added)} starter animals"
+            f"added {len(added)} {'random' if random else 'starter'} animals"
             + (f": {', '.join(added)}" if added else " (all present; --replace to rebuild)"),
             highlight=False,
             markup=False,

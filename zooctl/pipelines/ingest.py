@@ -95,14 +95,15 @@ def seed_starter(
     replace: bool = False,
     views: bool | None = None,
     progress: Callable[[str, int, int], None] | None = None,
+    random: int = 0,
 ) -> list[str]:
-    """Add the procedural starter animals (`zooctl.procedural.seed_bank`) and, like `add_files`,
+    """Add the procedural starter animals, or ``random`` random ones (`zooctl.procedural.seed_bank`) and, like `add_files`,
     render their retrieval views, so `bank search` and `fit` retrieval work on a seeded bank.
     Returns the names added."""
     from ..procedural import seed_bank
 
     views = _views_default() if views is None else views
-    added = seed_bank(bank, seed=seed, plans=plans, variants=variants, replace=replace)
+    added = seed_bank(bank, seed=seed, plans=plans, variants=variants, replace=replace, random=random)
     for i, n in enumerate(added if views else []):
         _index_views(bank, bank.get(n))
         if progress is not None:

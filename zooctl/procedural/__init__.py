@@ -152,15 +152,28 @@ def starter_assets(seed: int = 0, plans: list[str] | None = None, variants: bool
 
 
 def seed_bank(
-    bank: Any, seed: int = 0, plans: list[str] | None = None, variants: bool = True, replace: bool = False
+    bank: Any,
+    seed: int = 0,
+    plans: list[str] | None = None,
+    variants: bool = True,
+    replace: bool = False,
+    random: int = 0,
 ) -> list[str]:
     """Add the starter animals to ``bank`` (anything with ``add(asset, replace=...)`` and
-    ``exists(name)``, such as `zooctl.store.bank.Bank`). Existing names are kept unless ``replace``.
+    ``exists(name)``, such as `zooctl.store.bank.Bank`), or with ``random`` > 0 that many random
+    animals (`zooctl.procedural.random.random_assets`; ``plans`` then names body-plan labels).
+    Existing names are kept unless ``replace``.
 
     Returns the names added.
     """
+    if random > 0:
+        from .random import random_assets
+
+        assets = random_assets(random, seed=seed, labels=plans)
+    else:
+        assets = starter_assets(seed, plans, variants)
     added = []
-    for asset in starter_assets(seed, plans, variants):
+    for asset in assets:
         if not replace and bank.exists(asset.name):
             continue
         bank.add(asset, replace=replace)

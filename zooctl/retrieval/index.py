@@ -38,14 +38,24 @@ def cached_embedder(name: str, device: str = "cpu", **options: Any) -> Embedder:
     return _EMBEDDERS[key]
 
 
+MASK_KINDS = ("mask", "rgb+mask")
+
+
+def needs_masks(embedder: Embedder) -> bool:
+    """Whether the embedder reads masks (``input_kind`` "mask" or "rgb+mask")."""
+    return getattr(embedder, "input_kind", "rgb") in MASK_KINDS
+
+
 def embed_inputs(embedder: Embedder, images: np.ndarray, masks: np.ndarray | None) -> np.ndarray:
-    """Run an embedder on what it takes: RGB crops (N, S, S, 3) or masks (N, S, S)."""
-    if getattr(embedder, "input_kind", "rgb") == "mask":
+    """Run an embedder on what it takes: RGB crops (N, S, S, 3), masks (N, S, S), or both."""
+    if needs_masks(embedder):
         if masks is None:
             raise UsageError(
                 f"the {embedder.name!r} embedder needs masks of the animal",
                 hint="give masks (--masks) or choose another --embedder",
             )
+        if embedder.input_kind == "rgb+mask":
+            return embedder.embed_batch(images, masks)
         return embedder.embed_batch(masks)
     return embedder.embed_batch(images)
 

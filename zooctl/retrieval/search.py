@@ -19,7 +19,7 @@ import numpy as np
 from ..embed.base import embedder_identity
 from ..errors import UsageError
 from . import query_cache
-from .index import cached_embedder, current_pack, embed_inputs
+from .index import cached_embedder, current_pack, embed_inputs, needs_masks
 from .query import DEFAULT_QUERY_FRAMES, QueryFrames, load_query, stored_query
 from .score import aggregate, best_views, fuse
 
@@ -77,7 +77,7 @@ def embed_query(
     out, notes = {}, []
     for e in embedders:
         emb = cached_embedder(e, device)
-        if getattr(emb, "input_kind", "rgb") == "mask" and query.masks is None:
+        if needs_masks(emb) and query.masks is None:
             notes.append(f"{e}: skipped, the query has no masks")
             continue
         out[e] = embed_inputs(emb, query.images, query.masks)
@@ -173,7 +173,7 @@ def query_embeddings(
     notes: list[str] = []
     if hit is not None and not hit.has_masks:  # mask embedders cannot use this video: no frames needed
         for e in list(todo):
-            if getattr(cached_embedder(e, device), "input_kind", "rgb") == "mask":
+            if needs_masks(cached_embedder(e, device)):
                 notes.append(f"{e}: skipped, the query has no masks")
                 todo.remove(e)
     if hit is not None and not todo and not need_images:

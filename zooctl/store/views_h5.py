@@ -89,7 +89,7 @@ def summary_digest(summary: dict[str, Any]) -> str:
 @dataclass
 class StoredViews:
     """What a sidecar holds. images (V, S, S, 3) uint8 (None unless asked for), masks (V, S, S) bool,
-    embeddings {embedder: (V, D) float32} and their input_kinds {embedder: "rgb" or "mask"},
+    embeddings {embedder: (V, D) float32} and their input_kinds {embedder: "rgb", "mask" or "rgb+mask"},
     params {key: (V,...) array}."""
 
     asset: str

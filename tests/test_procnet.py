@@ -1,0 +1,89 @@
+"""Random procedural animals, the procnet training job, its embedder and its CLI."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from cli_helpers import run_inprocess
+
+from zooctl.embed.procnet import DEFAULT_WEIGHTS, ProcnetEmbedder
+from zooctl.procedural.random import LABELS, RANGES, random_assets, random_params
+from zooctl.retrieval.index import embed_inputs
+from zooctl.retrieval.train_data import render_training_set
+from zooctl.retrieval.train_embedder import TrainConfig, save_model, supcon, train_head
+
+
+def test_random_animals_are_deterministic_labelled_and_in_range():
+    a, b = random_assets(len(LABELS), seed=3), random_assets(len(LABELS), seed=3)
+    assert [x.meta["body_plan"] for x in a] == list(LABELS)
+    for x, y in zip(a, b, strict=True):
+        assert x.name == y.name and np.array_equal(x.vertices, y.vertices)
+    c = random_assets(len(LABELS), seed=4)
+    assert not np.allclose(a[0].vertices.max(0), c[0].vertices.max(0))
+    rng = np.random.default_rng(0)
+    for label, (_, ranges) in RANGES.items():
+        p = random_params(rng, label)
+        for k, (lo, hi) in ranges.items():
+            assert lo <= getattr(p, k) <= hi, (label, k)
+
+
+def test_supcon_prefers_embeddings_grouped_by_label():
+    import torch
+
+    lab = torch.tensor([0, 0, 1, 1])
+    good = torch.nn.functional.normalize(torch.tensor([[1.0, 0], [1, 0.1], [0, 1], [0.1, 1]]), dim=1)
+    bad = good[[0, 2, 1, 3]]
+    assert supcon(good, lab, 0.1) < supcon(bad, lab, 0.1)
+
+
+@pytest.fixture(scope="module")
+def tiny_set():
+    return render_training_set(8, 2, seed=0, size=64)
+
+
+def test_tiny_training_is_deterministic_and_loads_as_an_embedder(tiny_set, tmp_path):
+    assert len(tiny_set) == 16 and tiny_set.features["effnet"].shape == (16, 1280)
+    assert tiny_set.features["silhouette"].shape == (16, 576)
+    cfg = TrainConfig(hidden=32, dim=16, steps=4, animals_per_batch=8, views_per_animal=2)
+    w1, l1 = train_head(tiny_set, cfg)
+    w2, l2 = train_head(tiny_set, cfg)
+    assert l1 == l2 and all(np.array_equal(w1[k], w2[k]) for k in w1)
+    assert np.isfinite(l1).all()
+    p = save_model(tmp_path / "a.npz", w1, cfg, tiny_set, {})
+    emb = ProcnetEmbedder(weights=p)
+    assert emb.dim == 16 and emb.input_kind == "rgb+mask"
+    rng = np.random.default_rng(0)
+    imgs = rng.integers(0, 255, (3, 64, 64, 3), dtype=np.uint8)
+    masks = np.zeros((3, 64, 64), bool)
+    masks[:, 16:48, 20:40] = True
+    e = embed_inputs(emb, imgs, masks)
+    assert e.shape == (3, 16) and np.allclose(np.linalg.norm(e, axis=1), 1, atol=1e-5)
+    # other weights, other identity: banks embedded by the old ones are told to reindex
+    w3, _ = train_head(tiny_set, TrainConfig(hidden=32, dim=16, steps=4, seed=1, animals_per_batch=8))
+    q = save_model(tmp_path / "b.npz", w3, cfg, tiny_set, {})
+    assert ProcnetEmbedder(weights=q).identity != emb.identity
+    with pytest.raises(Exception, match="need|masks"):
+        embed_inputs(emb, imgs, None)
+
+
+def test_packaged_weights_are_small_and_load():
+    assert DEFAULT_WEIGHTS.stat().st_size <= 5_000_000
+    emb = ProcnetEmbedder()
+    assert emb.identity.startswith("procnet/") and emb.dim == 128
+
+
+def test_cli_trains_and_refuses_bad_input(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("ZOOCTL_STORE", str(tmp_path / "store"))
+    out = tmp_path / "m.npz"
+    r = run_inprocess(
+        capsys, "embed", "train", "--animals", "8", "--views", "2", "--steps", "3", "-o", str(out), "--json"
+    )
+    assert r.code == 0, r.err
+    assert r.json()["steps_run"] == 3 and out.is_file()
+    assert out.with_suffix(".loss.png").read_bytes()[:4] == b"\x89PNG"
+    r = run_inprocess(capsys, "embed", "train", "--animals", "2")
+    assert r.code != 0 and "--animals" in r.err and "Traceback" not in r.err
+    r = run_inprocess(capsys, "bank", "seed", "--random", "2", "--plan", "crab", "--no-views")
+    assert r.code != 0 and "unknown body plan" in r.err
+    r = run_inprocess(capsys, "bank", "seed", "--random", "2", "--seed", "1", "--no-views", "--json")
+    assert r.code == 0 and len(r.json()["added"]) == 2
