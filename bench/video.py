@@ -65,7 +65,7 @@ def quality(sequences, max_size: int, preset: str) -> dict:
         t2 = time.perf_counter()
         truth = load_truth(seq, dv.frames.shape)
         for mode, box in (("no_box", None), ("box", cues.box_of(truth[0]))):
-            seg = get_registry().get("segmenter", "grabcut").create()
+            seg = get_registry().get("segmenter", "grabcut").create(**SEG_OPTIONS)
             t3 = time.perf_counter()
             masks = seg.segment(dv.frames, box=box, flow=vf)
             t4 = time.perf_counter()
@@ -160,7 +160,7 @@ def composited_quality(assets, frames: int, size: int, preset: str) -> dict:
     for name, (rgb, truth) in videos.items():
         vf = compute_video_flow(DISFlow(preset), rgb)
         for mode, box in (("no_box", None), ("box", cues.box_of(truth[0]))):
-            seg = get_registry().get("segmenter", "grabcut").create()
+            seg = get_registry().get("segmenter", "grabcut").create(**SEG_OPTIONS)
             masks = seg.segment(rgb, box=box, flow=vf)
             j = [float((m & g).sum() / max((m | g).sum(), 1)) for m, g in zip(masks, truth)]
             out[mode][name] = {"frames": len(j), "J": float(np.mean(j)), "J_min": float(np.min(j))}
@@ -178,6 +178,7 @@ def composited_quality(assets, frames: int, size: int, preset: str) -> dict:
 
 
 _OVERLAYS: Path | None = None
+SEG_OPTIONS: dict = {}  # --seg-option: the grabcut options measured (defaults when empty)
 
 
 def _overlay(path: Path, frames, masks, truth) -> None:
@@ -293,8 +294,14 @@ def main() -> None:
     )
     ap.add_argument("--composited-frames", type=int, default=30)
     ap.add_argument("--overlays", type=Path, default=None, help="write mask overlay PNGs here")
+    ap.add_argument(
+        "--seg-option", action="append", default=[], metavar="K=V", help="grabcut option to measure"
+    )
     args = ap.parse_args()
     global _OVERLAYS
+    for kv in args.seg_option:
+        k, _, v = kv.partition("=")
+        SEG_OPTIONS[k] = json.loads(v) if v not in ("true", "false") else v == "true"
     _OVERLAYS = args.overlays
     if not VIDEOS.is_dir():
         sys.exit(f"shared DAVIS videos not found at {VIDEOS}")
