@@ -3,6 +3,7 @@
     .venv/bin/python bench/video.py                      # both parts, all three sequences
     .venv/bin/python bench/video.py --part quality       # mean region IoU (J): no box, first-frame box
     .venv/bin/python bench/video.py --part throughput --repeats 3
+    .venv/bin/python bench/video.py --part quality --seg-option key_every=5 --flow-size 480  # variants
 
 Quality: each shared DAVIS sequence (``../shared/data/videos/{blackswan,dog,cows}``) is decoded at
 the default size (854 px, DAVIS's own 480p) and segmented by `grabcut` twice: (a) with no box (its
@@ -30,6 +31,12 @@ VIDEOS = REPO.parent / "shared" / "data" / "videos"
 SEQUENCES = ("blackswan", "dog", "cows")
 
 
+def _dis(preset: str):
+    from zooctl.video.flow import DISFlow
+
+    return DISFlow(preset) if FLOW_SIZE is None else DISFlow(preset, max_size=FLOW_SIZE)
+
+
 def machine() -> str:
     import cv2
     from _util import machine as base_machine
@@ -54,18 +61,18 @@ def quality(sequences, max_size: int, preset: str) -> dict:
     from zooctl.plugins import get_registry
     from zooctl.video import cues
     from zooctl.video.decode import decode
-    from zooctl.video.flow import DISFlow, compute_video_flow
+    from zooctl.video.flow import compute_video_flow
 
     out: dict = {"no_box": {}, "box": {}}
     for seq in sequences:
         t0 = time.perf_counter()
         dv = decode(VIDEOS / seq, max_size=max_size)
         t1 = time.perf_counter()
-        vf = compute_video_flow(DISFlow(preset), dv.frames)
+        vf = compute_video_flow(_dis(preset), dv.frames)
         t2 = time.perf_counter()
         truth = load_truth(seq, dv.frames.shape)
         for mode, box in (("no_box", None), ("box", cues.box_of(truth[0]))):
-            seg = get_registry().get("segmenter", "grabcut").create()
+            seg = get_registry().get("segmenter", "grabcut").create(**SEG_OPTIONS)
             t3 = time.perf_counter()
             masks = seg.segment(dv.frames, box=box, flow=vf)
             t4 = time.perf_counter()
@@ -152,15 +159,15 @@ def composited_quality(assets, frames: int, size: int, preset: str) -> dict:
     """J per composited video, no box and first-frame box (see `composited_set`)."""
     from zooctl.plugins import get_registry
     from zooctl.video import cues
-    from zooctl.video.flow import DISFlow, compute_video_flow
+    from zooctl.video.flow import compute_video_flow
 
     out: dict = {"no_box": {}, "box": {}}
     with tempfile.TemporaryDirectory() as tmp:
         videos = composited_set(assets, frames, size, Path(tmp))
     for name, (rgb, truth) in videos.items():
-        vf = compute_video_flow(DISFlow(preset), rgb)
+        vf = compute_video_flow(_dis(preset), rgb)
         for mode, box in (("no_box", None), ("box", cues.box_of(truth[0]))):
-            seg = get_registry().get("segmenter", "grabcut").create()
+            seg = get_registry().get("segmenter", "grabcut").create(**SEG_OPTIONS)
             masks = seg.segment(rgb, box=box, flow=vf)
             j = [float((m & g).sum() / max((m | g).sum(), 1)) for m, g in zip(masks, truth)]
             out[mode][name] = {"frames": len(j), "J": float(np.mean(j)), "J_min": float(np.min(j))}
@@ -178,6 +185,8 @@ def composited_quality(assets, frames: int, size: int, preset: str) -> dict:
 
 
 _OVERLAYS: Path | None = None
+FLOW_SIZE: int | None = None  # --flow-size: longest side DIS works at (None: its default)
+SEG_OPTIONS: dict = {}  # --seg-option: the grabcut options measured (defaults when empty)
 
 
 def _overlay(path: Path, frames, masks, truth) -> None:
@@ -232,14 +241,14 @@ def throughput_at(
     from zooctl.store.videos import VideoRecord, VideoStore
     from zooctl.video import cues
     from zooctl.video.decode import decode
-    from zooctl.video.flow import DISFlow, compute_video_flow
+    from zooctl.video.flow import compute_video_flow
 
     dv = decode(VIDEOS / seq, max_size=size)
     t = len(dv.frames)
     r = {"frames": t, "size": f"{dv.frames.shape[2]}x{dv.frames.shape[1]}"}
     r["decode_jpeg_fps"] = _median_fps(lambda: decode(VIDEOS / seq / "JPEGImages", max_size=size), t, repeats)
     r["decode_mp4_fps"] = _median_fps(lambda: decode(mp4, max_size=size), t, repeats)
-    est = DISFlow(preset)
+    est = _dis(preset)
     holder = {}
 
     def flow():
@@ -293,8 +302,19 @@ def main() -> None:
     )
     ap.add_argument("--composited-frames", type=int, default=30)
     ap.add_argument("--overlays", type=Path, default=None, help="write mask overlay PNGs here")
+    ap.add_argument(
+        "--seg-option", action="append", default=[], metavar="K=V", help="grabcut option to measure"
+    )
+    ap.add_argument("--flow-size", type=int, default=None, help="longest side the DIS flow works at")
     args = ap.parse_args()
-    global _OVERLAYS
+    global _OVERLAYS, FLOW_SIZE
+    FLOW_SIZE = args.flow_size
+    for kv in args.seg_option:
+        k, _, v = kv.partition("=")
+        try:
+            SEG_OPTIONS[k] = json.loads(v)  # numbers, true/false
+        except json.JSONDecodeError:
+            SEG_OPTIONS[k] = v
     _OVERLAYS = args.overlays
     if not VIDEOS.is_dir():
         sys.exit(f"shared DAVIS videos not found at {VIDEOS}")

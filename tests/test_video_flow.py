@@ -26,6 +26,15 @@ def test_dis_recovers_a_translation():
     assert np.median(inner, 0) == pytest.approx([3, -2], abs=0.25)
 
 
+def test_dis_at_a_smaller_working_size_returns_full_size_flow():
+    a, b = shifted_pair(6, -4, h=192, w=256)
+    flow = DISFlow("medium", max_size=128).flow(a, b)  # computed at 128x96, displacements rescaled
+    assert flow.shape == (192, 256, 2) and flow.dtype == np.float32
+    assert np.median(flow[32:-32, 32:-32].reshape(-1, 2), 0) == pytest.approx([6, -4], abs=0.5)
+    with pytest.raises(UsageError):
+        DISFlow(max_size=4)
+
+
 def test_warp_with_backward_flow_reconstructs_the_first_frame():
     a, b = shifted_pair(4, 0)
     back = DISFlow().flow(b, a)  # b -> a: sampling a at x + back(x) gives b

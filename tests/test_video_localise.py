@@ -54,6 +54,15 @@ def test_no_box_finds_the_moving_object(synthetic):
     assert set(how) <= {"localiser", "tracked", "re-seeded", "empty"}
 
 
+def test_tracked_masks_are_checked_on_the_keyframes_start_looked_at():
+    seg = GrabCutTracker(key_every=4)
+    mask = np.zeros((8, 8), bool)
+    mask[2:6, 2:6] = True
+    checked = [i for i in range(10) if seg._due(i, 10, mask, mask)]
+    assert checked == [0, 4, 8, 9]  # `_start`'s keyframes: no extra look while the mask holds
+    assert seg._due(5, 10, mask & False, mask)  # lost: look again at once
+
+
 def test_box_on_a_later_frame_tracks_both_ways(synthetic):
     frames, masks = synthetic
     seg = GrabCutTracker(localise=False)

@@ -33,7 +33,7 @@ from .indexed import INDEX_VERSION, IndexedStore
 
 __all__ = ["INDEX_VERSION", "FILE_VERSION", "VideoRecord", "VideoStore"]
 FILE_VERSION = 1
-_GZIP = 3  # frames and masks: a fair size/speed trade; flow is float16 with the shuffle filter
+_GZIP = 3  # masks and occlusion (0/1 maps: small either way)
 
 
 @dataclass
@@ -140,9 +140,8 @@ def _fill_video(f: Any, rec: VideoRecord) -> None:
     f.attrs["source"] = json.dumps(rec.source, sort_keys=True, default=str)
     f.attrs["segmenter"] = json.dumps(rec.segmenter, sort_keys=True, default=str)
     f.attrs["flow_estimator"] = json.dumps(rec.flow_estimator, sort_keys=True, default=str)
-    f.create_dataset(
-        "frames", data=rec.frames, chunks=(1, h, w, 3), compression="gzip", compression_opts=_GZIP
-    )
+    # frames and flow take lzf: 2.4x faster to write than gzip for 20% more bytes (BENCHMARKS.md)
+    f.create_dataset("frames", data=rec.frames, chunks=(1, h, w, 3), compression="lzf")
     f.create_dataset(
         "masks",
         data=rec.masks.astype(np.uint8),
@@ -158,8 +157,7 @@ def _fill_video(f: Any, rec: VideoRecord) -> None:
             key,
             data=arr.astype(np.float16),
             chunks=(1, h, w, 2),
-            compression="gzip",
-            compression_opts=1,
+            compression="lzf",
             shuffle=True,
         )
     for key, arr in (

@@ -23,12 +23,19 @@ DIS_PRESETS = {
 
 
 class DISFlow:
-    """Dense Inverse Search flow (Kroeger et al. 2016) on grey images, with OpenCV's variational refinement."""
+    """Dense Inverse Search flow (Kroeger et al. 2016) on grey images, with OpenCV's variational refinement.
 
-    def __init__(self, preset: str = "medium") -> None:
+    ``max_size``: longest side the flow is computed at; larger frames are downscaled first and the
+    flow comes back up (displacements rescaled) at their size. None: full size.
+    """
+
+    def __init__(self, preset: str = "medium", max_size: int | None = None) -> None:
         if preset not in DIS_PRESETS:
             raise UsageError(f"unknown DIS preset {preset!r}", hint=f"use one of {', '.join(DIS_PRESETS)}")
+        if max_size is not None and int(max_size) < 16:
+            raise UsageError(f"flow max_size must be at least 16 pixels, got {max_size}")
         self.preset = preset
+        self.max_size = None if max_size is None else int(max_size)
         self._dis = cv2.DISOpticalFlow.create(DIS_PRESETS[preset])
 
     def flow(self, frame_a: np.ndarray, frame_b: np.ndarray) -> np.ndarray:
@@ -37,7 +44,21 @@ class DISFlow:
 
     def flow_gray(self, grey_a: np.ndarray, grey_b: np.ndarray) -> np.ndarray:
         """(H, W) uint8 x2 -> (H, W, 2) float32; skips the colour conversion when grey frames are cached."""
-        return self._dis.calc(grey_a, grey_b, None)
+        h, w = grey_a.shape[:2]
+        if self.max_size is None or max(h, w) <= self.max_size:
+            return self._dis.calc(grey_a, grey_b, None)
+        s = self.max_size / max(h, w)
+        sw, sh = max(round(w * s), 1), max(round(h * s), 1)
+        a, b = (cv2.resize(g, (sw, sh), interpolation=cv2.INTER_AREA) for g in (grey_a, grey_b))
+        return resize_flow(self._dis.calc(a, b, None), w, h, cv2.INTER_LINEAR)
+
+
+def resize_flow(flow: np.ndarray, w: int, h: int, interpolation: int = cv2.INTER_AREA) -> np.ndarray:
+    """(H, W, 2) flow -> (h, w, 2), displacements rescaled to the new pixel size."""
+    out = cv2.resize(flow, (w, h), interpolation=interpolation)
+    out[..., 0] *= w / flow.shape[1]
+    out[..., 1] *= h / flow.shape[0]
+    return out
 
 
 def _grey(frame: np.ndarray) -> np.ndarray:

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import InputError, UsageError
 from . import cues
-from .flow import DISFlow, VideoFlow, compute_video_flow, fb_inconsistent, warp
+from .flow import DISFlow, VideoFlow, compute_video_flow, fb_inconsistent, resize_flow, warp
 from .localise import Evidence, Localiser, class_name, fuse, main_region
 
 Box = tuple[int, int, int, int]  # x, y, w, h in pixels of the frames given to segment()
@@ -195,7 +195,7 @@ class GrabCutTracker:
                         gate,
                         self._unreliable(flow, i) if self.reliable_motion else None,
                     )
-                if self.localise and self._due(i, s, m, prior):
+                if self.localise and self._due(i, t, m, prior):
                     new = self._reseed(frames, bins, flow, i, m, hist_fg, hist_bg)
                     if new is not None:
                         m, how[i] = new, "re-seeded"
@@ -287,9 +287,10 @@ class GrabCutTracker:
         x0, y0, x1, y1 = max(x - m, 0), max(y - m, 0), min(x + bw + m, w), min(y + bh + m, h)
         return self._first(frames[i], bins[i], self._residual(flow, i), (x0, y0, x1 - x0, y1 - y0))
 
-    def _due(self, i: int, s: int, mask: np.ndarray, prior: np.ndarray) -> bool:
-        """Check the tracked mask against the localiser on keyframes, and whenever it shrinks or vanishes."""
-        if abs(i - s) % self.key_every == 0:
+    def _due(self, i: int, t: int, mask: np.ndarray, prior: np.ndarray) -> bool:
+        """Check the tracked mask against the localiser on keyframes (those `_start` already looked
+        at: no new look), and whenever it shrinks or vanishes."""
+        if i % self.key_every == 0 or i == t - 1:
             return True
         area, before = int(mask.sum()), int(prior.sum())
         if before == 0:  # lost (out of frame, hidden): look for it again on every frame
@@ -452,8 +453,4 @@ def _closed(mask: np.ndarray) -> np.ndarray:
 
 def _resize_flow(flow: np.ndarray, w: int, h: int) -> np.ndarray:
     """(N, H, W, 2) flow -> (N, h, w, 2), displacements rescaled to the new pixel size."""
-    sx, sy = w / flow.shape[2], h / flow.shape[1]
-    out = np.stack([cv2.resize(f, (w, h), interpolation=cv2.INTER_AREA) for f in flow])
-    out[..., 0] *= sx
-    out[..., 1] *= sy
-    return out
+    return np.stack([resize_flow(f, w, h) for f in flow])
