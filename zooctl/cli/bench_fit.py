@@ -97,7 +97,8 @@ def run(
             )
         else:
             err_console.print(
-                f"{row['video']} [{row['ablation']}]: template {row['template']}, mask IoU {row['mask_iou']:.3f}, {row['wall_s']:.0f} s",
+                f"{row['video']} [{row['ablation']}]: template {row['template']}, mask IoU {row['mask_iou']:.3f}, "
+                f"novel-view IoU {_num(row.get('novel_view_iou'))}, {row['wall_s']:.0f} s",
                 highlight=False,
                 markup=False,
             )
@@ -137,6 +138,10 @@ def run(
             f"{len(failed)} of {len(res['rows'])} benchmark fits failed (see the table)",
             hint="run again with --resume to redo only those",
         )
+
+
+def _num(x: float | None) -> str:
+    return "n/a" if x is None else f"{x:.3f}"
 
 
 def component_overrides(renderer: str | None, articulation: str | None) -> dict | None:

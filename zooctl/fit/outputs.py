@@ -62,6 +62,24 @@ def write_glb(asset: RiggedAsset, path: Path) -> Path:
     return export_asset(asset, Path(path), "glb", ["fit"])
 
 
+@torch.no_grad()
+def exported_mask_iou(asset: RiggedAsset, camera, masks: np.ndarray, batch: int = 8) -> np.ndarray:
+    """(T,) IoU of the exported character's ``fit`` clip (linear blend skinning of the asset the
+    USD/GLB hold) projected through ``camera`` (input resolution) with masks (T, H, W) bool."""
+    from ..geometry import silhouette_iou
+    from ..render.raster import rasterize
+
+    T = len(masks)
+    faces = torch.as_tensor(asset.faces, dtype=torch.long)
+    out = []
+    for s in range(0, T, batch):
+        idx = np.arange(s, min(s + batch, T))
+        v = torch.as_tensor(asset.pose("fit", idx).astype(np.float32))
+        sil = rasterize(v, faces, camera.expand(len(idx))).mask.numpy()
+        out.append(silhouette_iou(sil, masks[idx]))
+    return np.concatenate(out)
+
+
 # -- overlay video -------------------------------------------------------------------------------
 
 
