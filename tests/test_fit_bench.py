@@ -161,3 +161,16 @@ def test_bench_folders_without_novel_views_say_n_a(tmp_path, store):
     res = run_benchmark(tmp_path / "v", store, own_template=True, overrides=TINY)
     assert res["rows"][0]["novel_view_iou"] is None and res["rows"][0]["miou"] is not None
     assert "| n/a |" in markdown_table(res)
+
+
+def test_overlay_turns_around_the_fit_at_a_fixed_time(tmp_path):
+    from zooctl.fit.export import fitted_asset
+    from zooctl.fit.outputs import overlay_frames
+
+    res = _fit_tiny(tmp_path)
+    asset = fitted_asset(res.scene, res.template, "tube-fit", res.video.fps)
+    out = overlay_frames(asset, res.input_camera(), res.video.frames, turn_frames=4)
+    T, W = res.video.num_frames, res.video.frames.shape[2]
+    assert out.shape == (T + 4, 32, 64, 3)
+    assert all((out[T + k, :, :W] == out[T // 2, :, :W]).all() for k in range(4))  # time stands still
+    assert not (out[T, :, W:] == out[T + 1, :, W:]).all()  # while the camera turns
