@@ -174,3 +174,14 @@ def test_overlay_turns_around_the_fit_at_a_fixed_time(tmp_path):
     assert out.shape == (T + 4, 32, 64, 3)
     assert all((out[T + k, :, :W] == out[T // 2, :, :W]).all() for k in range(4))  # time stands still
     assert not (out[T, :, W:] == out[T + 1, :, W:]).all()  # while the camera turns
+
+
+def test_bench_run_pose_prior_option(tmp_path):
+    from cli_helpers import zooctl
+
+    from zooctl.cli.bench_fit import component_overrides
+
+    assert component_overrides(None, None, "clips") == {"pose_prior": {"kind": "clips"}}
+    assert component_overrides(None, None) is None
+    r = zooctl("bench", "run", str(tmp_path), "--pose-prior", "bogus", store=tmp_path / "store")
+    assert r.code == 2 and "pose_prior: kind 'bogus'" in r.err and "Traceback" not in r.err, r.err
