@@ -51,6 +51,23 @@ def test_bench_make_ground_truth_is_consistent(tmp_path):
     assert not np.allclose(z["gt_cam_rotation"][0], z["gt_cam_rotation"][12])
     assert np.abs(z["gt_vertices"][12] - z["gt_vertices"][0]).max() > 1e-3
     assert json.loads((folder / "meta.json").read_text())["asset"] == "tube"
+    # Held-out views: the same frames' vertices through the held-out cameras give their masks.
+    assert z["gt_view_masks"].shape == (2, 13, 48, 48) and z["gt_view_rotation"].shape == (2, 13, 3, 3)
+    for c in range(2):
+        view = Camera(
+            K,
+            torch.as_tensor(z["gt_view_rotation"][c, t : t + 1], dtype=torch.float32),
+            torch.as_tensor(z["gt_view_translation"][c, t : t + 1], dtype=torch.float32),
+            48,
+            48,
+        )
+        vm = rasterize(
+            torch.as_tensor(z["gt_vertices"][t : t + 1]),
+            torch.as_tensor(z["gt_faces"], dtype=torch.long),
+            view,
+        ).mask[0]
+        assert (vm.numpy() == z["gt_view_masks"][c, t]).mean() > 0.99 and vm.any()
+        assert not np.allclose(z["gt_view_rotation"][c, t], z["gt_cam_rotation"][t])
 
 
 def test_bench_run_table(tmp_path, store):
@@ -67,7 +84,9 @@ def test_bench_run_table(tmp_path, store):
     assert [r["ablation"] for r in res["rows"]] == ["full", "no-flow"]
     row = res["rows"][0]
     assert row["template"] == "tube2" and 0 <= row["mask_iou"] <= 1 and row["miou"] is not None
+    assert 0 <= row["novel_view_iou"] <= 1
     table = markdown_table(res)
+    assert "novel-view IoU" in table
     assert "| full | 1 |" in table and "no-flow" in table
     assert "Camera motion: estimated" in table
     own = run_benchmark(tmp_path / "v", store, own_template=True, known_camera=True, overrides=TINY)
@@ -95,3 +114,70 @@ def test_reanimation_uses_the_scale_of_the_frame_it_starts_from(tmp_path):
         res.scene.root_translation[:-1] *= 2.0  # every frame but the last twice as far
     after = evaluate_fit(res, frames=4)
     assert after["reanimation"] == before["reanimation"]
+
+
+def _fit_tiny(tmp_path):
+    from zooctl.fit.config import FitConfig
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.run import fit_video
+
+    asset = tube_asset(bones=3, name="tube")
+    video = load_fit_video(make_video(asset, tmp_path / "v", frames=4, size=32, seed=0))
+    return fit_video(video, asset, FitConfig.from_dict(json.loads(json.dumps(TINY))))
+
+
+def test_novel_view_iou_scores_the_truth_high_and_a_mirror_low(tmp_path):
+    """Projected through the held-out cameras, the true shape (placed in the input camera's frame)
+    matches the held-out masks; the same shape mirrored in depth, which the input view cannot tell
+    apart, does not."""
+    from zooctl.metrics import novel_view_iou
+
+    res = _fit_tiny(tmp_path)
+    gt = res.video.gt
+    res.template = tube_asset(bones=3, name="tube")  # faces of the ground-truth mesh
+    sel = np.array([0, 3])
+    R, t = gt["cam_rotation"][sel], gt["cam_translation"][sel]
+    cam_frame = np.einsum("sva,sba->svb", gt["vertices"][sel], R) + t[:, None]
+    truth = novel_view_iou(res, sel, cam_frame, np.ones(2))
+    assert truth is not None and min(truth) > 0.9
+    z0 = cam_frame[..., 2:].mean(1, keepdims=True)
+    mirrored = cam_frame.copy()
+    mirrored[..., 2:] = 2 * z0 - cam_frame[..., 2:]
+    assert max(novel_view_iou(res, sel, mirrored, np.ones(2))) < min(truth) - 0.05
+
+
+def test_bench_folders_without_novel_views_say_n_a(tmp_path, store):
+    from zooctl.store.bank import Bank
+
+    tube = tube_asset(bones=3, name="tube")
+    Bank(store).add(tube)
+    folder = make_video(tube, tmp_path / "v", frames=3, size=32, seed=0)
+    with np.load(folder / "video.npz") as z:  # a folder made before the held-out views
+        np.savez(folder / "video.npz", **{k: z[k] for k in z.files if not k.startswith("gt_view_")})
+    res = run_benchmark(tmp_path / "v", store, own_template=True, overrides=TINY)
+    assert res["rows"][0]["novel_view_iou"] is None and res["rows"][0]["miou"] is not None
+    assert "| n/a |" in markdown_table(res)
+
+
+def test_overlay_turns_around_the_fit_at_a_fixed_time(tmp_path):
+    from zooctl.fit.export import fitted_asset
+    from zooctl.fit.outputs import overlay_frames
+
+    res = _fit_tiny(tmp_path)
+    asset = fitted_asset(res.scene, res.template, "tube-fit", res.video.fps)
+    out = overlay_frames(asset, res.input_camera(), res.video.frames, turn_frames=4)
+    T, W = res.video.num_frames, res.video.frames.shape[2]
+    assert out.shape == (T + 4, 32, 64, 3)
+    assert all((out[T + k, :, :W] == out[T // 2, :, :W]).all() for k in range(4))  # time stands still
+    assert not (out[T, :, W:] == out[T + 1, :, W:]).all()  # while the camera turns
+
+
+def test_bench_run_pose_prior_option(tmp_path):
+    from cli_helpers import zooctl
+
+    from zooctl.cli.bench_fit import component_overrides
+
+    assert component_overrides(None, None, "clips") == {"pose_prior": {"kind": "clips"}}
+    assert component_overrides(None, None) is None
+    r = zooctl("bench", "run", str(tmp_path), "--pose-prior", "bogus", store=tmp_path / "store")
+    assert r.code == 2 and "pose_prior: kind 'bogus'" in r.err and "Traceback" not in r.err, r.err

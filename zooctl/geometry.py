@@ -165,3 +165,11 @@ def global_transforms(local: np.ndarray, parents: np.ndarray) -> np.ndarray:
     for j, p in enumerate(parents):
         out[..., j, :, :] = local[..., j, :, :] if p < 0 else out[..., p, :, :] @ local[..., j, :, :]
     return out
+
+
+def silhouette_iou(sil: np.ndarray, masks: np.ndarray) -> np.ndarray:
+    """(B,) IoU of bool silhouettes (B, H, W) with bool masks (B, H, W); NaN where a mask is empty."""
+    B = len(masks)
+    inter = (sil & masks).reshape(B, -1).sum(1)
+    union = (sil | masks).reshape(B, -1).sum(1)
+    return np.where(masks.reshape(B, -1).any(1), inter / np.maximum(union, 1), np.nan)

@@ -11,6 +11,9 @@ the light direction, ambient level and background are random. Saved per video, i
   ``gt_skin_weights`` (V, K), ``gt_cam_rotation`` (T, 3, 3) and ``gt_cam_translation`` (T, 3)
   world-to-camera, ``gt_novel_vertices`` (V, 3) a held-out pose (8 more bones re-rotated after the
   last frame, for re-animation) seen by the last frame's camera (OpenCV convention, `zooctl.render.camera`);
+  ``gt_view_masks`` (C, T, H, W) bool, ``gt_view_rotation`` (C, T, 3, 3) and ``gt_view_translation``
+  (C, T, 3): the same frames seen by C = 2 cameras the fit never sees (`NOVEL_VIEWS`: the input
+  camera turned +90 degrees in azimuth, and raised 35 degrees in elevation), masks only;
 - ``meta.json``: asset name, frames, size, fps, seed; ``video.mp4``: the frames as H.264.
 """
 
@@ -30,6 +33,8 @@ from ..store.fs import write_bytes_atomic, write_json_atomic
 
 KEY_EVERY = 12
 BONES_PER_KEY = 8
+# (azimuth, elevation) offsets in degrees of the held-out cameras from each frame's input camera.
+NOVEL_VIEWS = ((90.0, 0.0), (0.0, 35.0))
 
 
 def _random_quat(rng: np.random.Generator, max_deg: float) -> np.ndarray:
@@ -182,11 +187,18 @@ def make_video(
         verts.reshape(-1, 3), size, size, azimuth=float(az[0]), elevation=float(el[0]), fov_y=fov, margin=1.1
     )
     dist = float(np.linalg.norm(ref.centers()[0][0].numpy() - centre))
-    cams = []
-    for i in range(frames):
-        a, e = math.radians(az[i]), math.radians(el[i])
-        eye = centre + dist * np.array([math.cos(e) * math.cos(a), math.sin(e), -math.cos(e) * math.sin(a)])
-        cams.append(orbit_camera(eye, centre, size, size, fov))
+
+    def orbit(da: float, de: float) -> list:
+        out = []
+        for i in range(frames):
+            a, e = math.radians(az[i] + da), math.radians(min(el[i] + de, 85.0))
+            eye = centre + dist * np.array(
+                [math.cos(e) * math.cos(a), math.sin(e), -math.cos(e) * math.sin(a)]
+            )
+            out.append(orbit_camera(eye, centre, size, size, fov))
+        return out
+
+    cams = orbit(0.0, 0.0)
     K = cams[0].intrinsics[0].numpy().astype(np.float64)
     Rs = np.stack([c.rotation[0].numpy() for c in cams]).astype(np.float64)
     ts = np.stack([c.translation[0].numpy() for c in cams]).astype(np.float64)
@@ -197,6 +209,10 @@ def make_video(
     rgb, masks = shade_frames(
         asset, verts, cams, light / np.linalg.norm(light), float(rng.uniform(0.25, 0.5)), bg
     )
+    views = [orbit(da, de) for da, de in NOVEL_VIEWS]
+    view_masks = np.stack([shade_frames(asset, verts, c, light, 0.5, bg)[1] for c in views])
+    view_R = np.stack([[c.rotation[0].numpy() for c in v] for v in views]).astype(np.float64)
+    view_t = np.stack([[c.translation[0].numpy() for c in v] for v in views]).astype(np.float64)
     flow = np.zeros((max(frames - 1, 0), size, size, 2), np.float16)
     valid = np.zeros((max(frames - 1, 0), size, size), bool)
     fr = FlowRenderer()
@@ -242,6 +258,9 @@ def make_video(
         gt_skin_weights=asset.skin_weights,
         gt_cam_rotation=Rs,
         gt_cam_translation=ts,
+        gt_view_masks=view_masks,
+        gt_view_rotation=view_R,
+        gt_view_translation=view_t,
     )
     write_bytes_atomic(dest / "video.npz", buf.getvalue())
     write_json_atomic(

@@ -74,6 +74,11 @@ def run(
         "--known-camera",
         help="Give each fit its video's camera rotations (CASA's protocol on synthetic data) instead of estimating the camera's motion.",
     ),
+    pose_prior: str = typer.Option(
+        None,
+        "--pose-prior",
+        help="Pose prior of every fit: none, rest (rotations near the rest pose) or clips (the template's clip statistics); default: the preset's.",
+    ),
     renderer: str = RendererOpt,
     articulation: str = ArticulationOpt,
     report: Path = typer.Option(None, "--report", help="Also write the markdown table here."),
@@ -94,7 +99,8 @@ def run(
             )
         else:
             err_console.print(
-                f"{row['video']} [{row['ablation']}]: template {row['template']}, mask IoU {row['mask_iou']:.3f}, {row['wall_s']:.0f} s",
+                f"{row['video']} [{row['ablation']}]: template {row['template']}, mask IoU {row['mask_iou']:.3f}, "
+                f"novel-view IoU {_num(row.get('novel_view_iou'))}, {row['wall_s']:.0f} s",
                 highlight=False,
                 markup=False,
             )
@@ -103,7 +109,7 @@ def run(
     opts = dict(
         known_camera=known_camera,
         own_template=own_template,
-        overrides=component_overrides(renderer, articulation),
+        overrides=component_overrides(renderer, articulation, pose_prior),
     )
     if batch.executor is not None or resume:  # a batch: each fit one task
         ex = batch.make_executor(None)
@@ -136,9 +142,18 @@ def run(
         )
 
 
-def component_overrides(renderer: str | None, articulation: str | None) -> dict | None:
-    """Config overrides naming registered components (checked when the config is validated)."""
+def _num(x: float | None) -> str:
+    return "n/a" if x is None else f"{x:.3f}"
+
+
+def component_overrides(
+    renderer: str | None, articulation: str | None, pose_prior: str | None = None
+) -> dict | None:
+    """Config overrides naming registered components or the pose prior (checked when the config is
+    validated)."""
     out: dict = {}
+    if pose_prior is not None:
+        out["pose_prior"] = {"kind": pose_prior}
     if renderer is not None:
         out["stage1"] = {"renderer": renderer}
         out["stage2"] = {"renderer": renderer}

@@ -78,6 +78,19 @@ class TemplateTrials:
 
 
 @dataclass
+class PosePrior:
+    """Which prior ``weights.pose_prior`` weighs (`zooctl.fit.pose_prior`): ``none``, ``rest``
+    (rotations near the rest pose) or ``clips`` (per-joint rotation statistics of the template's
+    own clips, deviations floored at ``min_std_deg``)."""
+
+    kind: str = "rest"
+    min_std_deg: float = 10.0
+
+
+POSE_PRIORS = ("none", "rest", "clips")
+
+
+@dataclass
 class Ablation:
     """Switches for CASA's ablations (tables 2-5)."""
 
@@ -117,6 +130,7 @@ class FitConfig:
     weights: LossWeights = field(default_factory=LossWeights)
     ablation: Ablation = field(default_factory=Ablation)
     trials: TemplateTrials = field(default_factory=TemplateTrials)
+    pose_prior: PosePrior = field(default_factory=PosePrior)
     schema_version: int = CONFIG_VERSION
 
     # -- serialisation ------------------------------------------------------------------------
@@ -152,6 +166,11 @@ class FitConfig:
             raise UsageError(f"--focal {self.camera.focal} must be positive (pixels)")
         if self.max_frames is not None and self.max_frames < 1:
             raise UsageError("max_frames must be at least 1")
+        if self.pose_prior.kind not in POSE_PRIORS or not self.pose_prior.min_std_deg > 0:
+            raise UsageError(
+                f"pose_prior: kind {self.pose_prior.kind!r} must be one of {', '.join(POSE_PRIORS)} "
+                "and min_std_deg positive"
+            )
         if self.trials.candidates < 1 or self.trials.iters < 0:
             raise UsageError(
                 "trials: candidates >= 1 and iters >= 0 are required", hint="e.g. --candidates 3"

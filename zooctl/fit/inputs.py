@@ -84,7 +84,7 @@ class FitVideo:
             None if self.flow is None else self.flow[: max(n - 1, 0)],
             None if self.flow_valid is None else self.flow_valid[: max(n - 1, 0)],
             self.intrinsics,
-            {k: (v[:n] if k in _PER_FRAME_GT else v) for k, v in self.gt.items()},
+            {k: _truncate_gt(k, v, n) for k, v in self.gt.items()},
             self.source,
             self.mask_source,
             None if self.camera_rotations is None else self.camera_rotations[:n],
@@ -92,6 +92,13 @@ class FitVideo:
 
 
 _PER_FRAME_GT = {"vertices", "joints", "cam_rotation", "cam_translation"}
+_PER_VIEW_FRAME_GT = {"view_masks", "view_rotation", "view_translation"}  # (C, T, ...)
+
+
+def _truncate_gt(key: str, value: Any, n: int) -> Any:
+    if key in _PER_FRAME_GT:
+        return value[:n]
+    return value[:, :n] if key in _PER_VIEW_FRAME_GT else value
 
 
 def load_fit_video(

@@ -62,13 +62,36 @@ def write_glb(asset: RiggedAsset, path: Path) -> Path:
     return export_asset(asset, Path(path), "glb", ["fit"])
 
 
+@torch.no_grad()
+def exported_mask_iou(asset: RiggedAsset, camera, masks: np.ndarray, batch: int = 8) -> np.ndarray:
+    """(T,) IoU of the exported character's ``fit`` clip (linear blend skinning of the asset the
+    USD/GLB hold) projected through ``camera`` (input resolution) with masks (T, H, W) bool."""
+    from ..geometry import silhouette_iou
+    from ..render.raster import rasterize
+
+    T = len(masks)
+    faces = torch.as_tensor(asset.faces, dtype=torch.long)
+    out = []
+    for s in range(0, T, batch):
+        idx = np.arange(s, min(s + batch, T))
+        v = torch.as_tensor(asset.pose("fit", idx).astype(np.float32))
+        sil = rasterize(v, faces, camera.expand(len(idx))).mask.numpy()
+        out.append(silhouette_iou(sil, masks[idx]))
+    return np.concatenate(out)
+
+
 # -- overlay video -------------------------------------------------------------------------------
 
 
 @torch.no_grad()
-def overlay_frames(asset: RiggedAsset, camera, frames: np.ndarray, alpha: float = 0.6) -> np.ndarray:
-    """(T, H, 2W, 3) uint8: the shaded fitted mesh over each frame, beside a novel view turning
-    once around the animal over the video."""
+def overlay_frames(
+    asset: RiggedAsset, camera, frames: np.ndarray, alpha: float = 0.6, turn_frames: int = 60
+) -> np.ndarray:
+    """(T + turn_frames, H, 2W, 3) uint8. First the video: the shaded fitted mesh over each frame,
+    beside the fit playing its motion seen from the side (+90 degrees around the animal from the
+    input camera, raised 20 degrees), a view the input never shows. Then a turntable: the fit frozen
+    at the middle frame (its overlay on the left) while the camera turns once around it, starting
+    at the input camera's direction."""
     from ..render.preview import PreviewRenderer, orbit_camera
     from ..render.raster import rasterize
 
@@ -76,22 +99,49 @@ def overlay_frames(asset: RiggedAsset, camera, frames: np.ndarray, alpha: float 
     posed = asset.pose("fit", np.arange(T)).astype(np.float32)  # (T, V, 3)
     faces = torch.as_tensor(asset.faces, dtype=torch.long)
     renderer = PreviewRenderer()
-    cam = camera
-    out = np.zeros((T, H, 2 * W, 3), np.uint8)
+    out = np.zeros((T + turn_frames, H, 2 * W, 3), np.uint8)
     size = float(np.linalg.norm(posed[0].max(0) - posed[0].min(0)))
-    for t in range(T):
-        shaded = renderer.render(posed[t], asset.faces, cam, asset.vertex_colors)
-        mask = rasterize(torch.as_tensor(posed[t][None]), faces, cam).mask[0].numpy()
-        img = frames[t].copy()
-        img[mask] = (alpha * shaded[mask] + (1 - alpha) * frames[t][mask]).astype(np.uint8)
-        out[t, :, :W] = img
+
+    def around(t: int, azimuth: float, elevation: float):
+        # Angles from the input camera (at the origin, +Y up) as seen from the animal's centre.
         centre = 0.5 * (posed[t].max(0) + posed[t].min(0))
-        ang = 2 * math.pi * t / max(T, 1)
-        eye = centre + 1.6 * size * np.array([math.sin(ang), 0.35, math.cos(ang)])
-        out[t, :, W:] = renderer.render(
+        a0 = math.atan2(-centre[0], -centre[2])
+        e0 = math.atan2(-centre[1], math.hypot(centre[0], centre[2]))
+        a, e = a0 + math.radians(azimuth), float(np.clip(e0 + math.radians(elevation), -1.4, 1.4))
+        eye = centre + 1.6 * size * np.array(
+            [math.sin(a) * math.cos(e), math.sin(e), math.cos(a) * math.cos(e)]
+        )
+        return renderer.render(
             posed[t], asset.faces, orbit_camera(eye, centre, H, W, 35.0), asset.vertex_colors
         )
+
+    for t in range(T):
+        shaded = renderer.render(posed[t], asset.faces, camera, asset.vertex_colors)
+        mask = rasterize(torch.as_tensor(posed[t][None]), faces, camera).mask[0].numpy()
+        img = frames[t].copy()
+        img[mask] = (alpha * shaded[mask] + (1 - alpha) * frames[t][mask]).astype(np.uint8)
+        out[t, :, :W] = _label(img, "input + fit")
+        out[t, :, W:] = _label(around(t, 90.0, 20.0), "fit, side view (+90 deg)")
+    mid = T // 2
+    for k in range(turn_frames):
+        out[T + k, :, :W] = out[mid, :, :W]
+        ang = 360.0 * k / turn_frames
+        out[T + k, :, W:] = _label(around(mid, ang, 0.0), f"fit at frame {mid}, {ang:.0f} deg from the input")
     return out
+
+
+def _label(img: np.ndarray, text: str) -> np.ndarray:
+    import cv2
+
+    img = np.ascontiguousarray(img)
+    scale = max(img.shape[0] / 640.0, 0.35)
+    cv2.putText(
+        img, text, (6, int(18 * scale) + 4), cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0), 3, cv2.LINE_AA
+    )
+    cv2.putText(
+        img, text, (6, int(18 * scale) + 4), cv2.FONT_HERSHEY_SIMPLEX, scale, (255, 255, 255), 1, cv2.LINE_AA
+    )
+    return img
 
 
 def write_overlay(asset: RiggedAsset, camera, frames: np.ndarray, path: Path, fps: float) -> Path:

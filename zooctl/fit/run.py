@@ -19,10 +19,12 @@ import torch
 
 from ..asset import RiggedAsset
 from ..errors import InputError, UsageError
+from ..geometry import silhouette_iou
 from .camera_init import CameraInit, initialise_camera
 from .config import FitConfig
 from .inputs import FitVideo, crop_box, fit_resolution, resample_flow, resample_masks
 from .losses import MaskTargets
+from .pose_prior import clip_pose_stats
 from .scene import FitScene
 from .stages import StageRunner, Targets, make_optimizer, mask_iou, stage_config
 
@@ -147,6 +149,8 @@ def fit_video(
         principal=((W / 2 - x0) * s, (H / 2 - y0) * s),
         articulation=cfg.articulation,
     )
+    if cfg.pose_prior.kind == "clips":
+        scene.clip_stats = clip_pose_stats(template, cfg.pose_prior.min_std_deg, dev)
     if resume is None:
         rep.message("searching the camera and viewpoint")
         t1 = time.perf_counter()
@@ -296,10 +300,7 @@ def input_mask_iou(result: FitResult, masks: np.ndarray | None = None) -> np.nda
     for s in range(0, scene.num_frames, B):
         idx = torch.arange(s, min(s + B, scene.num_frames), device=scene.rotations.device)
         sil = rasterize(scene.pose(idx).vertices, scene.faces, cam.expand(len(idx))).mask.cpu().numpy()
-        m = masks[idx.cpu().numpy()]
-        inter = (sil & m).reshape(len(idx), -1).sum(1)
-        union = (sil | m).reshape(len(idx), -1).sum(1)
-        out.append(np.where(m.reshape(len(idx), -1).any(1), inter / np.maximum(union, 1), np.nan))
+        out.append(silhouette_iou(sil, masks[idx.cpu().numpy()]))
     return np.concatenate(out)
 
 

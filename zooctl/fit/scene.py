@@ -67,6 +67,7 @@ class FitScene(nn.Module):
         self.register_buffer("init_logits", self.model.skin.logits.detach().clone())
         self.size = float(asset.size())
         self.num_joints = J
+        self.clip_stats = None  # `zooctl.fit.pose_prior.ClipPoseStats` for the clips pose prior
 
     @property
     def num_frames(self) -> int:

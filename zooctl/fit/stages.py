@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ..geometry import silhouette_iou
 from ..render.base import check_silhouette, get_renderer
 from .config import FitConfig, StageConfig
 from .losses import (
@@ -38,6 +39,7 @@ from .losses import (
     skin_prior,
     soft_iou_loss,
 )
+from .pose_prior import clip_pose_loss
 from .scene import FitScene
 
 Tensor = torch.Tensor
@@ -154,7 +156,12 @@ class StageRunner:
                 u = scene.model.global_scale()
                 disp = scene.model.displacement(u * scene.model.points)
                 terms["displacement"] = w.displacement * displacement_prior(disp, scene.size)
-            terms["pose"] = w.pose_prior * pose_prior(scene.rotations, scene.model.rest_rotation)
+            kind = self.cfg.pose_prior.kind
+            if kind == "rest":
+                terms["pose"] = w.pose_prior * pose_prior(scene.rotations, scene.model.rest_rotation)
+            elif kind == "clips":
+                q = scene.rotations[frames]
+                terms["pose"] = w.pose_prior * clip_pose_loss(q, scene.model.rest_rotation, scene.clip_stats)
         total = sum(terms.values())
         return total, {k: float(v.detach()) for k, v in terms.items()}
 
@@ -187,8 +194,5 @@ def mask_iou(scene: FitScene, masks: np.ndarray, batch: int = 16) -> np.ndarray:
         idx = torch.arange(s, min(s + batch, scene.num_frames), device=scene.rotations.device)
         v = scene.pose(idx).vertices
         sil = rasterize(v, scene.faces, scene.camera(len(idx))).mask.cpu().numpy()
-        m = masks[idx.cpu().numpy()]
-        inter = (sil & m).reshape(len(idx), -1).sum(1)
-        union = (sil | m).reshape(len(idx), -1).sum(1)
-        out.append(np.where(m.reshape(len(idx), -1).any(1), inter / np.maximum(union, 1), np.nan))
+        out.append(silhouette_iou(sil, masks[idx.cpu().numpy()]))
     return np.concatenate(out)

@@ -1,0 +1,66 @@
+"""Pose priors on the fitted joint rotations (``FitConfig.pose_prior``: none, rest, clips).
+
+``rest``: rotations near the rest pose (`zooctl.fit.losses.pose_prior`). ``clips``: a Gaussian per
+joint over the rotation vector of rest^-1 q, learned from the template's own clips (every frame of
+every clip): how this skeleton moves. The loss is the mean Mahalanobis distance per degree of
+freedom; each joint's standard deviations are floored at ``min_std_deg`` (joints a clip never
+moves still may move a little, and a template's clips are not the video animal's motion).
+Without clips the prior falls back to ``rest`` statistics: mean 0, the floor as the deviation.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from ..asset import RiggedAsset
+from ..rig.rotations import quat_conjugate, quat_mul, quat_normalize, quat_to_axis_angle
+
+Tensor = torch.Tensor
+
+
+@dataclass
+class ClipPoseStats:
+    """Per joint: mean (J, 3) and precision (J, 3, 3) of rest^-1 q's rotation vector; frames: how
+    many clip frames they were estimated from (0: the fallback)."""
+
+    mean: Tensor
+    precision: Tensor
+    frames: int
+
+
+def clip_pose_stats(asset: RiggedAsset, min_std_deg: float = 10.0, device: str = "cpu") -> ClipPoseStats:
+    """The template's clip statistics (module docstring)."""
+    _, rest_q, _ = asset.rest_trs()
+    rest = torch.as_tensor(np.asarray(rest_q), dtype=torch.float64)
+    J = len(asset.parents)
+    rots = [np.asarray(c.rotations) for c in asset.clips.values() if c.rotations.shape[1:] == (J, 4)]
+    floor = math.radians(min_std_deg) ** 2 * torch.eye(3, dtype=torch.float64)
+    if not rots:
+        mean = torch.zeros(J, 3, dtype=torch.float64)
+        cov = floor.expand(J, 3, 3)
+        n = 0
+    else:
+        q = torch.as_tensor(np.concatenate(rots), dtype=torch.float64)  # (N, J, 4)
+        aa = quat_to_axis_angle(quat_normalize(quat_mul(quat_conjugate(rest)[None], q)))  # (N, J, 3)
+        mean = aa.mean(0)
+        d = aa - mean
+        cov = torch.einsum("nja,njb->jab", d, d) / max(len(aa) - 1, 1)
+        # Floor the deviations: eigenvalues below the floor's variance are raised to it.
+        w, V = torch.linalg.eigh(cov)
+        w = w.clamp_min(float(floor[0, 0]))
+        cov = V @ torch.diag_embed(w) @ V.transpose(-1, -2)
+        n = len(aa)
+    prec = torch.linalg.inv(cov)
+    return ClipPoseStats(mean.float().to(device), prec.float().to(device), n)
+
+
+def clip_pose_loss(rotations: Tensor, rest: Tensor, stats: ClipPoseStats) -> Tensor:
+    """Mean squared Mahalanobis distance per degree of freedom of rotations (T, J, 4) from the
+    clips' per-joint Gaussian (rest (J, 4) the rest rotations)."""
+    q = quat_mul(quat_conjugate(rest)[None], quat_normalize(rotations))
+    d = quat_to_axis_angle(q) - stats.mean  # (T, J, 3)
+    return torch.einsum("tja,jab,tjb->tj", d, stats.precision, d).mean() / 3.0
