@@ -34,7 +34,9 @@ SEQUENCES = ("blackswan", "dog", "cows")
 def _dis(preset: str):
     from zooctl.video.flow import DISFlow
 
-    return DISFlow(preset) if FLOW_SIZE is None else DISFlow(preset, max_size=FLOW_SIZE)
+    return (
+        DISFlow(preset) if FLOW_SIZE is None else DISFlow(preset, max_size=FLOW_SIZE)
+    )  # --flow-size 0: full
 
 
 def machine() -> str:
@@ -305,7 +307,12 @@ def main() -> None:
     ap.add_argument(
         "--seg-option", action="append", default=[], metavar="K=V", help="grabcut option to measure"
     )
-    ap.add_argument("--flow-size", type=int, default=None, help="longest side the DIS flow works at")
+    ap.add_argument(
+        "--flow-size",
+        type=int,
+        default=None,
+        help="longest side DIS flow works at (0: full size; default: DISFlow's)",
+    )
     args = ap.parse_args()
     global _OVERLAYS, FLOW_SIZE
     FLOW_SIZE = args.flow_size
