@@ -34,9 +34,7 @@ SEQUENCES = ("blackswan", "dog", "cows")
 def _dis(preset: str):
     from zooctl.video.flow import DISFlow
 
-    return (
-        DISFlow(preset) if FLOW_SIZE is None else DISFlow(preset, max_size=FLOW_SIZE)
-    )  # --flow-size 0: full
+    return DISFlow(preset) if FLOW_SIZE is None else DISFlow(preset, max_size=FLOW_SIZE)
 
 
 def machine() -> str:
