@@ -305,7 +305,12 @@ def main() -> None:
     ap.add_argument(
         "--seg-option", action="append", default=[], metavar="K=V", help="grabcut option to measure"
     )
-    ap.add_argument("--flow-size", type=int, default=None, help="longest side the DIS flow works at")
+    ap.add_argument(
+        "--flow-size",
+        type=int,
+        default=None,
+        help="longest side DIS flow works at (0: full size; default: DISFlow's)",
+    )
     args = ap.parse_args()
     global _OVERLAYS, FLOW_SIZE
     FLOW_SIZE = args.flow_size

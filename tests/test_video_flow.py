@@ -33,6 +33,7 @@ def test_dis_at_a_smaller_working_size_returns_full_size_flow():
     assert np.median(flow[32:-32, 32:-32].reshape(-1, 2), 0) == pytest.approx([6, -4], abs=0.5)
     with pytest.raises(UsageError):
         DISFlow(max_size=4)
+    assert DISFlow(max_size=0).max_size is None  # 0: full size
 
 
 def test_warp_with_backward_flow_reconstructs_the_first_frame():

@@ -74,6 +74,11 @@ def add(
     flow_preset: str = typer.Option(
         None, "--flow-preset", help="DIS preset: ultrafast | fast | medium (default medium)."
     ),
+    flow_size: int = typer.Option(
+        None,
+        "--flow-size",
+        help="Longest side DIS flow is computed at (the stored flow is upsampled to the frames; default 640; 0: full size).",
+    ),
     fps: float = typer.Option(
         None, "--fps", help="Resample a video file to this rate; for image folders, their rate (default 30)."
     ),
@@ -102,6 +107,8 @@ def add(
     flow_opts = _parse_options(None, "--flow-option")
     if flow_preset:
         flow_opts["preset"] = flow_preset
+    if flow_size is not None:
+        flow_opts["max_size"] = flow_size
     opts = AddOptions(
         name=name,
         masks=masks,

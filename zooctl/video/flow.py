@@ -20,22 +20,25 @@ DIS_PRESETS = {
     "fast": cv2.DISOPTICAL_FLOW_PRESET_FAST,
     "medium": cv2.DISOPTICAL_FLOW_PRESET_MEDIUM,
 }
+FLOW_WORK_SIZE = 640  # longest side DIS works at by default: DAVIS J as at full 854 px, 15% less CPU per add
 
 
 class DISFlow:
     """Dense Inverse Search flow (Kroeger et al. 2016) on grey images, with OpenCV's variational refinement.
 
     ``max_size``: longest side the flow is computed at; larger frames are downscaled first and the
-    flow comes back up (displacements rescaled) at their size. None: full size.
+    flow comes back up (displacements rescaled) at their size. None or 0: full size.
     """
 
-    def __init__(self, preset: str = "medium", max_size: int | None = None) -> None:
+    def __init__(self, preset: str = "medium", max_size: int | None = FLOW_WORK_SIZE) -> None:
         if preset not in DIS_PRESETS:
             raise UsageError(f"unknown DIS preset {preset!r}", hint=f"use one of {', '.join(DIS_PRESETS)}")
-        if max_size is not None and int(max_size) < 16:
-            raise UsageError(f"flow max_size must be at least 16 pixels, got {max_size}")
+        if max_size and int(max_size) < 16:
+            raise UsageError(
+                f"flow size must be at least 16 pixels, got {max_size}", hint="or 0 for full size"
+            )
         self.preset = preset
-        self.max_size = None if max_size is None else int(max_size)
+        self.max_size = int(max_size) if max_size else None
         self._dis = cv2.DISOpticalFlow.create(DIS_PRESETS[preset])
 
     def flow(self, frame_a: np.ndarray, frame_b: np.ndarray) -> np.ndarray:
