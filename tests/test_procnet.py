@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from cli_helpers import run_inprocess
 
-from zooctl.embed.procnet import DEFAULT_WEIGHTS, ProcnetEmbedder
+from zooctl.embed.procnet import ProcnetEmbedder, default_weights
+from zooctl.errors import InputError
 from zooctl.procedural.random import LABELS, RANGES, random_assets, random_params
 from zooctl.retrieval.index import embed_inputs
 from zooctl.retrieval.train_data import render_training_set
@@ -66,10 +67,16 @@ def test_tiny_training_is_deterministic_and_loads_as_an_embedder(tiny_set, tmp_p
         embed_inputs(emb, imgs, None)
 
 
-def test_packaged_weights_are_small_and_load():
-    assert DEFAULT_WEIGHTS.stat().st_size <= 5_000_000
-    emb = ProcnetEmbedder()
-    assert emb.identity.startswith("procnet/") and emb.dim == 128
+def test_without_weights_it_says_how_to_train_them(tmp_path, monkeypatch):
+    monkeypatch.delenv("ZOOCTL_PROCNET_WEIGHTS", raising=False)
+    monkeypatch.setenv("ZOOCTL_STORE", str(tmp_path / "store"))
+    assert default_weights() == tmp_path / "store" / "models" / "procnet.npz"
+    with pytest.raises(InputError, match="procnet weights") as e:
+        ProcnetEmbedder()
+    assert "embed train" in e.value.hint
+    (tmp_path / "bad.npz").write_bytes(b"not a zip")
+    with pytest.raises(InputError, match="not a procnet weights file"):
+        ProcnetEmbedder(weights=tmp_path / "bad.npz")
 
 
 def test_cli_trains_and_refuses_bad_input(tmp_path, capsys, monkeypatch):

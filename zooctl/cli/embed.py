@@ -39,7 +39,7 @@ def train(
     from ..retrieval.train_embedder import TrainConfig, plot_losses, save_model, train_head
 
     root = store_root()
-    out = out or Path(root) / "models" / "procnet.npz"
+    out = out or Path(root) / "models" / "procnet.npz"  # = procnet.default_weights() without --store
     cfg = TrainConfig(steps=steps, seed=seed, minutes=minutes)
     t0 = time.perf_counter()
     with Progress(console=console, disable=json_out, transient=True) as bar:

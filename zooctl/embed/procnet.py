@@ -4,9 +4,11 @@ Input: the RGB crop and its mask (``input_kind = "rgb+mask"``). Features: Effici
 pooled 1280-d features of the crop and the 576-d silhouette descriptor of the mask (the same
 extractors as the ``effnet`` and ``silhouette`` embedders), concatenated in the order the weights
 file names; then ``relu(x W1 + b1) W2 + b2``, unit length. Pure numpy at inference (a search stays
-torch-free). Weights: ``ZOOCTL_PROCNET_WEIGHTS`` or ``weights=``, else the packaged
-`DEFAULT_WEIGHTS`, made by `zooctl embed train` (`zooctl.retrieval.train_embedder`). The identity
-carries the file's digest, so banks embedded by other weights are told to reindex.
+torch-free). Weights: ``weights=``, else ``ZOOCTL_PROCNET_WEIGHTS``, else `default_weights`
+(``models/procnet.npz`` in the store, where `zooctl embed train` writes them;
+`zooctl.retrieval.train_embedder`). None ship in the package: the head has not beaten the default
+embedders on the leave-one-out benchmark (BENCHMARKS.md). The identity carries the file's digest,
+so banks embedded by other weights are told to reindex.
 """
 
 from __future__ import annotations
@@ -20,16 +22,22 @@ import numpy as np
 from ..errors import InputError
 from .base import check_images, check_masks, file_digest, l2_normalize
 
-DEFAULT_WEIGHTS = Path(__file__).with_name("weights") / "procnet.npz"
+
+def default_weights() -> Path:
+    """Where `zooctl embed train` writes the weights by default: STORE/models/procnet.npz."""
+    from ..paths import default_store
+
+    return default_store() / "models" / "procnet.npz"
 
 
 def weights_file(weights: str | Path | None = None) -> Path:
-    """The weights to load: the argument, ZOOCTL_PROCNET_WEIGHTS, else the packaged file."""
-    p = Path(weights or os.environ.get("ZOOCTL_PROCNET_WEIGHTS") or DEFAULT_WEIGHTS).expanduser()
+    """The weights to load: the argument, ZOOCTL_PROCNET_WEIGHTS, else `default_weights`."""
+    p = Path(weights or os.environ.get("ZOOCTL_PROCNET_WEIGHTS") or default_weights()).expanduser()
     if not p.is_file():
         raise InputError(
             f"procnet weights {p} do not exist",
-            hint="train them with `zooctl embed train -o PATH` and set ZOOCTL_PROCNET_WEIGHTS=PATH",
+            hint="train them with `zooctl embed train` (about 6 min on 2 CPU cores) "
+            "or point ZOOCTL_PROCNET_WEIGHTS at a weights .npz",
         )
     return p
 
