@@ -102,12 +102,12 @@ def test_train_list_show_animate_bench_rm(seeded_store, capsys, monkeypatch, tmp
     ]
     assert Path(manifest["files"]["preview"][0]).stat().st_size > 0
     assert Path(manifest["files"]["contact_sheet"][0]).stat().st_size > 0
-    # The preview renders every third frame (10 of the clip's 30 per second) and plays them at
-    # 10 fps: the 12 sampled frames last as long, from 4 renders.
+    # The preview renders every sixth frame (5 of the clip's 30 per second) and plays them at
+    # 5 fps: the 12 sampled frames last as long, from 2 renders.
     import imageio_ffmpeg
 
     n_frames, secs = imageio_ffmpeg.count_frames_and_secs(manifest["files"]["preview"][0])
-    assert n_frames == 4 and abs(secs - 0.4) < 0.05
+    assert n_frames == 2 and abs(secs - 0.4) < 0.05
 
     # The exported motion is the sampled one: re-sample with the same seed and compare with the GLB.
     from zooctl.io.gltf_import import load_gltf

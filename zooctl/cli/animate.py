@@ -53,9 +53,9 @@ def animate(
     preview: bool = typer.Option(
         True, "--preview/--no-preview", help="Render a preview video and a contact sheet."
     ),
-    size: int = typer.Option(192, "--size", help="Preview image size in pixels."),
+    size: int = typer.Option(128, "--size", help="Preview image size in pixels (per tile)."),
     preview_fps: float = typer.Option(
-        10.0,
+        5.0,
         "--preview-fps",
         min=0.0,
         help="Frames per second the preview renders and plays (same duration; 0: every frame).",

@@ -29,8 +29,8 @@ class AnimateOptions:
     prior: str | None = None  # default: the most recently trained
     formats: tuple[str, ...] = ("usd", "glb")
     preview: bool = True
-    size: int = 192
-    preview_fps: float = 10.0  # frames per second the preview renders (rendering dominates the command)
+    size: int = 128
+    preview_fps: float = 5.0  # frames per second the preview renders (rendering dominates the command)
     device: str = "cpu"
 
 
@@ -169,7 +169,7 @@ def _preview(
     fps: float,
     device: str,
     original=None,
-    preview_fps: float = 10.0,
+    preview_fps: float = 5.0,
 ) -> dict[str, list[str]]:
     """A video with every sample in motion beside a real clip of the same skeleton (``original``'s
     most moving clip, looped), and a contact sheet (one row of frames per sample) whose labels give
