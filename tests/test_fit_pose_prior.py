@@ -11,7 +11,8 @@ import torch
 from zooctl.asset import Clip
 from zooctl.errors import UsageError
 from zooctl.fit.config import FitConfig
-from zooctl.fit.pose_prior import clip_pose_loss, clip_pose_stats
+from zooctl.fit.losses import clip_pose_loss
+from zooctl.fit.pose_prior import clip_pose_stats
 from zooctl.rig.rotations import axis_angle_to_quat, quat_mul
 from zooctl.rig.synthetic import tube_asset
 

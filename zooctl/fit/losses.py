@@ -9,7 +9,7 @@
 | scale | `scale_prior` | ``scale_prior`` |
 | skin | `skin_prior` | ``skin_prior`` |
 | displacement | `displacement_prior` | ``displacement`` |
-| pose | `pose_prior` | ``pose_prior`` |
+| pose | `pose_prior` (``pose_prior.kind`` rest) or `clip_pose_loss` (clips) | ``pose_prior`` |
 | smooth, symmetry, bone_length | the articulation model's ``smoothness_loss``, ``symmetry_loss``, ``bone_length_loss`` (CASA eq. 6, 7; `zooctl.rig.priors`, since they belong to the model) | ``smooth`` (lambda2), ``symmetry`` (lambda3), ``bone_length`` |
 
 `zooctl.fit.stages.StageRunner.loss` weights and sums them; change a weight's default in
@@ -23,10 +23,16 @@ it) and a fixed sample of mask pixels (that some vertex should cover).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 import torch.nn.functional as F
+
+from ..rig.rotations import quat_conjugate, quat_mul, quat_normalize, quat_to_axis_angle
+
+if TYPE_CHECKING:
+    from .pose_prior import ClipPoseStats
 
 Tensor = torch.Tensor
 
@@ -163,3 +169,11 @@ def pose_prior(rotations: Tensor, rest: Tensor) -> Tensor:
     """Joint rotations (T, J, 4) near the rest pose (J, 4): mean of ``1 - <q, q_rest>^2``."""
     q = rotations / rotations.norm(dim=-1, keepdim=True)
     return (1.0 - (q * rest).sum(-1) ** 2).mean()
+
+
+def clip_pose_loss(rotations: Tensor, rest: Tensor, stats: ClipPoseStats) -> Tensor:
+    """Mean squared Mahalanobis distance per degree of freedom of rotations (T, J, 4) from the
+    clips' per-joint Gaussian (rest (J, 4) the rest rotations)."""
+    q = quat_mul(quat_conjugate(rest)[None], quat_normalize(rotations))
+    d = quat_to_axis_angle(q) - stats.mean  # (T, J, 3)
+    return torch.einsum("tja,jab,tjb->tj", d, stats.precision, d).mean() / 3.0

@@ -25,7 +25,8 @@ Tensor = torch.Tensor
 @dataclass
 class ClipPoseStats:
     """Per joint: mean (J, 3) and precision (J, 3, 3) of rest^-1 q's rotation vector; frames: how
-    many clip frames they were estimated from (0: the fallback)."""
+    many clip frames they were estimated from (0: the fallback). Their loss is
+    `zooctl.fit.losses.clip_pose_loss`."""
 
     mean: Tensor
     precision: Tensor
@@ -56,11 +57,3 @@ def clip_pose_stats(asset: RiggedAsset, min_std_deg: float = 10.0, device: str =
         n = len(aa)
     prec = torch.linalg.inv(cov)
     return ClipPoseStats(mean.float().to(device), prec.float().to(device), n)
-
-
-def clip_pose_loss(rotations: Tensor, rest: Tensor, stats: ClipPoseStats) -> Tensor:
-    """Mean squared Mahalanobis distance per degree of freedom of rotations (T, J, 4) from the
-    clips' per-joint Gaussian (rest (J, 4) the rest rotations)."""
-    q = quat_mul(quat_conjugate(rest)[None], quat_normalize(rotations))
-    d = quat_to_axis_angle(q) - stats.mean  # (T, J, 3)
-    return torch.einsum("tja,jab,tjb->tj", d, stats.precision, d).mean() / 3.0

@@ -30,6 +30,7 @@ from ..render.base import check_silhouette, get_renderer
 from .config import FitConfig, StageConfig
 from .losses import (
     MaskTargets,
+    clip_pose_loss,
     contour_loss,
     displacement_prior,
     flow_loss,
@@ -39,7 +40,6 @@ from .losses import (
     skin_prior,
     soft_iou_loss,
 )
-from .pose_prior import clip_pose_loss
 from .scene import FitScene
 
 Tensor = torch.Tensor
