@@ -124,6 +124,14 @@ def _memory_value(layer: nn.TransformerDecoderLayer, memory: torch.Tensor) -> to
     return att.out_proj(v)
 
 
+def padding_attn_mask(pad: torch.Tensor, heads: int) -> torch.Tensor:
+    """pad (B, S) True where a token is padding -> bool attention mask (B * heads, S, S) that
+    hides those keys: what ``key_padding_mask=pad`` does, without torch's key-padding shape
+    check, whose first call imports sympy (0.5 s of every ``zooctl animate``)."""
+    B, S = pad.shape
+    return pad[:, None, None, :].expand(B, heads, S, S).reshape(B * heads, S, S)
+
+
 def decode_single_memory(
     decoder: nn.TransformerDecoder,
     queries: torch.Tensor,
@@ -141,13 +149,19 @@ def decode_single_memory(
     G, S, W = queries.shape
     R = memory.shape[1]
     x = queries
+    heads = decoder.layers[0].self_attn.num_heads
     for i, layer in enumerate(decoder.layers):
         if i == 0:
-            x = x + layer._sa_block(layer.norm1(x), None, pad)  # (G, S, W)
+            m = None if pad is None else padding_attn_mask(pad, heads)
+            x = x + layer._sa_block(layer.norm1(x), m, None)  # (G, S, W)
             x = (x[:, None] + layer.dropout2(_memory_value(layer, memory))[:, :, None]).reshape(G * R, S, W)
         else:
-            p = None if pad is None else pad[:, None].expand(G, R, S).reshape(G * R, S)
-            x = x + layer._sa_block(layer.norm1(x), None, p)
+            p = (
+                None
+                if pad is None
+                else padding_attn_mask(pad[:, None].expand(G, R, S).reshape(G * R, S), heads)
+            )
+            x = x + layer._sa_block(layer.norm1(x), p, None)
             x = x + layer.dropout2(_memory_value(layer, memory.reshape(G * R, W)))[:, None]
         x = x + layer._ff_block(layer.norm3(x))
     if decoder.norm is not None:
@@ -197,7 +211,9 @@ class MotionVAE(nn.Module):
         tokens = torch.cat([self.frame_token.expand(B, T, 1, -1), tokens], 2).reshape(B * T, J + 1, -1)
         pad = torch.cat([sk.mask.new_zeros(B, 1), ~sk.mask], 1)  # True: ignore
         pad = pad[:, None].expand(B, T, J + 1).reshape(B * T, J + 1)
-        pose = self.spatial_encoder(tokens, src_key_padding_mask=pad)[:, 0].reshape(B, T, -1)
+        pose = self.spatial_encoder(tokens, mask=padding_attn_mask(pad, self.cfg.heads))[:, 0].reshape(
+            B, T, -1
+        )
         frames = pose + self.time_in(time_encoding(torch.arange(T, device=rot6d.device), self.cfg.width))
         seq = torch.cat([self.mu_token.expand(B, 1, -1), self.sigma_token.expand(B, 1, -1), frames], 1)
         out = self.temporal_encoder(seq)
@@ -285,7 +301,7 @@ class TrajectoryVAE(nn.Module):
         tokens = self.traj_in(traj) + self.bone_in(sk.static)  # (B, J, W)
         seq = torch.cat([self.mu_token.expand(B, 1, -1), self.sigma_token.expand(B, 1, -1), tokens], 1)
         pad = torch.cat([sk.mask.new_zeros(B, 2), ~sk.mask], 1)
-        out = self.encoder(seq, src_key_padding_mask=pad)
+        out = self.encoder(seq, mask=padding_attn_mask(pad, self.cfg.heads))
         return self.to_mu(out[:, 0]), self.to_logvar(out[:, 1]).clamp(-12.0, 6.0)
 
     def decode(self, z: torch.Tensor, sk: SkeletonBatch, T: int | None = None) -> torch.Tensor:
@@ -298,7 +314,7 @@ class TrajectoryVAE(nn.Module):
             h = decode_single_memory(self.decoder, q, self.z_in(z)[:, None], ~sk.mask)[:, 0]
         else:  # each bone query attends to its own mix of the z tokens
             memory = self.z_in(z).reshape(B, M, -1) + self.z_pos
-            h = self.decoder(q, memory, tgt_key_padding_mask=~sk.mask)
+            h = self.decoder(q, memory, tgt_mask=padding_attn_mask(~sk.mask, self.cfg.heads))
         out = self.traj_out(self.norm_out(h)).reshape(B, J, L, 6).permute(0, 2, 1, 3)
         return out + self.identity6d
 
