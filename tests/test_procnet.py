@@ -28,6 +28,25 @@ def test_random_animals_are_deterministic_labelled_and_in_range():
             assert lo <= getattr(p, k) <= hi, (label, k)
 
 
+def test_every_benchmark_body_plan_has_random_animals_of_its_shape():
+    from zooctl.retrieval.evaluate import BODY_PLANS
+
+    assert set(BODY_PLANS.values()) <= set(LABELS)
+    for i, label in enumerate(("biped dinosaur", "humanoid", "crab")):
+        for a in random_assets(3, seed=i, labels=[label]):
+            ext = np.ptp(a.vertices, axis=0)  # x across, y up, z along
+            feet = [n for n in a.joint_names if "foot" in n]
+            if label == "biped dinosaur":  # level body, long tail, two legs and two arms
+                assert ext[2] > 1.5 * ext[1] and len(feet) == 2 and "upperarm_l" in a.joint_names
+                assert a.vertices[:, 2].max() > 0.5 * ext[2] - 0.1  # most of the length behind the hips
+            elif label == "humanoid":  # upright, two legs, two arms, a head on top
+                assert ext[1] > 1.5 * ext[2] and len(feet) == 2 and "upperarm_r" in a.joint_names
+            else:  # wide and flat, eight legs and two claws
+                assert ext[0] > 2 * ext[1] and len(feet) == 8
+                assert {"claw_finger_l", "claw_finger_r"} <= set(a.joint_names)
+            assert a.meta["body_plan"] == label
+
+
 def test_supcon_prefers_embeddings_grouped_by_label():
     import torch
 
@@ -90,7 +109,7 @@ def test_cli_trains_and_refuses_bad_input(tmp_path, capsys, monkeypatch):
     assert out.with_suffix(".loss.png").read_bytes()[:4] == b"\x89PNG"
     r = run_inprocess(capsys, "embed", "train", "--animals", "2")
     assert r.code != 0 and "--animals" in r.err and "Traceback" not in r.err
-    r = run_inprocess(capsys, "bank", "seed", "--random", "2", "--plan", "crab", "--no-views")
+    r = run_inprocess(capsys, "bank", "seed", "--random", "2", "--plan", "dragon", "--no-views")
     assert r.code != 0 and "unknown body plan" in r.err
     r = run_inprocess(capsys, "bank", "seed", "--random", "2", "--seed", "1", "--no-views", "--json")
     assert r.code == 0 and len(r.json()["added"]) == 2
