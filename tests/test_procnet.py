@@ -86,6 +86,36 @@ def test_tiny_training_is_deterministic_and_loads_as_an_embedder(tiny_set, tmp_p
         embed_inputs(emb, imgs, None)
 
 
+def test_bank_views_join_training_with_unknown_plans(tiny_set):
+    import torch
+
+    from zooctl.retrieval.train_data import TrainingSet
+    from zooctl.retrieval.train_embedder import merge_sets
+
+    z = torch.nn.functional.normalize(torch.randn(6, 4, generator=torch.Generator().manual_seed(0)), dim=1)
+    lab = torch.tensor([0, 0, 1, 1, -1, -1])
+    # unknown rows are no anchors and no positives, but still negatives; none known: no loss
+    moved = z.clone()
+    moved[4:] = -moved[4:]
+    assert supcon(z, lab, 0.1) != supcon(moved, lab, 0.1)  # negatives still count
+    assert float(supcon(z, torch.full((6,), -1), 0.1)) == 0.0
+    rows = np.arange(6)
+    bank = TrainingSet(
+        {f: tiny_set.features[f][rows] for f in tiny_set.features},
+        np.array([0, 0, -1, -1, 1, 1]),
+        np.array([0, 0, 1, 1, 2, 2]),
+        [tiny_set.labels[1], tiny_set.labels[0]],  # another label order: mapped by name
+    )
+    merged, ids = merge_sets(tiny_set, bank)
+    assert len(merged) == len(tiny_set) + 6 and list(ids) == [8, 9, 10]
+    assert list(merged.label[-6:]) == [1, 1, -1, -1, 0, 0]
+    cfg = TrainConfig(hidden=32, dim=16, steps=3, animals_per_batch=8, views_per_animal=2, bank_fraction=0.5)
+    w0, _ = train_head(tiny_set, cfg)
+    w1, l1 = train_head(tiny_set, cfg, bank=bank, init=w0)
+    w2, l2 = train_head(tiny_set, cfg, bank=bank, init=w0)
+    assert l1 == l2 and np.isfinite(l1).all() and not np.array_equal(w1["w1"], w0["w1"])
+
+
 def test_without_weights_it_says_how_to_train_them(tmp_path, monkeypatch):
     monkeypatch.delenv("ZOOCTL_PROCNET_WEIGHTS", raising=False)
     monkeypatch.setenv("ZOOCTL_STORE", str(tmp_path / "store"))
@@ -113,3 +143,25 @@ def test_cli_trains_and_refuses_bad_input(tmp_path, capsys, monkeypatch):
     assert r.code != 0 and "unknown body plan" in r.err
     r = run_inprocess(capsys, "bank", "seed", "--random", "2", "--seed", "1", "--no-views", "--json")
     assert r.code == 0 and len(r.json()["added"]) == 2
+    r = run_inprocess(capsys, "embed", "train", "--animals", "8", "--views", "2", "--bank")
+    assert r.code == 2 and "no asset in the bank has views" in r.err and "Traceback" not in r.err
+
+
+def test_cli_adapts_to_the_bank(tmp_path, capsys, monkeypatch):
+    from zooctl.retrieval.train_bank import plan_from_tags
+
+    labels = list(LABELS)
+    assert plan_from_tags(["quaternius", "Biped-Dinosaur"], labels) == "biped dinosaur"
+    assert plan_from_tags(["procedural", "dinosaur"], labels) == "biped dinosaur"  # a starter plan
+    assert plan_from_tags(["quaternius"], labels) is None
+    monkeypatch.setenv("ZOOCTL_STORE", str(tmp_path / "store"))
+    monkeypatch.setenv("ZOOCTL_VIEWS", "1")
+    r = run_inprocess(capsys, "bank", "seed", "--plan", "crab", "--no-variants")
+    assert r.code == 0, r.err
+    r = run_inprocess(capsys, "bank", "seed", "--random", "1", "--plan", "fish")
+    assert r.code == 0, r.err
+    args = ["embed", "train", "--animals", "8", "--views", "2", "--steps", "2", "--json"]
+    r = run_inprocess(capsys, *args, "--bank", "--bank-steps", "2")
+    assert r.code == 0, r.err
+    out = r.json()
+    assert out["bank"] == {"assets": 2, "tagged": 2, "steps": 2} and out["steps_run"] == 4
