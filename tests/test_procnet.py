@@ -165,3 +165,37 @@ def test_cli_adapts_to_the_bank(tmp_path, capsys, monkeypatch):
     assert r.code == 0, r.err
     out = r.json()
     assert out["bank"] == {"assets": 2, "tagged": 2, "steps": 2} and out["steps_run"] == 4
+
+
+def test_frozen_feature_evaluation_scores_leave_one_out(tmp_path, tiny_set):
+    from zooctl.retrieval.procnet_eval import FrozenFeatures, evaluate_weights, load_features, save_features
+
+    rng = np.random.default_rng(0)
+    plans = ["fish", "fish", "snake", "snake", "crab"]  # crab: unanswerable
+
+    def feats(n_views: int, noise: float) -> dict[str, np.ndarray]:
+        out = {}
+        for f, D in (("effnet", 1280), ("silhouette", 576)):
+            centre = {p: rng.normal(size=D) for p in set(plans)}
+            x = np.stack([centre[p] + noise * rng.normal(size=(n_views, D)) for p in plans])
+            out[f] = (x / np.linalg.norm(x, axis=-1, keepdims=True)).astype(np.float32)
+        return out
+
+    rng = np.random.default_rng(1)
+    bank = feats(4, 0.3)
+    rng = np.random.default_rng(1)  # the same plan centres for the queries
+    query = feats(2, 0.3)
+    ff = FrozenFeatures(
+        list("ABCDE"), plans, bank, query, [], [], {f: v[:0] for f, v in bank.items()}, tiny_set
+    )
+    ff = load_features(save_features(tmp_path / "f.npz", ff))
+    w, _ = train_head(
+        tiny_set, TrainConfig(hidden=16, dim=8, steps=2, animals_per_batch=8, views_per_animal=2)
+    )
+    path = save_model(tmp_path / "w.npz", w, TrainConfig(hidden=16, dim=8), tiny_set, {})
+    rows = {(r["set"], r["embedders"]): r for r in evaluate_weights(ff, path)["rows"]}
+    default = rows[("shared", "effnet+silhouette")]
+    assert default["queries"] == 5 and default["answerable"] == 4
+    assert default["top1_answerable"] == 4 and default["misses"] == [f"E->{default['misses'][0][3:]}"]
+    assert rows[("held-out", "procnet")]["queries"] == len(np.unique(tiny_set.animal))
+    assert ("shared+starter", "effnet+silhouette+procnet") in rows
