@@ -1,4 +1,5 @@
-"""The body plans: quadruped, biped, bird, fish, snake, insect and spider.
+"""The body plans: quadruped, biped, bird, fish, snake, insect and spider (the biped dinosaur and
+the crab are in `zooctl.procedural.plans_extra`).
 
 Each ``build_<plan>(params, palette)`` lays out joints and parts for the given proportions in the
 model convention (Y up, -Z forward, feet on y = 0, the animal's right towards +X) and attaches the
