@@ -10,7 +10,7 @@ from cli_helpers import zooctl
 from zooctl.errors import InputError
 from zooctl.procedural import PLANS, VARIANTS, BodyParams, build_animal, seed_bank, starter_assets
 
-REQUIRED_PLANS = {"quadruped", "biped", "bird", "fish", "snake", "insect", "spider"}
+REQUIRED_PLANS = {"quadruped", "biped", "bird", "fish", "snake", "insect", "spider", "dinosaur", "crab"}
 CLIPS = {
     "quadruped": {"walk", "trot", "idle"},
     "biped": {"walk", "idle"},
@@ -19,8 +19,10 @@ CLIPS = {
     "snake": {"slither", "idle"},
     "insect": {"walk", "idle"},
     "spider": {"walk", "idle"},
+    "dinosaur": {"walk", "idle", "roar"},
+    "crab": {"walk", "idle", "snap"},
 }
-LEGS = {"quadruped": 4, "biped": 2, "bird": 2, "insect": 6, "spider": 8}
+LEGS = {"quadruped": 4, "biped": 2, "bird": 2, "insect": 6, "spider": 8, "dinosaur": 2, "crab": 8}
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +53,7 @@ def test_every_body_plan_with_variants(bank_assets):
         assert len(props) == len(variants), f"{plan} variants share proportions"
 
 
-@pytest.mark.parametrize("index", range(15))
+@pytest.mark.parametrize("index", range(19))
 def test_starter_animal_is_a_sound_rig(bank_assets, index):
     a = bank_assets[index]
     plan = a.meta["body_plan"]

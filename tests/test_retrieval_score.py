@@ -112,3 +112,15 @@ def test_leave_one_out_benchmark_on_procedural_animals(tmp_path):
     assert sub["assets"] == 4 and sub["queries"] == 1
     (row,) = sub["results"][0]["rows"]
     assert row["query"] == "Spid" and row["answerable"]
+
+
+def test_fuse_terms_add_up_to_the_fused_score():
+    from zooctl.retrieval.score import fuse, fuse_terms
+
+    rng = np.random.default_rng(0)
+    scores = {"a": rng.random(6), "b": 3 * rng.random(6)}
+    for how in ("zsum", "sum", "rank"):
+        terms = fuse_terms(scores, how, {"a": 2.0})
+        np.testing.assert_allclose(terms["a"] + terms["b"], fuse(scores, how, {"a": 2.0}))
+    z = fuse_terms(scores, "zsum")
+    assert abs(z["b"].mean()) < 1e-9 and z["b"].std() == pytest.approx(1.0)

@@ -82,6 +82,11 @@ def test_search_real_video_finds_the_cow(in_trio, capsys, tmp_path):
     assert scores == sorted(scores)
     assert out["query"]["masks"] and len(out["query"]["frames"]) == 4
     assert set(out["matches"][0]["distances"]) == {"effnet", "silhouette"}
+    for m in out["matches"]:  # the fused score is the sum of the per-embedder terms
+        assert sum(m["terms"].values()) == pytest.approx(m["score"], abs=1e-6)
+        assert set(m["ranks"]) == {"effnet", "silhouette"} and all(1 <= k <= 3 for k in m["ranks"].values())
+    for e in ("effnet", "silhouette"):  # each embedder's ranks are a permutation
+        assert sorted(m["ranks"][e] for m in out["matches"]) == [1, 2, 3]
     from PIL import Image
 
     with Image.open(gallery) as im:
@@ -100,6 +105,10 @@ def test_search_real_video_finds_the_cow(in_trio, capsys, tmp_path):
         "1",
     )
     assert t.code == 0 and "Cow" in t.out and "silhouette" in t.out
+    x = run_inprocess(capsys, "bank", "search", str(VIDEOS_DIR / "cows"), "--frames", "3", "--explain")
+    assert x.code == 0, x.err
+    assert "dist #rank term" in x.out and "#1 Cow: ranked effnet" in x.out
+    assert "#1 Cow over #2" in x.out
 
 
 @needs_shared_assets

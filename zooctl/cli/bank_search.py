@@ -34,10 +34,17 @@ def search(
     gallery: Path = typer.Option(
         None, "--gallery", help="Write a PNG of the query frames beside the best views of the top assets."
     ),
+    explain: bool = typer.Option(
+        False,
+        "--explain",
+        help="Show per-embedder scores of the top results: distance, rank by that embedder alone, "
+        "and its term of the fused score.",
+    ),
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     json_out: bool = JsonOpt,
 ) -> None:
-    """Rank the bank's assets by how much their rendered views look like the animal in VIDEO."""
+    """Rank the bank's assets by how much their rendered views look like the animal in VIDEO
+    (the JSON output always carries the per-embedder terms and ranks that --explain shows)."""
     from ..errors import UsageError
     from ..retrieval.index import enabled_embedders
     from ..retrieval.search import search_source
@@ -84,6 +91,13 @@ def search(
         rows,
         title=f"best matches of {len(res.matches)} among {res.candidates} assets (score: fused {res.fusion}, lower is better; embedder columns: {res.aggregation} cosine distance)",
     )
+    if explain:
+        from ..retrieval.explain import explain_lines, explain_table
+
+        ecols, erows, etitle = explain_table(res)
+        print_table(ecols, erows, title=etitle)
+        for line in explain_lines(res):
+            console.print(line, highlight=False, markup=False)
     if gallery is not None:
         console.print(f"gallery: {gallery}", highlight=False, markup=False)
 

@@ -14,8 +14,9 @@ def seed(
     plan: list[str] = typer.Option(
         None,
         "--plan",
-        help="Only this body plan (repeatable): quadruped, biped, bird, fish, snake, insect, spider; with "
-        "--random also 'quadruped dinosaur'.",
+        help="Only this body plan (repeatable): quadruped, biped (upright, with arms), dinosaur (level biped "
+        "with a long tail), bird, fish, snake, insect, spider, crab; with --random the labels quadruped, "
+        "'quadruped dinosaur', 'biped dinosaur', humanoid, bird, fish, snake, insect, spider, crab.",
     ),
     random: int = typer.Option(
         0,

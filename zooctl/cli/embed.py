@@ -9,6 +9,14 @@ import typer
 
 from ._common import JsonOpt, console, print_json, store_root
 
+RANDOMIZE_HELP = (
+    "Domain randomisation of the training animals: any hue, flat facets half of the time, colour noise."
+)
+BANK_HELP = (
+    "Then adapt the head to this store's bank: fine-tune on its assets' stored views (identity, plus "
+    "body plan where a tag names one, e.g. --tag biped-dinosaur) mixed with the procedural ones."
+)
+
 app = typer.Typer(help="Train retrieval embedders.", no_args_is_help=True)
 
 
@@ -24,14 +32,18 @@ def train(
     device: str = typer.Option("cpu", "--device", help="torch device for rendering and training."),
     out: Path = typer.Option(None, "-o", "--out", help="Weights .npz (default: STORE/models/procnet.npz)."),
     cache: bool = typer.Option(True, "--cache/--no-cache", help="Reuse features cached in the store."),
+    randomize: bool = typer.Option(False, "--randomize", help=RANDOMIZE_HELP),
+    bank: bool = typer.Option(False, "--bank", help=BANK_HELP),
+    bank_steps: int = typer.Option(300, "--bank-steps", help="Fine-tuning steps with --bank."),
     json_out: bool = JsonOpt,
 ) -> None:
     """Render random procedural animals, embed them with the frozen backbone and train the head."""
     from ..errors import UsageError
 
-    if animals < 8 or views < 2 or steps < 1:
+    if animals < 8 or views < 2 or steps < 1 or bank_steps < 1:
         raise UsageError(
-            "need --animals >= 8, --views >= 2 and --steps >= 1", hint="e.g. --animals 320 --views 12"
+            "need --animals >= 8, --views >= 2, --steps >= 1 and --bank-steps >= 1",
+            hint="e.g. --animals 320 --views 12",
         )
     from rich.progress import Progress
 
@@ -41,6 +53,13 @@ def train(
     root = store_root()
     out = out or Path(root) / "models" / "procnet.npz"  # = procnet.default_weights() without --store
     cfg = TrainConfig(steps=steps, seed=seed, minutes=minutes)
+    bts = None
+    if bank:  # before the slow part: a bank without views is refused at once
+        from ..procedural.random import LABELS
+        from ..retrieval.train_bank import bank_training_set
+        from ..store.bank import Bank
+
+        bts = bank_training_set(Bank.open(root), list(LABELS))
     t0 = time.perf_counter()
     with Progress(console=console, disable=json_out, transient=True) as bar:
         task = bar.add_task("render + embed animals", total=animals)
@@ -51,6 +70,7 @@ def train(
             seed,
             device=device,
             progress=lambda i, n: bar.update(task, completed=i),
+            randomize=randomize,
         )
         t1 = time.perf_counter()
         task2 = bar.add_task("train head", total=steps)
@@ -62,8 +82,24 @@ def train(
                 task2, completed=i, description=f"train head (loss {loss:.2f})"
             ),
         )
+        bank_info = None
+        if bts is not None:
+            task3 = bar.add_task("adapt to the bank", total=bank_steps)
+            ft = TrainConfig(steps=bank_steps, lr=3e-4, seed=seed)
+            weights, more = train_head(
+                ts, ft, device, lambda i, n, loss: bar.update(task3, completed=i), bank=bts, init=weights
+            )
+            losses += more
+            n_bank = len(set(bts.animal.tolist()))
+            bank_info = {
+                "assets": n_bank,
+                "tagged": len(set(bts.animal[bts.label >= 0].tolist())),
+                "steps": bank_steps,
+            }
     t2 = time.perf_counter()
     meta = {
+        "bank": bank_info,
+        "randomize": randomize,
         "animals": animals,
         "views": views,
         "steps_run": len(losses),
@@ -85,7 +121,8 @@ def train(
         return
     console.print(
         f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB) and {curve}; render + embed {res['render_embed_s']} s, "
-        f"train {res['train_s']} s, final loss {meta['final_loss']:.3f}. Use it: ZOOCTL_PROCNET_WEIGHTS={path}",
+        f"train {res['train_s']} s, final loss {meta['final_loss']:.3f}. Use it: ZOOCTL_PROCNET_WEIGHTS={path}"
+        + ("; then `zooctl bank reindex --embedder procnet`" if bank else ""),
         highlight=False,
         markup=False,
     )

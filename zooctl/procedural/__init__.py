@@ -33,6 +33,7 @@ from .plans import (
     build_snake,
     build_spider,
 )
+from .plans_extra import CRAB, DINOSAUR, build_crab, build_dinosaur
 
 __all__ = ["PLANS", "VARIANTS", "BodyParams", "build_animal", "starter_assets", "seed_bank"]
 
@@ -45,6 +46,8 @@ PLANS: dict[str, tuple[BodyParams, Callable[..., Body]]] = {
     "snake": (SNAKE, build_snake),
     "insect": (INSECT, build_insect),
     "spider": (SPIDER, build_spider),
+    "dinosaur": (DINOSAUR, build_dinosaur),
+    "crab": (CRAB, build_crab),
 }
 
 # Proportion variants per plan: asset-name suffix -> changed proportions (in metres).
@@ -69,6 +72,11 @@ VARIANTS: dict[str, dict[str, dict[str, float]]] = {
     "snake": {"": {}, "thick": {"body_length": 1.6, "girth": 0.09, "head_size": 0.11, "tail_length": 0.35}},
     "insect": {"": {}, "longlegs": {"leg_length": 0.4, "body_length": 0.36}},
     "spider": {"": {}, "longlegs": {"leg_length": 0.6, "girth": 0.07}},
+    "dinosaur": {
+        "": {},
+        "duckbill": {"head_size": 0.2, "neck_length": 0.45, "leg_length": 0.7, "tail_length": 1.1},
+    },
+    "crab": {"": {}, "wide": {"body_length": 0.4, "head_size": 0.11, "leg_length": 0.24}},
 }
 
 # Base hues (0..1) per plan, for colours that read at a glance on a contact sheet.
@@ -80,11 +88,25 @@ _HUES = {
     "snake": 0.3,
     "insect": 0.13,
     "spider": 0.0,
+    "dinosaur": 0.25,
+    "crab": 0.02,
 }
 
 
-def palette(plan: str, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(main, secondary, belly) linear RGB colours of one animal, jittered around the plan's hue."""
+def palette(
+    plan: str, rng: np.random.Generator, any_hue: bool = False
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(main, secondary, belly) linear RGB colours of one animal, jittered around the plan's hue
+    (``any_hue``: any hue, brightness and contrast, so that colour says nothing about the plan)."""
+    if any_hue:
+        h, sat, val = rng.uniform(0, 1), rng.uniform(0.05, 0.85), rng.uniform(0.2, 0.9)
+        main = np.array(colorsys.hsv_to_rgb(h, sat, val))
+        h2 = (h + rng.choice([rng.uniform(-0.08, 0.08), rng.uniform(0, 1)])) % 1.0
+        second = np.array(colorsys.hsv_to_rgb(h2, rng.uniform(0.05, 0.9), rng.uniform(0.1, 0.95)))
+        belly = np.array(
+            colorsys.hsv_to_rgb(h, sat * rng.uniform(0.1, 1), min(1.0, val * rng.uniform(0.7, 1.5)))
+        )
+        return main, second, belly
     h = (_HUES.get(plan, 0.1) + rng.uniform(-0.05, 0.05)) % 1.0
     sat = rng.uniform(0.35, 0.7) if plan != "spider" else rng.uniform(0.0, 0.15)
     val = rng.uniform(0.45, 0.8) if plan != "spider" else rng.uniform(0.2, 0.35)
@@ -106,11 +128,13 @@ def build_animal(
     name: str | None = None,
     jitter: float = 0.0,
     meta: dict[str, Any] | None = None,
+    any_hue: bool = False,
 ) -> RiggedAsset:
     """One procedural animal of body plan ``plan`` (see `PLANS`).
 
     ``params`` defaults to the plan's proportions; ``jitter`` (e.g. 0.06) scales each proportion by
-    a seeded random factor in [1 - jitter, 1 + jitter]. Colours come from the seed.
+    a seeded random factor in [1 - jitter, 1 + jitter]. Colours come from the seed (around the
+    plan's hue, or any hue with ``any_hue``).
     """
     if plan not in PLANS:
         raise InputError(f"unknown body plan {plan!r}", hint=f"plans: {', '.join(PLANS)}")
@@ -123,7 +147,7 @@ def build_animal(
     for field_name in ("body_length", "head_size", "girth"):
         if getattr(p, field_name) <= 0:
             raise InputError(f"{field_name} must be positive, got {getattr(p, field_name)}")
-    body = builder(p, palette(plan, rng))
+    body = builder(p, palette(plan, rng, any_hue))
     info = {
         "tags": ["procedural", plan],
         "license": "CC0-1.0",

@@ -1,4 +1,5 @@
-"""The body plans: quadruped, biped, bird, fish, snake, insect and spider.
+"""The body plans: quadruped, biped, bird, fish, snake, insect and spider (the biped dinosaur and
+the crab are in `zooctl.procedural.plans_extra`).
 
 Each ``build_<plan>(params, palette)`` lays out joints and parts for the given proportions in the
 model convention (Y up, -Z forward, feet on y = 0, the animal's right towards +X) and attaches the
@@ -726,8 +727,10 @@ def _legged_walk(
     attach: list[tuple[float, np.ndarray]],
     color: np.ndarray,
     first_leg_left_phase0: list[bool],
+    thickness: float = 0.05,
 ) -> list[Limb]:
-    """Add sprawling three-joint legs (side reach then down to the ground); returns their limbs."""
+    """Add sprawling three-joint legs (side reach then down to the ground); returns their limbs.
+    ``thickness``: the leg's radius at the body, times ``H`` (a third of it at the tip)."""
     limbs = []
     for i, ((zoff, direction), left0) in enumerate(zip(attach, first_leg_left_phase0, strict=True)):
         for s, sx in SIDES:
@@ -745,8 +748,8 @@ def _legged_walk(
                 limb_part(
                     f"leg{i + 1}_{s}",
                     [coxa - d * 0.5 * radius, coxa, knee, foot, tip],
-                    0.05 * H,
-                    0.015 * H,
+                    thickness * H,
+                    0.3 * thickness * H,
                     joints,
                     origin,
                     color,

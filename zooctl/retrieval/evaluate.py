@@ -47,7 +47,8 @@ BODY_PLANS = {
 }
 STARTER_PLANS = {
     "quadruped": "quadruped",
-    "biped": "biped dinosaur",
+    "biped": "humanoid",
+    "dinosaur": "biped dinosaur",
     "bird": "bird",
     "fish": "fish",
     "snake": "snake",

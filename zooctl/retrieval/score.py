@@ -62,13 +62,14 @@ def best_views(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return mean_over_q.argmin(1), d.argmin(2)
 
 
-def fuse(
+def fuse_terms(
     scores: dict[str, np.ndarray], how: str = "zsum", weights: dict[str, float] | None = None
-) -> np.ndarray:
-    """Combine per-embedder (A,) scores (lower is better) into one (A,) score, lower is better."""
+) -> dict[str, np.ndarray]:
+    """Each embedder's (A,) term of the fused score (its weighted z-score, raw score or rank);
+    `fuse` adds them. `bank search --explain` shows them."""
     if how not in FUSIONS:
         raise UsageError(f"unknown fusion {how!r}", hint=f"choose one of {', '.join(FUSIONS)}")
-    total = None
+    terms = {}
     for name, s in scores.items():
         w = 1.0 if weights is None else float(weights.get(name, 1.0))
         s = np.asarray(s, np.float64)
@@ -78,7 +79,15 @@ def fuse(
             t = (s - s.mean()) / s.std()
         else:
             t = s
-        total = w * t if total is None else total + w * t
-    if total is None:
+        terms[name] = w * t
+    return terms
+
+
+def fuse(
+    scores: dict[str, np.ndarray], how: str = "zsum", weights: dict[str, float] | None = None
+) -> np.ndarray:
+    """Combine per-embedder (A,) scores (lower is better) into one (A,) score, lower is better."""
+    terms = fuse_terms(scores, how, weights)
+    if not terms:
         raise UsageError("no embedder scores to combine")
-    return total
+    return np.sum(list(terms.values()), axis=0)

@@ -21,7 +21,7 @@ from ..errors import UsageError
 from . import query_cache
 from .index import cached_embedder, current_pack, embed_inputs, needs_masks
 from .query import DEFAULT_QUERY_FRAMES, QueryFrames, load_query, stored_query
-from .score import aggregate, best_views, fuse
+from .score import aggregate, best_views, fuse, fuse_terms
 
 DEFAULT_TOP = 5
 DEFAULT_SHORTLIST = 256
@@ -30,13 +30,17 @@ DEFAULT_SHORTLIST = 256
 @dataclass
 class Match:
     """One ranked asset: fused ``score`` (lower is better), per-embedder ``distances`` (the chosen
-    aggregation of cosine distances), its ``best_view`` overall and each query frame's nearest view."""
+    aggregation of cosine distances), its ``best_view`` overall and each query frame's nearest view.
+    Per embedder also its ``terms`` of the fused score (they add up to ``score``) and the asset's
+    ``ranks`` by that embedder alone among the scored candidates (1: best)."""
 
     name: str
     score: float
     distances: dict[str, float]
     best_view: int
     frame_views: list[int]
+    terms: dict[str, float] = field(default_factory=dict)
+    ranks: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass
@@ -63,6 +67,8 @@ class SearchResult:
                     "distances": m.distances,
                     "best_view": m.best_view,
                     "frame_views": m.frame_views,
+                    "terms": m.terms,
+                    "ranks": m.ranks,
                 }
                 for i, m in enumerate(self.matches)
             ],
@@ -281,8 +287,10 @@ def score_packs(
         d = np.where(valid[:, None, :], d, np.float32(np.inf))
         per_e[e] = aggregate(d, aggregation, k)
         views_best[e] = best_views(d)
+    terms = fuse_terms(per_e, fusion, weights)
     total = fuse(per_e, fusion, weights)
     ranked = np.argsort(total, kind="stable")
+    ranks = {e: np.argsort(np.argsort(s, kind="stable"), kind="stable") + 1 for e, s in per_e.items()}
     lead = next(iter(query_emb))
     matches = [
         Match(
@@ -291,6 +299,8 @@ def score_packs(
             {e: float(s[i]) for e, s in per_e.items()},
             int(views_best[lead][0][i]),
             [int(x) for x in views_best[lead][1][i]],
+            {e: float(t[i]) for e, t in terms.items()},
+            {e: int(r[i]) for e, r in ranks.items()},
         )
         for i in ranked
     ]

@@ -43,19 +43,24 @@ class TrainConfig:
     views_per_animal: int = 4
     input_dropout: float = 0.2
     seed: int = 0
+    # with a bank set (`embed train --bank`): this share of each batch's animals are bank assets
+    bank_fraction: float = 0.25
 
 
 def supcon(z, labels, temperature: float):
-    """Supervised contrastive loss of unit rows z (B, D) with integer labels (B,)."""
+    """Supervised contrastive loss of unit rows z (B, D) with integer labels (B,); rows labelled
+    -1 (unknown) are neither anchors nor positives, but stay negatives of the others."""
     import torch
 
     sim = z @ z.T / temperature
     eye = torch.eye(len(z), dtype=torch.bool, device=z.device)
     sim = sim.masked_fill(eye, -1e9)
     logp = sim - torch.logsumexp(sim, dim=1, keepdim=True)
-    pos = (labels[:, None] == labels[None, :]) & ~eye
+    pos = (labels[:, None] == labels[None, :]) & ~eye & (labels >= 0)[:, None]
     n = pos.sum(1)
     keep = n > 0
+    if not bool(keep.any()):  # no row has a positive: nothing to pull together
+        return z.sum() * 0.0
     return -((logp * pos).sum(1)[keep] / n[keep]).mean()
 
 
@@ -70,14 +75,41 @@ def make_head(in_dim: int, cfg: TrainConfig):
     )
 
 
-def _batch(rng: np.random.Generator, views: dict, by_label: list[np.ndarray], cfg: TrainConfig):
-    """Row indices of one batch: animals drawn plan-balanced, views drawn within each animal."""
+def _batch(
+    rng: np.random.Generator,
+    views: dict,
+    by_label: list[np.ndarray],
+    cfg: TrainConfig,
+    bank: np.ndarray | None = None,
+):
+    """Row indices of one batch: animals drawn plan-balanced (``bank``: a ``cfg.bank_fraction``
+    share of them drawn from these bank animals instead), views drawn within each animal."""
     rows = []
+    n_bank = 0 if bank is None or not len(bank) else int(round(cfg.bank_fraction * cfg.animals_per_batch))
     for k in range(cfg.animals_per_batch):
-        animals = by_label[(k + int(rng.integers(len(by_label)))) % len(by_label)]
+        animals = by_label[(k + int(rng.integers(len(by_label)))) % len(by_label)] if k >= n_bank else bank
         v = views[int(animals[int(rng.integers(len(animals)))])]
         rows.append(rng.choice(v, size=min(cfg.views_per_animal, len(v)), replace=False))
     return np.concatenate(rows)
+
+
+def merge_sets(ts: TrainingSet, bank: TrainingSet) -> tuple[TrainingSet, np.ndarray]:
+    """``ts`` with ``bank``'s rows appended (its animals renumbered after ``ts``'s, its labels mapped
+    by name onto ``ts.labels``, -1 where unknown); returns it and the bank's animal ids."""
+    off = int(ts.animal.max()) + 1 if len(ts) else 0
+    lab = np.array(
+        [
+            ts.labels.index(bank.labels[k]) if k >= 0 and bank.labels[k] in ts.labels else -1
+            for k in bank.label
+        ]
+    )
+    merged = TrainingSet(
+        {f: np.concatenate([ts.features[f], bank.features[f]]) for f in ts.features},
+        np.concatenate([ts.label, lab.astype(np.int64)]),
+        np.concatenate([ts.animal, bank.animal + off]),
+        ts.labels,
+    )
+    return merged, np.unique(bank.animal) + off
 
 
 def train_head(
@@ -85,28 +117,42 @@ def train_head(
     cfg: TrainConfig,
     device: str = "cpu",
     progress: Callable[[int, int, float], None] | None = None,
+    bank: TrainingSet | None = None,
+    init: dict[str, np.ndarray] | None = None,
 ) -> tuple[dict[str, np.ndarray], list[float]]:
     """Train on ``ts``; returns the head's numpy weights (`zooctl.embed.procnet` layout) and the
-    loss per step. Stops after ``cfg.steps`` steps or ``cfg.minutes``, whichever comes first."""
+    loss per step. Stops after ``cfg.steps`` steps or ``cfg.minutes``, whichever comes first.
+    ``bank``: the user's bank views (`zooctl.retrieval.train_bank`), mixed into every batch
+    (``cfg.bank_fraction``); ``init``: weights to start from (fine-tuning) instead of random ones."""
     import torch
 
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
+    bank_animals = None
+    if bank is not None and len(bank):
+        ts, bank_animals = merge_sets(ts, bank)
     x_all = torch.from_numpy(np.concatenate([ts.features[f] for f in cfg.inputs], 1).astype(np.float32))
     lab = torch.from_numpy(ts.label)
     ani = torch.from_numpy(ts.animal)
     dev = torch.device(device)
     head = make_head(x_all.shape[1], cfg).to(dev)
+    if init is not None:
+        lin = [m for m in head if isinstance(m, torch.nn.Linear)]
+        with torch.no_grad():
+            for m, w, b in ((lin[0], init["w1"], init["b1"]), (lin[1], init["w2"], init["b2"])):
+                m.weight.copy_(torch.from_numpy(np.asarray(w, np.float32).T))
+                m.bias.copy_(torch.from_numpy(np.asarray(b, np.float32)))
     opt = torch.optim.AdamW(head.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.steps)
-    by_label = [np.unique(ts.animal[ts.label == k]) for k in range(len(ts.labels))]
+    proc = ts.animal if bank_animals is None else np.where(np.isin(ts.animal, bank_animals), -1, ts.animal)
+    by_label = [np.unique(proc[(ts.label == k) & (proc >= 0)]) for k in range(len(ts.labels))]
     by_label = [a for a in by_label if len(a)]
     views = {int(a): np.flatnonzero(ts.animal == a) for a in np.unique(ts.animal)}
     losses = []
     t0 = time.perf_counter()
     head.train()
     for step in range(cfg.steps):
-        idx = torch.from_numpy(_batch(rng, views, by_label, cfg))
+        idx = torch.from_numpy(_batch(rng, views, by_label, cfg, bank_animals))
         z = torch.nn.functional.normalize(head(x_all[idx].to(dev)), dim=1)
         loss = supcon(z, lab[idx].to(dev), cfg.temperature)
         if cfg.identity_weight > 0:

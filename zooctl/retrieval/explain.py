@@ -1,0 +1,48 @@
+"""`bank search --explain`: how each embedder scored the top results and what decided the order."""
+
+from __future__ import annotations
+
+from .search import SearchResult
+
+
+def _ordinal(n: int) -> str:
+    suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
+    return f"{n}{suffix}"
+
+
+def explain_table(res: SearchResult) -> tuple[list[tuple[str, str]], list[list[str]], str]:
+    """(columns, rows, title): per match and embedder "distance #rank term": the aggregated cosine
+    distance, the asset's rank by that embedder alone and its term of the fused score."""
+    cols = [("rank", "right"), ("asset", "left"), ("score", "right")]
+    cols += [(f"{e}: dist #rank term", "right") for e in res.embedders]
+    rows = []
+    for i, m in enumerate(res.matches, 1):
+        row = [str(i), m.name, f"{m.score:+.2f}"]
+        for e in res.embedders:
+            row.append(f"{m.distances[e]:.3f} #{m.ranks.get(e, '-')} {m.terms.get(e, float('nan')):+.2f}")
+        rows.append(row)
+    term = {"zsum": "z-score of the distance", "sum": "the distance", "rank": "rank - 1"}[res.fusion]
+    title = (
+        f"per embedder: {res.aggregation} cosine distance, #rank among the {res.candidates} candidates by "
+        f"that embedder alone, and its term of the {res.fusion} score ({term}; the terms add up to the "
+        f"score; lower is better)"
+    )
+    return cols, rows, title
+
+
+def explain_lines(res: SearchResult) -> list[str]:
+    """Sentences: which embedders put the first match first, and what separated it from the second."""
+    if not res.matches:
+        return []
+    first = res.matches[0]
+    ranks = ", ".join(f"{e} {_ordinal(first.ranks[e])}" for e in res.embedders if e in first.ranks)
+    lines = [f"#1 {first.name}: ranked {ranks} by the embedders alone."]
+    if len(res.matches) > 1 and len(res.embedders) > 1:
+        second = res.matches[1]
+        diffs = {e: second.terms[e] - first.terms[e] for e in res.embedders if e in first.terms}
+        parts = ", ".join(
+            f"{e} {d:+.2f} ({'for' if d >= 0 else 'against'} {first.name})"
+            for e, d in sorted(diffs.items(), key=lambda kv: -kv[1])
+        )
+        lines.append(f"#1 {first.name} over #2 {second.name} by {second.score - first.score:.2f}: {parts}.")
+    return lines
