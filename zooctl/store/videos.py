@@ -7,7 +7,8 @@ Layout under the store root (JSON Schemas: ``schemas/video_index.schema.json`` a
     videos/<name>.h5       frames, masks, boxes, forward/backward flow, occlusion masks, source metadata
     videos/<name>.cache/   derived data (retrieval query embeddings), removed with the video
 
-Same rules as the bank: the HDF5 file is built in memory and written to a temporary beside its
+Same rules as the bank: the HDF5 file is built in memory (`video add` starts on its frames and flow
+in the background while the masks are made: `VideoImage`) and written to a temporary beside its
 final path outside the lock (the slow part), then under the store's writers' lock the name is
 checked again, the file is fsynced and ``os.replace``d into place, and the index is replaced last.
 A failure at any point (a full disk included) leaves the store as it was (at worst an unindexed
