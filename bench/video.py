@@ -10,7 +10,8 @@ the default size (854 px, DAVIS's own 480p) and segmented by `grabcut` twice: (a
 localiser finds the animal) and (b) with only the box of the first ground-truth mask. J is the mean over frames of |mask & truth| / |mask | truth| (all
 frames, the first included, as DAVIS reports it). Throughput: frames per second of decode (JPEG
 folder and H.264 file), DIS flow (forward + backward + occlusion check), segmentation, and writing
-the HDF5 store, at 480p and at 256 px; each is the median of ``--repeats`` runs.
+the HDF5 store, at 480p and at 256 px, and of a whole `video add` of the JPEG folder (decode, flow,
+no-box masks, store: stages overlap there), with its CPU seconds; each is the median of ``--repeats`` runs.
 """
 
 from __future__ import annotations
@@ -205,12 +206,24 @@ def _overlay(path: Path, frames, masks, truth) -> None:
 
 
 def _median_fps(fn, n_frames: int, repeats: int) -> float:
-    times = []
+    return n_frames / _median_times(fn, repeats)[0]
+
+
+def _median_times(fn, repeats: int) -> tuple[float, float]:
+    """Median wall and CPU (user + system, all threads) seconds of ``fn()``."""
+    import resource
+
+    def cpu() -> float:
+        r = resource.getrusage(resource.RUSAGE_SELF)
+        return r.ru_utime + r.ru_stime
+
+    walls, cpus = [], []
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), cpu()
         fn()
-        times.append(time.perf_counter() - t0)
-    return n_frames / statistics.median(times)
+        walls.append(time.perf_counter() - t0)
+        cpus.append(cpu() - c0)
+    return statistics.median(walls), statistics.median(cpus)
 
 
 def throughput(seq: str, sizes, repeats: int, preset: str, seg_frames: int) -> dict:
@@ -242,6 +255,7 @@ def throughput_at(
     from zooctl.video import cues
     from zooctl.video.decode import decode
     from zooctl.video.flow import compute_video_flow
+    from zooctl.video.ingest import AddOptions, add_video
 
     dv = decode(VIDEOS / seq, max_size=size)
     t = len(dv.frames)
@@ -281,6 +295,10 @@ def throughput_at(
     r["store_write_fps"] = _median_fps(lambda: store.add(rec, replace=True), t, repeats)
     r["flow_plus_store_fps"] = 1.0 / (1.0 / r["flow_fps"] + 1.0 / r["store_write_fps"])
     r["h5_bytes_per_frame"] = int(store.path("bench").stat().st_size / t)
+    # what `zooctl video add FOLDER` does: decode, flow, no-box masks (the localiser), store write
+    opts = AddOptions(name="add", max_size=size, replace=True)
+    wall, cpu = _median_times(lambda: add_video(store, VIDEOS / seq / "JPEGImages", opts), repeats)
+    r["add_fps"], r["add_cpu_s"] = t / wall, cpu
     return r
 
 

@@ -71,3 +71,45 @@ def test_flow_colours_and_bad_preset():
     assert (rgb[:, 4:] == 255).all() and not (rgb[:, :4] == 255).all()  # still is white, motion has colour
     with pytest.raises(UsageError, match="unknown DIS preset"):
         DISFlow("slowest")
+
+
+def test_threaded_video_flow_equals_one_thread():
+    frames = np.stack([shifted_pair(k, k // 2)[1] for k in range(5)])
+    one = compute_video_flow(DISFlow("fast"), frames, workers=1)
+    done = []
+    two = compute_video_flow(DISFlow("fast"), frames, workers=2, progress=lambda d, t: done.append((d, t)))
+    for key in ("forward", "backward", "occlusion_forward", "occlusion_backward"):
+        assert np.array_equal(getattr(one, key), getattr(two, key)), key
+    assert done == [(1, 4), (2, 4), (3, 4), (4, 4)]
+
+
+def test_an_estimator_not_marked_thread_safe_runs_on_one_thread():
+    import threading
+
+    class Shift:  # a plug-in estimator without ``thread_safe``: called from one thread only
+        def __init__(self):
+            self.threads = set()
+
+        def flow(self, a, b):
+            self.threads.add(threading.get_ident())
+            f = np.zeros(a.shape[:2] + (2,), np.float32)
+            f[..., 0] = 1.0
+            return f
+
+    est = Shift()
+    vf = compute_video_flow(est, np.zeros((4, 16, 16, 3), np.uint8), workers=2)
+    assert len(est.threads) == 1 and (vf.forward[..., 0] == 1).all()
+
+
+def test_fb_check_matches_its_formula():
+    rng = np.random.default_rng(0)
+    f = rng.normal(0, 2, (24, 40, 2)).astype(np.float32)
+    b = rng.normal(0, 2, (24, 40, 2)).astype(np.float32)
+    back = warp(b, f)
+    lhs = ((f + back) ** 2).sum(-1)
+    rhs = 0.01 * ((f**2).sum(-1) + (back**2).sum(-1)) + 0.5
+    gy, gx = np.mgrid[0:24, 0:40]
+    x, y = gx + f[..., 0], gy + f[..., 1]
+    expect = (lhs > rhs) | (x < 0) | (x > 39) | (y < 0) | (y > 23)
+    got = fb_inconsistent(f, b)
+    assert got.dtype == bool and np.mean(got == expect) > 0.999  # float rounding at the threshold

@@ -111,6 +111,64 @@ def test_failures_leave_the_store_unchanged(store, synthetic_folder, tmp_path):
     assert not list((store / "videos").glob(".*.tmp"))
 
 
+def _record(t=12, h=40, w=56):
+    from zooctl.store.videos import VideoRecord
+
+    rng = np.random.default_rng(1)
+    masks = np.zeros((t, h, w), bool)
+    masks[:, 10:30, 15:40] = True
+    return VideoRecord(
+        "bg",
+        rng.integers(0, 255, (t, h, w, 3), dtype=np.uint8),
+        masks,
+        rng.normal(0, 2, (t - 1, h, w, 2)).astype(np.float32),
+        rng.normal(0, 2, (t - 1, h, w, 2)).astype(np.float32),
+        rng.random((t - 1, h, w)) > 0.9,
+        rng.random((t - 1, h, w)) > 0.9,
+        24.0,
+        {"path": "x", "kind": "images", "sha256": "0" * 64},
+        np.arange(t),
+        {"name": "masks"},
+        {"name": "dis"},
+    )
+
+
+def _parts(rec):
+    return (rec.frames, rec.flow_forward, rec.flow_backward, rec.occlusion_forward, rec.occlusion_backward)
+
+
+def test_a_file_begun_in_the_background_equals_one_written_at_once(store, tmp_path):
+    rec = _record()
+    one, bg = VideoStore.open(tmp_path / "one"), VideoStore.open(store)
+    one.add(rec)
+    bg.add(rec, image=bg.begin_image(*_parts(rec)))
+    a, b = one.get("bg"), bg.get("bg")
+    for key in (
+        "frames",
+        "masks",
+        "flow_forward",
+        "flow_backward",
+        "occlusion_forward",
+        "occlusion_backward",
+    ):
+        assert np.array_equal(getattr(a, key), getattr(b, key)), key
+    assert a.segmenter == b.segmenter and a.source == b.source and a.fps == b.fps
+    assert describe_h5(one.path("bg")) == describe_h5(bg.path("bg"))
+    validate(describe_h5(bg.path("bg")), "video_h5.schema.json")
+    assert bg.summary("bg")["bytes"] == bg.path("bg").stat().st_size
+
+
+def test_a_background_image_is_for_its_own_arrays_and_can_be_dropped(store):
+    rec, other = _record(), _record()
+    vs = VideoStore.open(store)
+    image = vs.begin_image(*_parts(other))
+    with pytest.raises(ValueError, match="not those this image was started with"):
+        vs.add(rec, image=image)
+    image.close()
+    image.close()  # twice: no-op
+    assert vs.names() == [] and not list((store / "videos").glob("*.h5"))
+
+
 def save_blank_masks(folder: Path, n: int, shape) -> Path:
     folder.mkdir()
     for i in range(n):

@@ -122,7 +122,8 @@ def register_flow_estimators(register):
     :param register: call ``register(ComponentSpec("flow_estimator", name, factory))``.
 
     ``factory(**options)`` returns an object with ``flow(frame_a, frame_b) -> (H, W, 2) float32``,
-    the pixel displacement from a to b.
+    the pixel displacement from a to b. One that sets ``thread_safe = True`` may be called from
+    several threads at once: `video add` then computes the frame pairs on all cores.
     """
 
 

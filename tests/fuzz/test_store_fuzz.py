@@ -23,6 +23,15 @@ pytestmark = pytest.mark.skipif(
 )
 
 
+@pytest.fixture(scope="module", autouse=True)
+def silhouette_only():
+    """`build_base` sets ZOOCTL_EMBEDDERS for the rest of the process (the bench wants that); here it
+    ends with this module, or later tests in the same worker lose the default embedders."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("ZOOCTL_EMBEDDERS", "silhouette")
+        yield
+
+
 @pytest.fixture(scope="module")
 def base(tmp_path_factory):
     root = tmp_path_factory.mktemp("fuzzbase") / "store"

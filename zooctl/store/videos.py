@@ -7,7 +7,8 @@ Layout under the store root (JSON Schemas: ``schemas/video_index.schema.json`` a
     videos/<name>.h5       frames, masks, boxes, forward/backward flow, occlusion masks, source metadata
     videos/<name>.cache/   derived data (retrieval query embeddings), removed with the video
 
-Same rules as the bank: the HDF5 file is built in memory and written to a temporary beside its
+Same rules as the bank: the HDF5 file is built in memory (`video add` starts on its frames and flow
+in the background while the masks are made: `VideoImage`) and written to a temporary beside its
 final path outside the lock (the slow part), then under the store's writers' lock the name is
 checked again, the file is fsynced and ``os.replace``d into place, and the index is replaced last.
 A failure at any point (a full disk included) leaves the store as it was (at worst an unindexed
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -132,6 +134,14 @@ def write_video_h5(path: Path, rec: VideoRecord) -> None:
 
 
 def _fill_video(f: Any, rec: VideoRecord) -> None:
+    _fill_bulk(
+        f, rec.frames, rec.flow_forward, rec.flow_backward, rec.occlusion_forward, rec.occlusion_backward
+    )
+    _fill_rest(f, rec)
+
+
+def _fill_rest(f: Any, rec: VideoRecord) -> None:
+    """Attributes, masks and boxes: what is known only once the masks are."""
     t, h, w = rec.frames.shape[:3]
     f.attrs["zooctl_kind"] = "video"
     f.attrs["schema_version"] = FILE_VERSION
@@ -140,8 +150,6 @@ def _fill_video(f: Any, rec: VideoRecord) -> None:
     f.attrs["source"] = json.dumps(rec.source, sort_keys=True, default=str)
     f.attrs["segmenter"] = json.dumps(rec.segmenter, sort_keys=True, default=str)
     f.attrs["flow_estimator"] = json.dumps(rec.flow_estimator, sort_keys=True, default=str)
-    # frames and flow take lzf: 2.4x faster to write than gzip for 20% more bytes (BENCHMARKS.md)
-    f.create_dataset("frames", data=rec.frames, chunks=(1, h, w, 3), compression="lzf")
     f.create_dataset(
         "masks",
         data=rec.masks.astype(np.uint8),
@@ -151,22 +159,86 @@ def _fill_video(f: Any, rec: VideoRecord) -> None:
     )
     f.create_dataset("boxes", data=rec.boxes)
     f.create_dataset("source_indices", data=np.asarray(rec.source_indices, np.int64))
+
+
+def _fill_bulk(
+    f: Any, frames, flow_forward, flow_backward, occlusion_forward, occlusion_backward, stop=None
+) -> None:
+    """Frames, flow and occlusion: most of the bytes and of the time. ``stop()`` true: give up."""
+    t, h, w = frames.shape[:3]
     g = f.create_group("flow")
-    for key, arr in (("forward", rec.flow_forward), ("backward", rec.flow_backward)):
-        g.create_dataset(
-            key,
-            data=arr.astype(np.float16),
-            chunks=(1, h, w, 2),
-            compression="lzf",
-            shuffle=True,
+    # frames and flow take lzf: 2.4x faster to write than gzip for 20% more bytes (BENCHMARKS.md)
+    parts = [
+        (f, "frames", frames, np.uint8, (1, h, w, 3), {"compression": "lzf"}),
+        (g, "forward", flow_forward, np.float16, (1, h, w, 2), {"compression": "lzf", "shuffle": True}),
+        (g, "backward", flow_backward, np.float16, (1, h, w, 2), {"compression": "lzf", "shuffle": True}),
+    ]
+    parts += [
+        (g, key, arr, np.uint8, (1, h, w), {"compression": "gzip", "compression_opts": _GZIP})
+        for key, arr in (("occlusion_forward", occlusion_forward), ("occlusion_backward", occlusion_backward))
+    ]
+    step = 8  # frames per write: a cancelled background write stops within one step
+    for group, key, arr, dtype, chunks, filters in parts:
+        ds = group.create_dataset(key, shape=arr.shape, dtype=dtype, chunks=chunks, **filters)
+        for i in range(0, len(arr), step):
+            if stop is not None and stop():
+                return
+            ds[i : i + step] = arr[i : i + step].astype(dtype, copy=False)
+
+
+class VideoImage:
+    """A video's HDF5 file built in memory, its bulk (frames, flow, occlusion: `_fill_bulk`) on a
+    background thread while the masks are still being made (h5py compresses without the GIL).
+
+    ``finish(rec)`` adds the rest and returns the file's bytes, as `h5_image` would; ``close()``
+    abandons it. The arrays must not change until then.
+    """
+
+    def __init__(self, frames, flow_forward, flow_backward, occlusion_forward, occlusion_backward) -> None:
+        import io
+
+        import h5py
+
+        self._arrays = (frames, flow_forward, flow_backward, occlusion_forward, occlusion_backward)
+        self._buf = io.BytesIO()
+        self._file = h5py.File(self._buf, "w")
+        self._stop = threading.Event()
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="zooctl-video-image", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            _fill_bulk(self._file, *self._arrays, stop=self._stop.is_set)
+        except BaseException as exc:  # re-raised by finish(), in the caller's thread
+            self._error = exc
+
+    def finish(self, rec: VideoRecord) -> bytes:
+        """The file's bytes with ``rec``'s masks and metadata (``rec`` must hold the same arrays)."""
+        parts = (
+            rec.frames,
+            rec.flow_forward,
+            rec.flow_backward,
+            rec.occlusion_forward,
+            rec.occlusion_backward,
         )
-    for key, arr in (
-        ("occlusion_forward", rec.occlusion_forward),
-        ("occlusion_backward", rec.occlusion_backward),
-    ):
-        g.create_dataset(
-            key, data=arr.astype(np.uint8), chunks=(1, h, w), compression="gzip", compression_opts=_GZIP
-        )
+        if any(a is not b for a, b in zip(parts, self._arrays)):
+            raise ValueError("the record's frames or flow are not those this image was started with")
+        self._thread.join()
+        try:
+            if self._error is not None:
+                raise self._error
+            _fill_rest(self._file, rec)
+        finally:
+            self._file.close()
+        return self._buf.getvalue()
+
+    def close(self) -> None:
+        """Stop the background write (within one step) and drop the image; no-op once finished."""
+        self._stop.set()
+        self._thread.join()
+        if self._file:  # h5py: false once closed
+            self._file.close()
 
 
 def read_video_h5(path: Path, what: tuple[str, ...] = ("frames", "masks", "flow")) -> VideoRecord:
@@ -272,11 +344,17 @@ class VideoStore(IndexedStore):
             raise self.exists_error(name)
         return name
 
-    def add(self, rec: VideoRecord, replace: bool = False) -> dict[str, Any]:
-        """Store a video atomically; returns its index summary."""
+    def begin_image(self, frames, flow_forward, flow_backward, occlusion_forward, occlusion_backward):
+        """Start writing a video's frames and flow in the background (see `VideoImage`); pass the
+        result to `add` with the record, or ``close()`` it."""
+        return VideoImage(frames, flow_forward, flow_backward, occlusion_forward, occlusion_backward)
+
+    def add(self, rec: VideoRecord, replace: bool = False, image: VideoImage | None = None) -> dict[str, Any]:
+        """Store a video atomically; returns its index summary. ``image``: its file, started with
+        `begin_image` on the record's frames and flow."""
         name = self.check_new(rec.name, replace)
         rec.validate()
-        image = h5_image(lambda f: _fill_video(f, rec))
+        image = h5_image(lambda f: _fill_video(f, rec)) if image is None else image.finish(rec)
         summary = rec.summary()
         summary["bytes"] = len(image)
         self.publish_item(name, summary, [(self.path(name), image)], replace)

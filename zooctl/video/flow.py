@@ -2,13 +2,20 @@
 
 A flow estimator is any object with ``flow(frame_a, frame_b) -> (H, W, 2) float32``: the pixel
 displacement (dx, dy) that takes each pixel of ``frame_a`` to ``frame_b``. A learned model only has to
-provide that method (see ``zooctl.hookspecs.register_flow_estimators``).
+provide that method (see ``zooctl.hookspecs.register_flow_estimators``). One that may be called from
+several threads at once sets ``thread_safe = True``: `compute_video_flow` then spreads the frame pairs
+over the cores.
 """
 
 from __future__ import annotations
 
+import os
+import threading
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import nullcontext
 from dataclasses import dataclass
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -27,8 +34,11 @@ class DISFlow:
     """Dense Inverse Search flow (Kroeger et al. 2016) on grey images, with OpenCV's variational refinement.
 
     ``max_size``: longest side the flow is computed at; larger frames are downscaled first and the
-    flow comes back up (displacements rescaled) at their size. None or 0: full size.
+    flow comes back up (displacements rescaled) at their size. None or 0: full size. Thread-safe: each
+    thread gets its own OpenCV estimator (they keep state between calls).
     """
+
+    thread_safe = True
 
     def __init__(self, preset: str = "medium", max_size: int | None = FLOW_WORK_SIZE) -> None:
         if preset not in DIS_PRESETS:
@@ -39,7 +49,14 @@ class DISFlow:
             )
         self.preset = preset
         self.max_size = int(max_size) if max_size else None
-        self._dis = cv2.DISOpticalFlow.create(DIS_PRESETS[preset])
+        self._local = threading.local()
+
+    @property
+    def _dis(self):
+        dis = getattr(self._local, "dis", None)
+        if dis is None:
+            dis = self._local.dis = cv2.DISOpticalFlow.create(DIS_PRESETS[self.preset])
+        return dis
 
     def flow(self, frame_a: np.ndarray, frame_b: np.ndarray) -> np.ndarray:
         """(H, W, 3) uint8 RGB x2 -> (H, W, 2) float32 displacement from a to b."""
@@ -85,27 +102,51 @@ class VideoFlow:
 
 
 def compute_video_flow(
-    estimator: object, frames: np.ndarray, progress: Callable[[int, int], None] | None = None
+    estimator: object,
+    frames: np.ndarray,
+    progress: Callable[[int, int], None] | None = None,
+    workers: int | None = None,
 ) -> VideoFlow:
-    """Forward and backward flow for every consecutive pair of ``frames`` (T, H, W, 3), T >= 2."""
+    """Forward and backward flow for every consecutive pair of ``frames`` (T, H, W, 3), T >= 2.
+
+    The pairs are independent: with a ``thread_safe`` estimator they run on ``workers`` threads
+    (None: `flow_workers`; OpenCV and NumPy release the GIL), with the same result as one thread."""
     t, h, w = frames.shape[:3]
     fwd = np.empty((t - 1, h, w, 2), np.float32)
     bwd = np.empty((t - 1, h, w, 2), np.float32)
     occ_f = np.empty((t - 1, h, w), bool)
     occ_b = np.empty((t - 1, h, w), bool)
     use_grey = hasattr(estimator, "flow_gray")
-    prev = _grey(frames[0]) if use_grey else frames[0]
-    for i in range(t - 1):
-        nxt = _grey(frames[i + 1]) if use_grey else frames[i + 1]
-        fn = estimator.flow_gray if use_grey else estimator.flow  # type: ignore[attr-defined]
-        fwd[i] = fn(prev, nxt)
-        bwd[i] = fn(nxt, prev)
+    fn = estimator.flow_gray if use_grey else estimator.flow  # type: ignore[attr-defined]
+    grey = _grey if use_grey else (lambda f: f)
+
+    def pair(i: int) -> None:
+        a, b = grey(frames[i]), grey(frames[i + 1])
+        fwd[i] = fn(a, b)
+        bwd[i] = fn(b, a)
         occ_f[i] = fb_inconsistent(fwd[i], bwd[i])
         occ_b[i] = fb_inconsistent(bwd[i], fwd[i])
-        prev = nxt
-        if progress:
-            progress(i + 1, t - 1)
+
+    n = flow_workers() if workers is None else max(int(workers), 1)
+    if not getattr(estimator, "thread_safe", False):
+        n = 1
+    with ThreadPoolExecutor(min(n, t - 1)) if n > 1 else nullcontext() as pool:
+        runs = pool.map(pair, range(t - 1)) if pool else map(pair, range(t - 1))
+        for done, _ in enumerate(runs, 1):  # in order, so progress counts finished pairs
+            if progress:
+                progress(done, t - 1)
     return VideoFlow(fwd, bwd, occ_f, occ_b)
+
+
+def flow_workers() -> int:
+    """Threads for the flow of one video: the cores this process may use, at most OMP_NUM_THREADS
+    when that is set (batch workers set it to their share) and at most 4."""
+    n = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    try:
+        n = min(n, int(os.environ.get("OMP_NUM_THREADS", n)))
+    except ValueError:
+        pass
+    return max(min(n, 4), 1)
 
 
 def warp(
@@ -115,16 +156,21 @@ def warp(
 
     ``image`` (H, W[, C]) any OpenCV dtype; ``flow`` (H, W, 2) float32. Outside samples get ``border_value``.
     """
-    h, w = flow.shape[:2]
+    return _remap(image, _pixel_grid(*flow.shape[:2]) + flow, interpolation, border_value)
+
+
+def _remap(image: np.ndarray, xy: np.ndarray, interpolation: int, border_value: float = 0) -> np.ndarray:
+    """``image`` sampled at the (H, W, 2) float32 positions ``xy``."""
+    return cv2.remap(image, xy, None, interpolation, borderMode=cv2.BORDER_CONSTANT, borderValue=border_value)
+
+
+@lru_cache(maxsize=8)
+def _pixel_grid(h: int, w: int) -> np.ndarray:
+    """(H, W, 2) float32 x, y of every pixel (read-only: shared between calls and threads)."""
     gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
-    return cv2.remap(
-        image,
-        gx + flow[..., 0],
-        gy + flow[..., 1],
-        interpolation,
-        borderMode=cv2.BORDER_CONSTANT,
-        borderValue=border_value,
-    )
+    grid = np.stack([gx, gy], -1)
+    grid.flags.writeable = False
+    return grid
 
 
 def fb_inconsistent(
@@ -135,14 +181,21 @@ def fb_inconsistent(
     |f + b(x+f)|^2 > alpha (|f|^2 + |b(x+f)|^2) + beta; pixels whose flow leaves the frame count too.
     """
     h, w = flow_ab.shape[:2]
-    back = warp(flow_ba, flow_ab)
+    xy = _pixel_grid(h, w) + flow_ab
+    back = _remap(flow_ba, xy, cv2.INTER_LINEAR)
+    # in place and per channel: sums over the last axis of (H, W, 2) arrays are NumPy's slow path
     s = flow_ab + back
-    lhs = (s * s).sum(-1)
-    rhs = alpha * ((flow_ab * flow_ab).sum(-1) + (back * back).sum(-1)) + beta
-    gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
-    x, y = gx + flow_ab[..., 0], gy + flow_ab[..., 1]
-    outside = (x < 0) | (x > w - 1) | (y < 0) | (y > h - 1)
-    return (lhs > rhs) | outside
+    s *= s
+    lhs = s[..., 0] + s[..., 1]
+    sq = flow_ab * flow_ab
+    sq += back * back
+    rhs = sq[..., 0] + sq[..., 1]
+    rhs *= np.float32(alpha)
+    rhs += np.float32(beta)
+    out = lhs > rhs
+    x, y = xy[..., 0], xy[..., 1]
+    out |= (x < 0) | (x > w - 1) | (y < 0) | (y > h - 1)
+    return out
 
 
 def flow_to_rgb(flow: np.ndarray, max_magnitude: float | None = None) -> np.ndarray:

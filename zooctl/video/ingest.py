@@ -59,8 +59,16 @@ def default_name(path: Path) -> str:
     return sanitize_name(stem)
 
 
-def preprocess(path: str | Path, opts: AddOptions, progress: StageProgress | None = None):
-    """Decode ``path`` and compute flow and masks; returns a `zooctl.store.videos.VideoRecord`."""
+def preprocess(
+    path: str | Path,
+    opts: AddOptions,
+    progress: StageProgress | None = None,
+    on_flow: Callable[[np.ndarray, Any], None] | None = None,
+):
+    """Decode ``path`` and compute flow and masks; returns a `zooctl.store.videos.VideoRecord`.
+
+    ``on_flow(frames, flow)``: called once the frames and flow (a `zooctl.video.flow.VideoFlow`) are
+    final, before segmentation (`add_video` starts writing them to the store there)."""
     from ..plugins import get_registry
     from ..store.videos import VideoRecord
     from .decode import DEFAULT_MAX_MEMORY_GB, DEFAULT_MAX_SIZE, decode
@@ -96,6 +104,8 @@ def preprocess(path: str | Path, opts: AddOptions, progress: StageProgress | Non
         )
     estimator = flow_spec.create(**opts.flow_options)
     vf = compute_video_flow(estimator, dv.frames, progress=stage("flow"))
+    if on_flow is not None:
+        on_flow(dv.frames, vf)
 
     if seg_name == "masks":
         seg_opts.setdefault("source_indices", dv.source_indices)
@@ -198,11 +208,24 @@ def check_masks(masks: np.ndarray, seg_name: str, user: bool) -> tuple[np.ndarra
 def add_video(
     store, path: str | Path, opts: AddOptions, progress: StageProgress | None = None
 ) -> dict[str, Any]:
-    """Preprocess ``path`` and add it to ``store`` (a `VideoStore`); returns the index summary."""
+    """Preprocess ``path`` and add it to ``store`` (a `VideoStore`); returns the index summary.
+
+    The store file's frames and flow are written on a background thread while the masks are made."""
     name = opts.name or default_name(Path(path))
     store.check_new(name, opts.replace)  # fail before minutes of work
-    rec = preprocess(path, AddOptions(**{**opts.__dict__, "name": name}), progress)
-    return store.add(rec, replace=opts.replace)
+    images = []
+
+    def begin(frames: np.ndarray, vf: Any) -> None:
+        images.append(
+            store.begin_image(frames, vf.forward, vf.backward, vf.occlusion_forward, vf.occlusion_backward)
+        )
+
+    try:
+        rec = preprocess(path, AddOptions(**{**opts.__dict__, "name": name}), progress, on_flow=begin)
+        return store.add(rec, replace=opts.replace, image=images[0] if images else None)
+    finally:
+        for image in images:  # a failure on the way: stop the background write
+            image.close()
 
 
 def _choose_segmenter(path: Path, opts: AddOptions) -> tuple[str, dict[str, Any]]:
