@@ -5,12 +5,13 @@ Seed: with a box (on any frame, ``box_frame``), the pixels inside it that move u
 the rest) seed GrabCut. Without one, the localiser (`zooctl.video.localise`: ImageNet animal class
 maps fused with motion) looks at keyframes, picks the one where it sees an animal most surely and
 seeds GrabCut around the main animal there, also from the part of the seed the class map is surest
-of (what moves with the animal, its reflection or wake, has its colours but less class evidence) and
-again inside the box of that result; the tighter mask wins where the class map says that what it
-leaves out is not the animal. Tracking, forwards and backwards from the seed frame: the
-neighbouring mask, warped along the flow, is the shape prior; the colour histograms are tracked and
-the motion cue is recomputed; together they build GrabCut's trimap in a window around the prior. On keyframes, and when the mask shrinks or vanishes, the localiser checks it: a mask that
-misses the animal it sees is replaced by a fresh seed (re-seeding). Works on CPU, offline.
+of (what moves with the animal, its reflection or wake, has its colours but less class evidence);
+that tighter mask wins where the class map says that what it leaves out is not the animal.
+Tracking, forwards and backwards from the seed frame: the neighbouring mask, warped along the flow,
+is the shape prior; the colour histograms are tracked and the motion cue is recomputed; together
+they build GrabCut's trimap in a window around the prior. On keyframes, and when the mask shrinks
+or vanishes, the localiser checks it: a mask that misses the animal it sees is replaced by a fresh
+seed (re-seeding). Works on CPU, offline.
 """
 
 from __future__ import annotations
@@ -51,9 +52,9 @@ class GrabCutTracker:
     (reliable flow) and have the animal's colours (``keep_colour``) are kept as sure foreground.
     ``reseed_colour``: the mean seed-frame colour probability a fresh seed needs to replace a
     tracked mask. ``reliable_motion``: flow that fails the forward-backward check (ripples, glints) is no motion
-    evidence, in the seed, the localiser and tracking. ``core_quantile``: a localiser seed learns the
-    animal's colours from its pixels at or over this quantile of the class map (0.5: the more
-    animal-like half), then is segmented again in the box of that result (0: one pass, the whole seed).
+    evidence, in the seed, the localiser and tracking. ``core_quantile``: a localiser seed is also cut
+    from its core, its pixels at or over this quantile of the class map (0.5: the more animal-like
+    half) in the colours typical of them (0: never; see `_seed_in_box`).
     """
 
     name = "grabcut"
@@ -302,23 +303,26 @@ class GrabCutTracker:
         """A localiser seed: (H, W) bool mask of the animal in ``box`` given its class map ``animal``.
 
         What moves with the animal (its reflection, its wake) is in the box too and has its colours,
-        but less class evidence. So the animal's colours are also learnt from the part of the seed
-        the class map is surest of, and the box of what GrabCut makes of that is segmented again as if
-        a user had drawn it, its outer band only probably background (a leg in other colours stays
-        reachable). That tighter mask is taken only when the evidence says so: the class map holds
-        at least half its peak on average over it, and less over what it leaves out.
+        but less class evidence. So the seed is also cut from the core alone (the part of it the class
+        map is surest of, in the colours typical of that part). The core's mask is taken only when the
+        evidence says that what it leaves out is not the animal: it keeps the pixels where the class
+        map is surest (at least 85% of those over 0.7 of its peak), holds half the peak on average,
+        and what it leaves out is big (a quarter of the animal or more: a reflection or wake, not a
+        leg in other colours).
         """
         plain = self._first(frame, bins, residual, box)
         if not self.core_quantile:
             return plain
         core = self._first(frame, bins, residual, box, animal)
-        if not core.any():
+        surest = plain & (animal >= 0.7)
+        if (
+            not surest.any()
+            or (core & surest).sum() < 0.85 * surest.sum()
+            or (plain & ~core).sum() < 0.25 * core.sum()
+            or animal[core].mean() < 0.5
+        ):
             return plain
-        tight = self._first(frame, bins, residual, cues.box_of(core), margin=self.seed_margin)
-        dropped = plain & ~tight
-        kept = float(animal[tight].mean()) if tight.any() else 0.0
-        left_out = float(animal[dropped].mean()) if dropped.any() else 0.0
-        return tight if kept >= 0.5 > left_out else plain
+        return core
 
     def _due(self, i: int, t: int, mask: np.ndarray, prior: np.ndarray) -> bool:
         """Check the tracked mask against the localiser on keyframes (those `_start` already looked
@@ -379,11 +383,10 @@ class GrabCutTracker:
         residual: np.ndarray,
         box: Box,
         animal: np.ndarray | None = None,
-        margin: float | None = None,
     ) -> np.ndarray:
         """Frame mask from a box: the box's moving, box-coloured pixels seed GrabCut. ``animal``: the
-        class map; the seed keeps its pixels at or over the map's ``core_quantile`` among them.
-        ``margin``: band around the box that is only probably background (default ``box_margin``)."""
+        class map; the seed keeps its core, its pixels at or over the map's ``core_quantile`` among
+        them whose colours are more typical of the core than of the frame outside the box."""
         h, w = bins.shape
         inbox = cues.box_mask((h, w), box)
         p_colour = cues.colour_probability(
@@ -396,11 +399,17 @@ class GrabCutTracker:
         if seed.sum() < 0.05 * inbox.sum():  # nothing stands out: GrabCut's own rectangle start
             seed = inbox
         if animal is not None:
-            seed = cues.largest_components(seed & (animal >= np.quantile(animal[seed], self.core_quantile)))
+            core = seed & (animal >= np.quantile(animal[seed], self.core_quantile))
+            # of those, the colours more typical of the core than of the frame outside the box (dark
+            # water under a swan is in the core too, but also all around it)
+            p_core = cues.colour_probability(
+                bins, cues.colour_histogram(bins, core), cues.colour_histogram(bins, ~inbox)
+            )
+            seed = cues.largest_components(core & (p_core > 0.5))
         # a hand-drawn box often cuts off a paw or an ear: a margin around it is only "probably"
         # background, so the animal's colours do not end up in GrabCut's background model
         x, y, bw, bh = box
-        m = round((self.box_margin if margin is None else margin) * max(bw, bh))
+        m = round(self.box_margin * max(bw, bh))
         trimap = np.full((h, w), cv2.GC_BGD, np.uint8)
         trimap[cues.box_mask((h, w), (x - m, y - m, bw + 2 * m, bh + 2 * m))] = cv2.GC_PR_BGD
         trimap[seed] = cv2.GC_PR_FGD
