@@ -113,3 +113,39 @@ def test_main_region_is_the_one_with_most_evidence():
     score[30:55, 40:75] = 0.7  # big, less sure: more evidence in all
     region, count = main_region(score)
     assert count == 2 and region[40, 60] and not region[10, 10]
+
+
+def test_a_localiser_seed_leaves_out_what_moves_with_the_animal_but_is_not_it():
+    """A dark bird over a reflection that moves with it and shares its darkness (both in the
+    localiser's loose box): the seed learns the bird's colours from where the class map is surest,
+    so the reflection, which the blurry class map also covers more weakly, stays background."""
+    import cv2
+    from video_helpers import texture
+
+    h, w = 96, 128
+    frame = (texture(h, w, 0) * 0.5 + np.array([60, 90, 60])).astype(np.uint8)
+    shapes = [np.zeros((h, w), np.uint8) for _ in range(2)]
+    cv2.ellipse(shapes[0], (64, 38), (30, 12), 0, 0, 360, 1, -1)
+    cv2.ellipse(shapes[1], (64, 62), (34, 14), 0, 0, 360, 1, -1)
+    bird = shapes[0] > 0
+    reflection = (shapes[1] > 0) & ~bird
+    reflection[:40] = False
+    frame[bird] = (texture(h, w, 1) * 0.2 + np.array([150, 150, 160]))[bird]  # grey
+    frame[reflection] = (texture(h, w, 2) * 0.2 + np.array([20, 50, 25]))[reflection]  # dark green
+    residual = np.where(bird | reflection, 3.0, 0.1).astype(np.float32)  # both move alike
+    yy, xx = np.mgrid[0:h, 0:w]
+    animal = np.exp(-(((xx - 64) / 30.0) ** 2 + ((yy - 38) / 14.0) ** 2)).astype(np.float32)
+    x, y, bw, bh = cues.box_of(bird | reflection)
+    box, bins = (x - 6, y - 6, bw + 12, bh + 12), cues.lab_bins(frame)
+    got = {}
+    for q in (0.0, 0.5):
+        cv2.setRNGSeed(0)  # GrabCut's k-means start, as `segment` sets it
+        got[q] = GrabCutTracker(core_quantile=q)._seed_in_box(frame, bins, residual, box, animal)
+    assert iou(got[0.0], bird | reflection) > 0.9  # one pass from the whole seed takes both
+    assert iou(got[0.5], bird) > 0.9 and not (got[0.5] & reflection).any()
+    # a class map sure of nothing (no pixel over 0.7 of a peak) says nothing against the reflection
+    cv2.setRNGSeed(0)
+    unsure = GrabCutTracker()._seed_in_box(frame, bins, residual, box, 0.6 * animal)
+    assert iou(unsure, bird | reflection) > 0.9
+    with pytest.raises(UsageError, match="core_quantile"):
+        GrabCutTracker(core_quantile=1.0)

@@ -4,11 +4,14 @@ Seed: with a box (on any frame, ``box_frame``), the pixels inside it that move u
 (flow residual after a RANSAC homography) and have the box's colours (Lab histograms, box against
 the rest) seed GrabCut. Without one, the localiser (`zooctl.video.localise`: ImageNet animal class
 maps fused with motion) looks at keyframes, picks the one where it sees an animal most surely and
-seeds GrabCut around the main animal there. Tracking, forwards and backwards from the seed frame:
-the neighbouring mask, warped along the flow, is the shape prior; the colour histograms are tracked
-and the motion cue is recomputed; together they build GrabCut's trimap in a window around the
-prior. On keyframes, and when the mask shrinks or vanishes, the localiser checks it: a mask that
-misses the animal it sees is replaced by a fresh seed (re-seeding). Works on CPU, offline.
+seeds GrabCut around the main animal there, also from the part of the seed the class map is surest
+of (what moves with the animal, its reflection or wake, has its colours but less class evidence);
+that tighter mask wins where the class map says that what it leaves out is not the animal.
+Tracking, forwards and backwards from the seed frame: the neighbouring mask, warped along the flow,
+is the shape prior; the colour histograms are tracked and the motion cue is recomputed; together
+they build GrabCut's trimap in a window around the prior. On keyframes, and when the mask shrinks
+or vanishes, the localiser checks it: a mask that misses the animal it sees is replaced by a fresh
+seed (re-seeding). Works on CPU, offline.
 """
 
 from __future__ import annotations
@@ -49,7 +52,9 @@ class GrabCutTracker:
     (reliable flow) and have the animal's colours (``keep_colour``) are kept as sure foreground.
     ``reseed_colour``: the mean seed-frame colour probability a fresh seed needs to replace a
     tracked mask. ``reliable_motion``: flow that fails the forward-backward check (ripples, glints) is no motion
-    evidence, in the seed, the localiser and tracking.
+    evidence, in the seed, the localiser and tracking. ``core_quantile``: a localiser seed is also cut
+    from its core, its pixels at or over this quantile of the class map (0.5: the more animal-like
+    half) in the colours typical of them (0: never; see `_seed_in_box`).
     """
 
     name = "grabcut"
@@ -78,6 +83,7 @@ class GrabCutTracker:
         keep_colour: float = 0.5,
         reliable_motion: bool = False,
         reseed_colour: float = 0.5,
+        core_quantile: float = 0.5,
     ) -> None:
         if iterations < 1 or first_iterations < 1:
             raise UsageError("GrabCut needs at least one iteration")
@@ -106,6 +112,9 @@ class GrabCutTracker:
         self.keep_colour = keep_colour
         self.reliable_motion = reliable_motion
         self.reseed_colour = reseed_colour
+        if not 0.0 <= core_quantile < 1.0:
+            raise UsageError(f"core_quantile must be in [0, 1), got {core_quantile}")
+        self.core_quantile = core_quantile
         self._loc: Localiser | None = None
         self.report: dict = {}
 
@@ -285,7 +294,35 @@ class GrabCutTracker:
         x, y, bw, bh = cues.box_of(np.isin(lab, hit[hit > 0]) | region)
         m = round(self.seed_margin * max(bw, bh))
         x0, y0, x1, y1 = max(x - m, 0), max(y - m, 0), min(x + bw + m, w), min(y + bh + m, h)
-        return self._first(frames[i], bins[i], self._residual(flow, i), (x0, y0, x1 - x0, y1 - y0))
+        box = (x0, y0, x1 - x0, y1 - y0)
+        return self._seed_in_box(
+            frames[i], bins[i], self._residual(flow, i), box, self._seen(frames, i).animal
+        )
+
+    def _seed_in_box(self, frame, bins, residual, box: Box, animal: np.ndarray) -> np.ndarray:
+        """A localiser seed: (H, W) bool mask of the animal in ``box`` given its class map ``animal``.
+
+        What moves with the animal (its reflection, its wake) is in the box too and has its colours,
+        but less class evidence. So the seed is also cut from the core alone (the part of it the class
+        map is surest of, in the colours typical of that part). The core's mask is taken only when the
+        evidence says that what it leaves out is not the animal: it keeps the pixels where the class
+        map is surest (at least 85% of those over 0.7 of its peak), holds half the peak on average,
+        and what it leaves out is big (a quarter of the animal or more: a reflection or wake, not a
+        leg in other colours).
+        """
+        plain = self._first(frame, bins, residual, box)
+        if not self.core_quantile:
+            return plain
+        core = self._first(frame, bins, residual, box, animal)
+        surest = plain & (animal >= 0.7)
+        if (
+            not surest.any()
+            or (core & surest).sum() < 0.85 * surest.sum()
+            or (plain & ~core).sum() < 0.25 * core.sum()
+            or animal[core].mean() < 0.5
+        ):
+            return plain
+        return core
 
     def _due(self, i: int, t: int, mask: np.ndarray, prior: np.ndarray) -> bool:
         """Check the tracked mask against the localiser on keyframes (those `_start` already looked
@@ -339,7 +376,17 @@ class GrabCutTracker:
 
     # -- steps ------------------------------------------------------------------------------------
 
-    def _first(self, frame: np.ndarray, bins: np.ndarray, residual: np.ndarray, box: Box) -> np.ndarray:
+    def _first(
+        self,
+        frame: np.ndarray,
+        bins: np.ndarray,
+        residual: np.ndarray,
+        box: Box,
+        animal: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Frame mask from a box: the box's moving, box-coloured pixels seed GrabCut. ``animal``: the
+        class map; the seed keeps its core, its pixels at or over the map's ``core_quantile`` among
+        them whose colours are more typical of the core than of the frame outside the box."""
         h, w = bins.shape
         inbox = cues.box_mask((h, w), box)
         p_colour = cues.colour_probability(
@@ -351,6 +398,14 @@ class GrabCutTracker:
             seed = cues.largest_components((p_colour > 0.5) & inbox)
         if seed.sum() < 0.05 * inbox.sum():  # nothing stands out: GrabCut's own rectangle start
             seed = inbox
+        if animal is not None:
+            core = seed & (animal >= np.quantile(animal[seed], self.core_quantile))
+            # of those, the colours more typical of the core than of the frame outside the box (dark
+            # water under a swan is in the core too, but also all around it)
+            p_core = cues.colour_probability(
+                bins, cues.colour_histogram(bins, core), cues.colour_histogram(bins, ~inbox)
+            )
+            seed = cues.largest_components(core & (p_core > 0.5))
         # a hand-drawn box often cuts off a paw or an ear: a margin around it is only "probably"
         # background, so the animal's colours do not end up in GrabCut's background model
         x, y, bw, bh = box
