@@ -1,6 +1,7 @@
 """Training losses of the motion VAE, masked over padded bones.
 
-- rotation: mean squared error of rotation matrices (from the predicted 6D) over real bones;
+- rotation: each real bone's squared rotation-matrix error over that bone's own motion in the
+  data (`relative_rotation_loss`, the default) or one mean squared error over all bones;
 - joints: mean squared error of normalised posed joint positions through forward kinematics
   (`SkeletonBatch.joint_positions`, i.e. `zooctl.rig.kinematics`);
 - velocities: relative frame-to-frame error of joint positions and of rotation matrices
