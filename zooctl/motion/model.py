@@ -44,8 +44,7 @@ class MotionConfig:
     rot_weight: float = 1.0
     # "relative": each joint's rotation error over its own motion in the data
     # (`losses.relative_rotation_loss`), so leaf bones and little-moving joints count; "mse": one
-    # MSE over all bones, which the joints with big pose offsets dominate (600-step runs on the 28
-    # shared assets: samples' amplitude ratio 0.13 against 0.02, BENCHMARKS.md).
+    # MSE over all bones, which the joints with big pose offsets dominate (BENCHMARKS.md).
     rot_loss: str = "relative"
     # Positions are in skeleton diagonals, so their errors are small (MSE ~1e-3): at 10 the KL
     # outweighed them and the decoder learned to ignore z (see `losses`).
