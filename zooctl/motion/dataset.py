@@ -136,6 +136,7 @@ class Batch:
     rotmat: torch.Tensor  # (B, T, J, 3, 3)
     skeletons: SkeletonBatch
     source: list[str]
+    joint_motion: torch.Tensor | None = None  # (B, J) `MotionDataset.joint_motion` of each window's skeleton
 
 
 class MotionDataset:
@@ -187,6 +188,23 @@ class MotionDataset:
         self.sources = sources
         self._rot6d = [matrix_to_rot6d(quat_to_matrix(r)).astype(np.float32) for r in rots]
         self.table = SkeletonBatch(self.skeletons)
+        self.joint_motion = self._joint_motion()
+
+    def _joint_motion(self) -> np.ndarray:
+        """(S, J) per skeleton and (padded) joint: how much the joint's rotation matrix moves
+        within a window (mean squared deviation from the window's mean, summed over the 9 entries),
+        averaged over the skeleton's windows; 0 for padding."""
+        from ..rig.rotations import rot6d_to_matrix
+
+        out = np.zeros((len(self.skeletons), self.table.num_joints), np.float32)
+        for sid, sk in enumerate(self.skeletons):
+            idx = np.flatnonzero(self.skel_ids == sid)
+            r = torch.as_tensor(np.stack([self._rot6d[i] for i in idx]))
+            m = rot6d_to_matrix(r)  # (N, T, J, 3, 3)
+            out[sid, : sk.num_joints] = (
+                ((m - m.mean(1, keepdim=True)) ** 2).sum((-1, -2)).mean((0, 1)).numpy()
+            )
+        return out
 
     def __len__(self) -> int:
         return len(self._rot6d)
@@ -209,7 +227,8 @@ class MotionDataset:
             r = self._rot6d[i]
             x[b, :, : r.shape[1]] = r
         rot6d = torch.as_tensor(x, device=device)
-        return Batch(rot6d, rot6d_to_matrix(rot6d), sk, [self.sources[i] for i in ids])
+        motion = torch.as_tensor(self.joint_motion[self.skel_ids[ids], :J], device=device)
+        return Batch(rot6d, rot6d_to_matrix(rot6d), sk, [self.sources[i] for i in ids], motion)
 
     def batches(
         self, batch_size: int, rng: np.random.Generator, device: torch.device | str = "cpu"

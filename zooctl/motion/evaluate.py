@@ -101,6 +101,10 @@ def evaluate(
         row["ponymation"]["recon_mpjpe"] = M.mpjpe(M.joint_positions(rec, sk), p_real)
         row["ponymation"]["recon_rot_deg"] = M.rotation_error_deg(rec, real)
         row["ponymation"]["recon_amplitude"] = M.motion_ratio(M.joint_amplitude(rec), M.joint_amplitude(real))
+        tw = train_w[key][1][:: max(1, len(train_w[key][1]) // 64)]  # decoding seen windows: underfit or not
+        row["ponymation"]["train_recon_amplitude"] = M.motion_ratio(
+            M.joint_amplitude(prior.reconstruct(tw, sk)), M.joint_amplitude(tw)
+        )
         if key in test_long and key in train_long:
             _long_metrics(
                 row, prior, sk, test_long[key][1], pca_long, retrieval_long, samples, seed, temperature
@@ -146,7 +150,7 @@ def _long_metrics(row, prior, sk, real, pca, retrieval, samples, seed, temperatu
             row[name]["jump_p95"] = float(np.percentile(M.frame_jumps(p), 95))
 
 
-RATIOS = ("amplitude", "speed", "recon_amplitude")
+RATIOS = ("amplitude", "speed", "recon_amplitude", "train_recon_amplitude")
 
 
 def _mean(rows: list[dict[str, float | None]]) -> dict[str, float | None]:

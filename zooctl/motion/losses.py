@@ -1,6 +1,7 @@
 """Training losses of the motion VAE, masked over padded bones.
 
-- rotation: mean squared error of rotation matrices (from the predicted 6D) over real bones;
+- rotation: each real bone's squared rotation-matrix error over that bone's own motion in the
+  data (`relative_rotation_loss`, the default) or one mean squared error over all bones;
 - joints: mean squared error of normalised posed joint positions through forward kinematics
   (`SkeletonBatch.joint_positions`, i.e. `zooctl.rig.kinematics`);
 - velocities: relative frame-to-frame error of joint positions and of rotation matrices
@@ -37,6 +38,25 @@ def rotation_loss(pred_mat: torch.Tensor, target_mat: torch.Tensor, mask: torch.
     return masked_mean((pred_mat - target_mat) ** 2, mask)
 
 
+def relative_rotation_loss(
+    pred_mat: torch.Tensor,
+    target_mat: torch.Tensor,
+    mask: torch.Tensor,
+    motion: torch.Tensor,
+    floor: float = 0.1,
+) -> torch.Tensor:
+    """(B, T, J, 3, 3) each, motion (B, J) each joint's within-window rotation variance in the
+    data (`MotionDataset.joint_motion`) -> scalar: each joint's squared error over its own motion,
+    averaged over real joints, so a tail tip turning 5 degrees counts like a hip turning 40 (about
+    1 for a decoder that outputs each window's mean pose). Joints that barely move are divided by
+    ``floor`` times their skeleton's mean joint motion instead of their own."""
+    err = ((pred_mat - target_mat) ** 2).sum((-1, -2)).mean(1)  # (B, J)
+    m = mask.to(err.dtype)
+    mean = (motion * m).sum(1, keepdim=True) / m.sum(1, keepdim=True).clamp_min(1.0)
+    w = m / (motion + floor * mean).clamp_min(1e-8)
+    return (err * w).sum() / m.sum().clamp_min(1.0)
+
+
 def joint_loss(pred_pos: torch.Tensor, target_pos: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     """(B, T, J, 3) normalised positions -> scalar MSE over real joints."""
     return masked_mean((pred_pos - target_pos) ** 2, mask)
@@ -67,12 +87,17 @@ def vae_losses(
     sk: SkeletonBatch,
     cfg,
     kl_scale: float = 1.0,
+    joint_motion: torch.Tensor | None = None,
 ) -> dict[str, torch.Tensor]:
     """Every term and the weighted ``total`` (weights from the `MotionConfig` ``cfg``; ``kl_scale``
     in [0, 1] is the KL annealing factor). ``kl`` is the plain KL, ``active`` the number of latent
-    dimensions carrying more than 0.01 nats (about 0 when the posterior has collapsed)."""
+    dimensions carrying more than 0.01 nats (about 0 when the posterior has collapsed).
+    ``joint_motion`` (B, J): the data's per-joint motion, needed by ``cfg.rot_loss == "relative"``."""
     pred_mat = rot6d_to_matrix(pred6d)
-    rot = rotation_loss(pred_mat, target_mat, sk.mask)
+    if getattr(cfg, "rot_loss", "mse") == "relative" and joint_motion is not None:
+        rot = relative_rotation_loss(pred_mat, target_mat, sk.mask, joint_motion)
+    else:
+        rot = rotation_loss(pred_mat, target_mat, sk.mask)
     pred_pos, target_pos = sk.joint_positions(pred_mat), sk.joint_positions(target_mat)
     joints = joint_loss(pred_pos, target_pos, sk.mask)
     vel_w = getattr(cfg, "velocity_weight", 0.0)

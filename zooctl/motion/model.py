@@ -42,6 +42,10 @@ class MotionConfig:
     kl_weight: float = 1e-3
     free_bits: float = 0.5  # nats per latent dimension the KL leaves free (see `losses`)
     rot_weight: float = 1.0
+    # "relative": each joint's rotation error over its own motion in the data
+    # (`losses.relative_rotation_loss`), so leaf bones and little-moving joints count; "mse": one
+    # MSE over all bones, which the joints with big pose offsets dominate (BENCHMARKS.md).
+    rot_loss: str = "relative"
     # Positions are in skeleton diagonals, so their errors are small (MSE ~1e-3): at 10 the KL
     # outweighed them and the decoder learned to ignore z (see `losses`).
     joint_weight: float = 100.0
@@ -78,6 +82,8 @@ class MotionConfig:
             raise InputError(f"arch must be 'ponymation' or 'trajectory', got {self.arch!r}")
         if self.sampler not in ("posterior", "mixture", "normal"):
             raise InputError(f"sampler must be 'posterior', 'mixture' or 'normal', got {self.sampler!r}")
+        if self.rot_loss not in ("mse", "relative"):
+            raise InputError(f"rot_loss must be 'mse' or 'relative', got {self.rot_loss!r}")
         if self.z_tokens < 1:
             raise InputError(f"z_tokens must be >= 1, got {self.z_tokens}")
         if self.layers < 1 or self.latent < 1 or self.length < 2 or not self.fps > 0:

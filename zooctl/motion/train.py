@@ -30,6 +30,8 @@ class TrainOptions:
     lr: float = 3e-4
     warmup_steps: int = 100
     max_minutes: float | None = None  # stop at the end of the step that passes this budget
+    # Stop after this many steps (the schedule's length): a fixed amount of work whatever the load.
+    max_steps: int | None = None
     recon_warmup: float = 0.1  # fraction of the run without KL
     kl_anneal: float = 0.2  # fraction of the run over which the KL weight ramps up to its value
     seed: int = 0
@@ -79,6 +81,8 @@ def train_vae(
     opt = torch.optim.AdamW(model.parameters(), lr=opts.lr, weight_decay=1e-4)
     steps_per_epoch = math.ceil(len(data) / opts.batch_size)  # bucketing may add a few partial batches
     total_steps = max(1, steps_per_epoch * opts.epochs)
+    if opts.max_steps is not None:
+        total_steps = max(1, min(total_steps, opts.max_steps))
     warm = max(1, min(opts.warmup_steps, total_steps // 10))
 
     budget = None if opts.max_minutes is None else 60.0 * opts.max_minutes
@@ -110,7 +114,9 @@ def train_vae(
             for g in opt.param_groups:
                 g["lr"] = lr_at(hist.steps, p)
             pred, mu, logvar = model(batch.rot6d, batch.skeletons)
-            losses = vae_losses(pred, batch.rotmat, mu, logvar, batch.skeletons, model.cfg, kl_scale(p))
+            losses = vae_losses(
+                pred, batch.rotmat, mu, logvar, batch.skeletons, model.cfg, kl_scale(p), batch.joint_motion
+            )
             opt.zero_grad(set_to_none=True)
             losses["total"].backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
@@ -127,7 +133,8 @@ def train_vae(
             hist.steps += 1
             if on_step is not None:
                 on_step(hist.steps, total_steps, vals)
-            if budget is not None and time.perf_counter() - start > budget:
+            over_steps = opts.max_steps is not None and hist.steps >= total_steps
+            if over_steps or (budget is not None and time.perf_counter() - start > budget):
                 hist.stopped_early = True
                 break
         hist.epochs = epoch + 1
