@@ -27,7 +27,13 @@ from zooctl.store.bank import Bank  # noqa: E402
 @pytest.fixture(scope="module", autouse=True)
 def local_ray():
     """One small Ray for the module (its start-up costs seconds): 2 CPUs, no dashboard."""
-    ray.init(num_cpus=2, include_dashboard=False, object_store_memory=200 * 1024 * 1024, log_to_driver=False)
+    ray.init(
+        address="local",
+        num_cpus=2,
+        include_dashboard=False,
+        object_store_memory=200 * 1024 * 1024,
+        log_to_driver=False,
+    )
     yield
     ray.shutdown()
 

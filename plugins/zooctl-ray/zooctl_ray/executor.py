@@ -96,7 +96,10 @@ class RayExecutor(ExecutorBase):
                         hint="start it with `ray start --head` and give its address (HOST:6379)",
                     ) from None
             else:
+                # "local": a Ray of our own even when another process's Ray runs on this machine
+                # (plain ray.init() would join that one, and refuses num_cpus when it does)
                 ray.init(
+                    address="local",
                     num_cpus=math.ceil((self.jobs or os.cpu_count() or 1) * self.cpus),
                     object_store_memory=OBJECT_STORE_MB * 1024 * 1024,
                     **common,
