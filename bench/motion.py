@@ -67,7 +67,7 @@ def main() -> None:
     ap.add_argument("--rot-velocity-weight", type=float, default=MotionConfig.rot_velocity_weight)
     ap.add_argument("--z-tokens", type=int, default=MotionConfig.z_tokens, help="trajectory model's z tokens")
     ap.add_argument("--sampler", default=MotionConfig.sampler, choices=("mixture", "posterior", "normal"))
-    ap.add_argument("--arch", default=MotionConfig.arch, choices=("ponymation", "trajectory"))
+    ap.add_argument("--arch", default=None, choices=("ponymation", "trajectory"), help="default: by device")
     ap.add_argument("--lr", type=float, default=None)
     ap.add_argument("--batch-size", type=int, default=None)
     ap.add_argument("--device", default="cpu")
@@ -86,7 +86,7 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     for k, v in device_defaults(args.device).items():
-        if k in ("width", "layers", "batch_size", "lr") and getattr(args, k) is None:
+        if k in ("arch", "width", "layers", "batch_size", "lr") and getattr(args, k) is None:
             setattr(args, k, v)
     files = sorted((SHARED / "assets" / "quaternius").glob("*/*.glb"))
     if not files:
@@ -113,7 +113,7 @@ def main() -> None:
     data = prior.dataset(train)
     print(
         f"{len(assets)} assets, {len(train)} training clips ({len(data)} windows), {len(test)} held out; "
-        f"model {args.width}x{args.layers}, {sum(p.numel() for p in prior.model.parameters()) / 1e6:.2f} M parameters",
+        f"model {args.arch} {args.width}x{args.layers}, {sum(p.numel() for p in prior.model.parameters()) / 1e6:.2f} M parameters",
         flush=True,
     )
     if args.load:
