@@ -156,17 +156,14 @@ def decode_single_memory(
     R = memory.shape[1]
     x = queries
     heads = decoder.layers[0].self_attn.num_heads
+    # the group's mask (G * heads, S, S), and the same repeated for its R sequences (later layers)
+    m = None if pad is None else padding_attn_mask(pad, heads)
+    p = None if m is None else m.reshape(G, 1, heads, S, S).expand(G, R, heads, S, S).reshape(-1, S, S)
     for i, layer in enumerate(decoder.layers):
         if i == 0:
-            m = None if pad is None else padding_attn_mask(pad, heads)
             x = x + layer._sa_block(layer.norm1(x), m, None)  # (G, S, W)
             x = (x[:, None] + layer.dropout2(_memory_value(layer, memory))[:, :, None]).reshape(G * R, S, W)
         else:
-            p = (
-                None
-                if pad is None
-                else padding_attn_mask(pad[:, None].expand(G, R, S).reshape(G * R, S), heads)
-            )
             x = x + layer._sa_block(layer.norm1(x), p, None)
             x = x + layer.dropout2(_memory_value(layer, memory.reshape(G * R, W)))[:, None]
         x = x + layer._ff_block(layer.norm3(x))
