@@ -116,3 +116,31 @@ def test_cli_render_still_video_and_sheet(store, tmp_path, capsys):
     ):
         r = run_inprocess(capsys, "bank", *args)
         assert r.code == 2 and msg in r.err and "Traceback" not in r.err, (args, r.err)
+
+
+def test_batched_rasterisation_equals_one_image_at_a_time(monkeypatch):
+    """A batch of poses is one pass with each image's own depth range: the same face ids and
+    weights as rasterising the images one by one, also when the batch is split to keep face ids
+    below the packed key's limit."""
+    import zooctl.render.preview as P
+
+    cam = orbit_camera(np.array([0.0, 0.0, 10.0]), np.zeros(3), 48, 40, fov_y=30.0)
+    far_v, far_f = quad(0.0, 2.0)
+    near_v, near_f = quad(1.0, 0.5)
+    v = torch.tensor(np.concatenate([far_v, near_v]))
+    f = torch.tensor(np.concatenate([far_f, near_f + 4]))
+    rng = np.random.default_rng(0)
+    # Five poses: shifted, scaled in depth, one partly outside the image, one behind the camera.
+    poses = [v + torch.tensor(rng.normal(0, 0.6, 3), dtype=torch.float32) for _ in range(3)]
+    poses += [v + torch.tensor([3.0, 0.0, 0.0]), v + torch.tensor([0.0, 0.0, 20.0])]
+    xy, z = cam.expand(len(poses)).project(torch.stack(poses))
+    skip = torch.tensor(rng.random((len(poses), len(f))) < 0.2)
+    one = [zbuffer_mesh(xy[b], z[b], f, 48, 40, skip=skip[b]) for b in range(len(poses))]
+    for bits in (P._FACE_BITS, 4):  # 4 bits: 16 face ids, so 5 poses x 4 faces are split
+        monkeypatch.setattr(P, "_FACE_BITS", bits)
+        ids, bary = zbuffer_mesh(xy, z, f, 48, 40, skip=skip)
+        assert ids.shape == (5, 48, 40) and bary.shape == (5, 48, 40, 3)
+        for b, (ids1, bary1) in enumerate(one):
+            assert torch.equal(ids[b], ids1)
+            assert torch.equal(bary[b], bary1)
+    assert (one[0][0] >= 0).any() and not (one[4][0] >= 0).any()  # behind the camera: nothing drawn

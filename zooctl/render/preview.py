@@ -27,6 +27,7 @@ BACKGROUND_TOP = (0.93, 0.94, 0.96)
 BACKGROUND_BOTTOM = (0.78, 0.80, 0.84)
 _FACE_BITS = 24  # face ids below 2**24 (16.7 million faces)
 _DEPTH_LEVELS = 2**38
+_BATCH_PIXELS = 1 << 22  # rendered pixels per rasteriser pass in `render_asset`
 
 
 def vertex_normals(vertices: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
@@ -175,9 +176,7 @@ class PreviewRenderer:
         try:
             normals = vertex_normals(verts, f)
             cull = is_closed_and_oriented(f)
-            img = torch.stack(
-                [self._render_one(verts[b], normals[b], f, col, cam, b, cull) for b in range(len(verts))]
-            )
+            img = self._render_batch(verts, normals, f, col, cam, cull)
         finally:
             torch.set_num_threads(threads)
         # img: (B, H*s, W*s, 3) linear RGB in [0, 1]
@@ -186,44 +185,44 @@ class PreviewRenderer:
         out = (img.clamp(0, 1) ** (1 / 2.2) * 255 + 0.5).to(torch.uint8).cpu().numpy()  # linear -> display
         return out[0] if single else out
 
-    def _render_one(
+    def _render_batch(
         self,
         v: torch.Tensor,
         n: torch.Tensor,
         f: torch.Tensor,
         col: torch.Tensor,
         cam: Camera,
-        b: int,
         cull: bool,
     ) -> torch.Tensor:
+        """v, n (B, V, 3) vertices and normals, f (F, 3), col (V, 3), cam a batch of B ->
+        linear RGB (B, H, W, 3)."""
         H, W = cam.height, cam.width
-        pc = v @ cam.rotation[b].T + cam.translation[b]  # camera frame, +Z forward
-        z = pc[:, 2]
-        k = cam.intrinsics[b]
-        xy = pc[:, :2] / z.clamp(min=1e-9)[:, None] * k[:2] + k[2:]
+        pc = v @ cam.rotation.transpose(1, 2) + cam.translation[:, None]  # camera frame, +Z forward
+        z = pc[..., 2]
+        k = cam.intrinsics[:, None]
+        xy = pc[..., :2] / z.clamp(min=1e-9)[..., None] * k[..., :2] + k[..., 2:]
+        centers = cam.centers()[0]  # (B, 3)
         skip = None
         if cull:  # a closed, consistently oriented surface hides every face that looks away
-            tri = v[f]
-            fn = torch.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], dim=-1)
-            skip = (fn * (tri[:, 0] - cam.centers()[0][b])).sum(-1) > 0
+            tri = v[:, f]  # (B, F, 3, 3)
+            fn = torch.cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0], dim=-1)
+            skip = (fn * (tri[:, :, 0] - centers[:, None])).sum(-1) > 0
         face_ids, bary = zbuffer_mesh(xy, z, f, H, W, cam.near, skip)
-        bg = _background(H, W, self.device)
+        img = _background(H, W, self.device).expand(len(v), H, W, 3).clone()
         hit = face_ids >= 0
         if not bool(hit.any()):
-            return bg
-        fid = face_ids[hit]
+            return img
+        b = torch.nonzero(hit)[:, 0]  # image of each covered pixel
         w = bary[hit]  # (P, 3) perspective-correct barycentrics
-        tri = f[fid]
-        normal = torch.nn.functional.normalize((n[tri] * w[..., None]).sum(1), dim=-1, eps=1e-12)
+        tri = f[face_ids[hit]]  # (P, 3)
+        normal = torch.nn.functional.normalize((n[b[:, None], tri] * w[..., None]).sum(1), dim=-1, eps=1e-12)
         albedo = (col[tri] * w[..., None]).sum(1)
         # Two-sided: turn normals that face away from the camera towards it.
-        view = torch.nn.functional.normalize(v[tri[:, 0]] - cam.centers()[0][b], dim=-1)
+        view = torch.nn.functional.normalize(v[b, tri[:, 0]] - centers[b], dim=-1)
         flip = (normal * view).sum(-1, keepdim=True) > 0
         normal = torch.where(flip, -normal, normal)
         diffuse = (normal @ self.light).clamp(min=0)[:, None]
-        shade = albedo * (self.ambient + (1 - self.ambient) * diffuse)
-        img = bg.clone()
-        img[hit] = shade
+        img[hit] = albedo * (self.ambient + (1 - self.ambient) * diffuse)
         return img
 
 
@@ -237,17 +236,43 @@ def zbuffer_mesh(
     skip: torch.Tensor | None = None,
     max_candidates: int = 1 << 21,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Z-buffer rasterisation of one mesh for previews (no gradients; the differentiable one is
-    `zooctl.render.raster.rasterize`).
+    """Z-buffer rasterisation of one mesh, or of a batch of poses of it, for previews (no
+    gradients; the differentiable one is `zooctl.render.raster.rasterize`).
 
-    xy (V, 2) pixel positions (pixel (i, j) is centred at (j + 0.5, i + 0.5)), z (V,) camera
-    depths, faces (F, 3); ``skip`` (F,) bool marks faces not to draw (culled back faces). Returns
-    face ids (H, W) int64 (-1: background) and perspective-correct barycentric weights (H, W, 3).
-    Faces with a vertex nearer than ``near`` are skipped.
+    xy (V, 2) or (B, V, 2) pixel positions (pixel (i, j) is centred at (j + 0.5, i + 0.5)), z
+    (V,) or (B, V) camera depths, faces (F, 3); ``skip`` (F,) or (B, F) bool marks faces not to
+    draw (culled back faces). Returns face ids (H, W) or (B, H, W) int64 (-1: background) and
+    perspective-correct barycentric weights (H, W, 3) or (B, H, W, 3). Faces with a vertex nearer
+    than ``near`` are skipped. A batch is one pass over all its images (each with its own depth
+    range), so its result is the same as rendering the images one by one, at a fraction of the
+    per-call cost.
     """
+    single = xy.ndim == 2
+    if single:
+        xy, z = xy[None], z[None]
+        skip = None if skip is None else skip[None]
     dev = xy.device
-    tri = xy[faces]  # (F, 3, 2)
-    tz = z[faces]  # (F, 3)
+    nb, nf = xy.shape[0], faces.shape[0]
+    if nf * nb >= 2**_FACE_BITS:  # the packed key holds face ids below 2**_FACE_BITS
+        half = max(1, nb // 2)
+        parts = [
+            zbuffer_mesh(
+                xy[s : s + half],
+                z[s : s + half],
+                faces,
+                height,
+                width,
+                near,
+                None if skip is None else skip[s : s + half],
+                max_candidates,
+            )
+            for s in range(0, nb, half)
+        ]
+        ids, bary = torch.cat([p[0] for p in parts]), torch.cat([p[1] for p in parts])
+        return (ids[0], bary[0]) if single else (ids, bary)
+    tri = xy[:, faces].reshape(nb * nf, 3, 2)  # faces of image b are b * F ... (b + 1) * F - 1
+    tz = z[:, faces].reshape(nb * nf, 3)
+    img_of = torch.arange(nb, device=dev).repeat_interleave(nf)  # (B * F,)
     lo = tri.min(1).values
     hi = tri.max(1).values
     x0 = torch.floor(lo[:, 0] - 0.5).clamp(min=0)
@@ -257,7 +282,7 @@ def zbuffer_mesh(
     area = _edge(tri[:, 0], tri[:, 1], tri[:, 2])
     ok = (tz.min(1).values > near) & (x1 >= x0) & (y1 >= y0) & (area.abs() > 1e-12)
     if skip is not None:
-        ok &= ~skip
+        ok &= ~skip.reshape(-1)
     # Barycentric weight i of pixel centre p is the affine function A_i p.x + B_i p.y + C_i.
     a, b = tri, tri.roll(-1, dims=1)  # edges (v1, v2), (v2, v0), (v0, v1) opposite v0, v1, v2
     a, b = a.roll(-1, dims=1), b.roll(-1, dims=1)
@@ -266,10 +291,17 @@ def zbuffer_mesh(
     B = (b[..., 0] - a[..., 0]) * inv[:, None]
     C = ((b[..., 1] - a[..., 1]) * a[..., 0] - (b[..., 0] - a[..., 0]) * a[..., 1]) * inv[:, None]
     inv_z = 1.0 / tz.clamp(min=1e-12)
-    zbuf = torch.full((height * width,), torch.iinfo(torch.int64).max, dtype=torch.int64, device=dev)
+    npix = height * width
+    zbuf = torch.full((nb * npix,), torch.iinfo(torch.int64).max, dtype=torch.int64, device=dev)
     if bool(ok.any()):
-        zmin, zmax = float(tz[ok].min()), float(tz[ok].max())
-        scale = (_DEPTH_LEVELS - 1) / max(zmax - zmin, 1e-12)
+        # Depth quantised per image over the depth range of its drawn faces.
+        big = torch.finfo(tz.dtype).max
+        fmin = torch.where(ok, tz.min(1).values, torch.full_like(ok, big, dtype=tz.dtype))
+        fmax = torch.where(ok, tz.max(1).values, torch.full_like(ok, -big, dtype=tz.dtype))
+        zmin = fmin.reshape(nb, nf).min(1).values
+        zmax = fmax.reshape(nb, nf).max(1).values
+        scale = ((_DEPTH_LEVELS - 1) / (zmax.double() - zmin.double()).clamp(min=1e-12)).to(tz.dtype)
+        zmin_f, scale_f = zmin[img_of], scale[img_of]
         # Faces grouped by the power-of-two size of their box's width and height.
         bw = _ceil_pow2(x1 - x0 + 1)
         bh = _ceil_pow2(y1 - y0 + 1)
@@ -301,21 +333,24 @@ def zbuffer_mesh(
                 f = fi[r]
                 iz = w0[r, c] * inv_z[f, 0] + w1[r, c] * inv_z[f, 1] + w2[r, c] * inv_z[f, 2]
                 depth = 1.0 / iz.clamp(min=1e-12)
-                q = ((depth - zmin) * scale).clamp(0, _DEPTH_LEVELS - 1).to(torch.int64)
-                pix = (py[r, c] * width + px[r, c]).to(torch.int64)
+                q = ((depth - zmin_f[f]) * scale_f[f]).clamp(0, _DEPTH_LEVELS - 1).to(torch.int64)
+                pix = img_of[f] * npix + (py[r, c] * width + px[r, c]).to(torch.int64)
                 zbuf.scatter_reduce_(0, pix, (q << _FACE_BITS) | f, reduce="amin")
     hit = zbuf != torch.iinfo(torch.int64).max
     face_ids = torch.where(hit, zbuf & ((1 << _FACE_BITS) - 1), torch.full_like(zbuf, -1))
-    bary = torch.zeros(height * width, 3, device=dev)
+    bary = torch.zeros(nb * npix, 3, device=dev)
     idx = torch.nonzero(hit).squeeze(1)
     if len(idx):
         fi = face_ids[idx]
-        cx = (idx % width).float() + 0.5
-        cy = (idx // width).float() + 0.5
+        local = idx % npix
+        cx = (local % width).float() + 0.5
+        cy = (local // width).float() + 0.5
         w = A[fi] * cx[:, None] + B[fi] * cy[:, None] + C[fi]
         w = w * inv_z[fi]  # screen-space -> perspective-correct
         bary[idx] = w / w.sum(-1, keepdim=True)
-    return face_ids.reshape(height, width), bary.reshape(height, width, 3)
+        face_ids[idx] = fi - (idx // npix) * nf  # ids within each image's mesh
+    face_ids, bary = face_ids.reshape(nb, height, width), bary.reshape(nb, height, width, 3)
+    return (face_ids[0], bary[0]) if single else (face_ids, bary)
 
 
 def _ceil_pow2(n: torch.Tensor) -> torch.Tensor:
@@ -349,12 +384,13 @@ def render_asset(
     elevation: float = 18.0,
     supersample: int = 2,
     device: str = "cpu",
-    batch: int = 8,
+    batch: int | None = None,
 ) -> np.ndarray:
     """Render an asset (`zooctl.asset.RiggedAsset`) posed at frames of a clip, or its rest pose.
 
     Returns uint8 (T, size, width or size, 3). The camera is fixed for the whole clip, framing
-    every vertex of every rendered frame, so motion is visible.
+    every vertex of every rendered frame, so motion is visible. Frames are rasterised ``batch`` at
+    a time (default: as many as fit in about 4 million rendered pixels).
     """
     if clip is None:
         posed = asset.pose(None)[None]
@@ -371,6 +407,8 @@ def render_asset(
             raise InputError("no frames to render")
         posed = asset.pose(clip, idx)
     W = width or size
+    if batch is None:
+        batch = max(1, _BATCH_PIXELS // (size * W * max(1, supersample) ** 2))
     cam = fit_camera(posed.reshape(-1, 3), size, W, azimuth, elevation)
     renderer = PreviewRenderer(device=device, supersample=supersample)
     colors = asset.vertex_colors
