@@ -134,49 +134,42 @@ def shade_frames(
     """
     import torch  # here, not at module level: `bank search` imports this module and rarely renders
 
+    from ..render.camera import Camera
     from ..render.preview import vertex_normals, zbuffer_mesh
 
     dev = torch.device(device)
-    N = len(posed)
-    R = cameras[0].height
     f = torch.as_tensor(faces, dtype=torch.long, device=dev)
     verts = torch.as_tensor(np.asarray(posed, np.float32), device=dev)
     normals = vertex_normals(verts, f)
     col = torch.as_tensor(np.asarray(colors, np.float32), device=dev)
-    # One rasterisation for all frames: each frame is a tile of a wide canvas (gap columns between
-    # tiles), which amortises the rasteriser's per-call work over N frames.
-    step = R + 2
-    xy_all, z_all = [], []
-    for i, cam in enumerate(cameras):
-        Rm, t, k = cam.rotation[0].to(dev), cam.translation[0].to(dev), cam.intrinsics[0].to(dev)
-        pc = verts[i] @ Rm.T + t
-        xy = pc[:, :2] / pc[:, 2:].clamp(min=1e-9) * k[:2] + k[2:]
-        xy_all.append(xy + torch.tensor([i * step, 0.0], device=dev))
-        z_all.append(pc[:, 2])
-    nv = verts.shape[1]
-    all_faces = torch.cat([f + i * nv for i in range(N)])
-    face_ids, bary = zbuffer_mesh(
-        torch.cat(xy_all), torch.cat(z_all), all_faces, R, step * N, cameras[0].near
+    cam = Camera(
+        torch.cat([c.intrinsics for c in cameras]).to(dev),
+        torch.cat([c.rotation for c in cameras]).to(dev),
+        torch.cat([c.translation for c in cameras]).to(dev),
+        cameras[0].height,
+        cameras[0].width,
+        cameras[0].near,
     )
-    rgb = np.empty((N, R, R, 3), np.uint8)
-    sil = np.empty((N, R, R), bool)
-    for i, cam in enumerate(cameras):
-        fid = face_ids[:, i * step : i * step + R]
-        hit = fid >= 0
-        img = torch.as_tensor(backgrounds[i], dtype=torch.float32, device=dev).clone()
-        if bool(hit.any()):
-            Rm, t = cam.rotation[0].to(dev), cam.translation[0].to(dev)
-            tri = f[fid[hit] - i * len(f)]
-            w = bary[:, i * step : i * step + R][hit][..., None]
-            n = torch.nn.functional.normalize((normals[i][tri] * w).sum(1), dim=-1, eps=1e-12)
-            view_dir = torch.nn.functional.normalize(verts[i][tri[:, 0]] + Rm.T @ t, dim=-1)
-            n = torch.where(((n * view_dir).sum(-1, keepdim=True) > 0), -n, n)  # two-sided
-            albedo = (col[tri] * w).sum(1) * float(gain[i])
-            lam = (n @ torch.as_tensor(lights[i], dtype=torch.float32, device=dev)).clamp(min=0)[:, None]
-            img[hit] = albedo * (float(ambient[i]) + (1 - float(ambient[i])) * lam)
-        rgb[i] = (img.clamp(0, 1) ** (1 / 2.2) * 255 + 0.5).to(torch.uint8).cpu().numpy()
-        sil[i] = hit.cpu().numpy()
-    return rgb, sil
+    xy, z = cam.project(verts)
+    face_ids, bary = zbuffer_mesh(xy, z, f, cam.height, cam.width, cam.near)  # one pass for all N
+    img = torch.as_tensor(np.stack(backgrounds), dtype=torch.float32, device=dev).clone()
+    hit = face_ids >= 0
+    if bool(hit.any()):
+        b = torch.nonzero(hit)[:, 0]  # frame of each covered pixel
+        tri = f[face_ids[hit]]
+        w = bary[hit][..., None]
+        n = torch.nn.functional.normalize((normals[b[:, None], tri] * w).sum(1), dim=-1, eps=1e-12)
+        centers = cam.centers()[0]
+        view_dir = torch.nn.functional.normalize(verts[b, tri[:, 0]] - centers[b], dim=-1)
+        n = torch.where(((n * view_dir).sum(-1, keepdim=True) > 0), -n, n)  # two-sided
+        gain_t = torch.as_tensor(np.asarray(gain, np.float32), device=dev)[b, None]
+        amb = torch.as_tensor(np.asarray(ambient, np.float32), device=dev)[b, None]
+        light = torch.as_tensor(np.asarray(lights, np.float32), device=dev)[b]
+        albedo = (col[tri] * w).sum(1) * gain_t
+        lam = (n * light).sum(-1, keepdim=True).clamp(min=0)
+        img[hit] = albedo * (amb + (1 - amb) * lam)
+    rgb = (img.clamp(0, 1) ** (1 / 2.2) * 255 + 0.5).to(torch.uint8).cpu().numpy()
+    return rgb, hit.cpu().numpy()
 
 
 def asset_colors(asset) -> np.ndarray:
