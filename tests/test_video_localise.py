@@ -174,9 +174,10 @@ class RedLocaliser:
         return Evidence(cam.astype(np.float32), 0.9, 0.99 if red.max() > 0.5 else 0.0, [(207, 0.9)])
 
 
-def two_animals(t: int = 10, h: int = 96, w: int = 160):
-    """``moving_object_video`` with a second, smaller red object moving slower at the bottom right:
-    frames and the true masks of the big and of the small object."""
+def two_animals(t: int = 10, h: int = 96, w: int = 160, near: bool = False):
+    """``moving_object_video`` with a second, smaller red object moving slower at the bottom right
+    (``near``: moving left, close under the big one): frames and the true masks of the big and of
+    the small object."""
     import cv2
 
     frames, big = moving_object_video(t=t, h=h, w=w)
@@ -184,7 +185,8 @@ def two_animals(t: int = 10, h: int = 96, w: int = 160):
     small = np.zeros_like(big)
     for i in range(t):
         m = np.zeros((h, w), np.uint8)
-        cv2.ellipse(m, (w - 30 + i, h - 12), (12, 9), 0, 0, 360, 1, -1)
+        centre = (w - 30 - 2 * i, 3 * h // 4) if near else (w - 30 + i, h - 12)
+        cv2.ellipse(m, centre, (12, 9), 0, 0, 360, 1, -1)
         small[i] = (m > 0) & ~big[i]
         frames[i][small[i]] = (200, 40, 40)
     return frames, big, small
@@ -213,6 +215,17 @@ def test_a_box_chooses_which_animal_the_localiser_seeds():
     assert seg.report["box_use"] == "seeded" and seg.report["seeding"][5] == "box"
     with pytest.raises(UsageError, match="does not cover"):
         seg.segment(frames, box=(500, 500, 10, 10), box_frame=5)
+
+
+def test_a_box_the_localiser_result_does_not_fit_seeds_from_the_box():
+    """The small animal close under the big one: their blurry class maps join, the localiser's seed
+    takes the big one, which does not fit the box on its frame; the box's own pixels seed instead."""
+    frames, big, small = two_animals(near=True)
+    seg = GrabCutTracker()
+    seg._loc = RedLocaliser()
+    got = seg.segment(frames, box=cues.box_of(small[5]), box_frame=5)
+    assert seg.report["box_use"] == "seeded" and seg.report["seeding"][5] == "box"
+    assert np.mean([iou(g, m) for g, m in zip(got, small)]) > 0.8
 
 
 def test_a_box_region_is_carried_along_the_flow():
