@@ -23,13 +23,13 @@ def carry(region: np.ndarray, forward: np.ndarray, backward: np.ndarray, frame: 
     so the animal's own evidence, not the warp's outline, decides where it ends.
     """
     t = len(forward) + 1
-    soft = np.zeros((t, *region.shape), np.float32)
-    soft[frame] = region
-    for i in range(frame + 1, t):
-        soft[i] = warp(soft[i - 1], backward[i - 1])
-    for i in range(frame - 1, -1, -1):
-        soft[i] = warp(soft[i + 1], forward[i])
-    out = soft >= 0.25
+    out = np.zeros((t, *region.shape), bool)
+    out[frame] = region
+    for order, pulls in ((range(frame + 1, t), backward), (range(frame - 1, -1, -1), forward)):
+        soft = region.astype(np.float32)  # one frame at a time: long videos hold only the bool maps
+        for i in order:
+            soft = warp(soft, pulls[i - 1] if i > frame else pulls[i])
+            out[i] = soft >= 0.25
     for i in range(t):
         if out[i].any():
             r = 0.1 * float(np.sqrt(out[i].sum()))
