@@ -82,12 +82,18 @@ def test_cli_box_frame_and_show_report_seeding(store, synthetic, tmp_path, capsy
     x, y, w, h = cues.box_of(masks[3])
     r = run_inprocess(capsys, "video", "add", str(folder), "--box-frame", "3", "-q")
     assert r.code == 2 and "--box-frame places --box" in r.err
-    r = run_inprocess(
-        capsys, "video", "add", str(folder), "--box", f"{x},{y},{w},{h}", "--box-frame", "3", "-q"
-    )
+    box = ("--box", f"{x},{y},{w},{h}", "--box-frame", "3")
+    r = run_inprocess(capsys, "video", "add", str(folder), *box, "--seg-option", "localise=false", "-q")
     assert r.code == 0, r.err
     r = run_inprocess(capsys, "video", "show", "clip")
     assert r.code == 0 and "seeding: 1 box" in r.out and "(first seed on frame 3)" in r.out, r.out
+    assert "the box on frame 3 seeded the masks" in r.out
+    # with the localiser (the default) the box chooses the animal and the localiser seeds it
+    r = run_inprocess(capsys, "video", "add", str(folder), *box, "--name", "clip2", "-q")
+    assert r.code == 0, r.err
+    r = run_inprocess(capsys, "video", "show", "clip2")
+    assert r.code == 0 and "seeding: 1 localiser" in r.out, r.out
+    assert "the box on frame 3 chose the animal" in r.out
 
 
 def test_an_animal_that_leaves_the_frame_is_found_again(synthetic):
@@ -149,3 +155,106 @@ def test_a_localiser_seed_leaves_out_what_moves_with_the_animal_but_is_not_it():
     assert iou(unsure, bird | reflection) > 0.9
     with pytest.raises(UsageError, match="core_quantile"):
         GrabCutTracker(core_quantile=1.0)
+
+
+class RedLocaliser:
+    """A localiser the test builds: its class map is the frame's redness, blurred as a class map is
+    (the shipped classifier sees no animal in synthetic ellipses); sure of an animal wherever
+    something is red."""
+
+    def evidence(self, frame):
+        import cv2
+
+        from zooctl.video.localise import Evidence
+
+        f = frame.astype(np.float32)
+        red = np.clip((f[..., 0] - 0.5 * (f[..., 1] + f[..., 2])) / 100.0, 0.0, 1.0)
+        cam = cv2.GaussianBlur(red, (0, 0), 6)
+        cam = cam / max(float(cam.max()), 1e-6)
+        return Evidence(cam.astype(np.float32), 0.9, 0.99 if red.max() > 0.5 else 0.0, [(207, 0.9)])
+
+
+def two_animals(t: int = 10, h: int = 96, w: int = 160, near: bool = False):
+    """``moving_object_video`` with a second, smaller red object moving slower at the bottom right
+    (``near``: moving left, close under the big one): frames and the true masks of the big and of
+    the small object."""
+    import cv2
+
+    frames, big = moving_object_video(t=t, h=h, w=w)
+    frames = frames.copy()
+    small = np.zeros_like(big)
+    for i in range(t):
+        m = np.zeros((h, w), np.uint8)
+        centre = (w - 30 - 2 * i, 3 * h // 4) if near else (w - 30 + i, h - 12)
+        cv2.ellipse(m, centre, (12, 9), 0, 0, 360, 1, -1)
+        small[i] = (m > 0) & ~big[i]
+        frames[i][small[i]] = (200, 40, 40)
+    return frames, big, small
+
+
+def test_a_box_chooses_which_animal_the_localiser_seeds():
+    """Two red animals: without a box the localiser takes the bigger; a box around the smaller one
+    on frame 5 makes every frame's mask the smaller one, seeded where the localiser sees it (not
+    necessarily on the box's frame); a box where the localiser sees no animal seeds from the box."""
+    frames, big, small = two_animals()
+    seg = GrabCutTracker()
+    seg._loc = RedLocaliser()
+    auto = seg.segment(frames)
+    assert iou(auto, big) > 0.7
+    seg = GrabCutTracker()
+    seg._loc = RedLocaliser()
+    got = seg.segment(frames, box=cues.box_of(small[5]), box_frame=5)
+    assert seg.report["box_use"] == "chose the animal" and seg.report["box_frame"] == 5
+    assert seg.report["seeding"][seg.report["seed_frame"]] == "localiser"
+    assert np.mean([iou(g, m) for g, m in zip(got, small)]) > 0.6
+    assert not (got & big).any()
+    # grey background only in the box: nothing the localiser calls an animal, so the box seeds
+    seg = GrabCutTracker()
+    seg._loc = RedLocaliser()
+    seg.segment(frames, box=(2, 2, 30, 20), box_frame=5)
+    assert seg.report["box_use"] == "seeded" and seg.report["seeding"][5] == "box"
+    with pytest.raises(UsageError, match="does not cover"):
+        seg.segment(frames, box=(500, 500, 10, 10), box_frame=5)
+
+
+def test_a_box_the_localiser_result_does_not_fit_seeds_from_the_box():
+    """The small animal close under the big one: their blurry class maps join, the localiser's seed
+    takes the big one, which does not fit the box on its frame; the box's own pixels seed instead."""
+    frames, big, small = two_animals(near=True)
+    seg = GrabCutTracker()
+    seg._loc = RedLocaliser()
+    got = seg.segment(frames, box=cues.box_of(small[5]), box_frame=5)
+    assert seg.report["box_use"] == "seeded" and seg.report["seeding"][5] == "box"
+    assert np.mean([iou(g, m) for g, m in zip(got, small)]) > 0.8
+
+
+def test_a_box_region_is_carried_along_the_flow():
+    from zooctl.video import hint
+
+    t, h, w = 5, 40, 60
+    region = np.zeros((h, w), bool)
+    region[10:20, 10:20] = True
+    forward = np.zeros((t - 1, h, w, 2), np.float32)
+    forward[..., 0] = 3.0  # everything moves 3 px right a frame
+    backward = -forward
+    got = hint.carry(region, forward, backward, 2)
+    for i in range(t):
+        moved = np.roll(region, 3 * (i - 2), axis=1)
+        assert (got[i] & moved).sum() == moved.sum()  # covers it, with a band around
+        assert got[i].sum() < 2 * moved.sum()
+    parts = np.zeros((h, w), bool)
+    parts[5:15, 5:15] = parts[25:35, 40:50] = True
+    touched = hint.touching(parts, region)
+    assert touched[5:15, 5:15].all() and not touched[25:35, 40:50].any()
+
+
+def test_a_mask_agrees_with_the_box_it_was_drawn_around():
+    from zooctl.video import hint
+
+    mask = np.zeros((60, 80), bool)
+    mask[20:40, 30:50] = True
+    assert hint.agrees(mask, (28, 18, 24, 24))  # a loose box
+    assert hint.agrees(mask, (32, 22, 16, 16))  # a tight box cutting paws off
+    assert not hint.agrees(mask, (0, 0, 20, 15))  # another place
+    assert not hint.agrees(mask, (0, 0, 80, 60))  # the box is the whole frame, the mask a corner of it
+    assert not hint.agrees(mask & False, (28, 18, 24, 24))

@@ -63,7 +63,8 @@ def fit(
     box: str = typer.Option(
         None,
         "--box",
-        help="x,y,w,h around the animal in the first frame (original pixels): seeds --masks auto.",
+        help="x,y,w,h around the animal in the first frame (original pixels): chooses the animal --masks auto "
+        "segments.",
     ),
     out: Path = typer.Option(
         None,

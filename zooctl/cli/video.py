@@ -60,8 +60,9 @@ def add(
     box: str = typer.Option(
         None,
         "--box",
-        help="x,y,w,h around the animal in frame --box-frame (original pixels): a hint. Default: the localiser "
-        "finds the animal (ImageNet animal classes and motion).",
+        help="x,y,w,h around the animal in frame --box-frame (original pixels): a hint that chooses which "
+        "animal (the localiser then seeds it; the box's own pixels where it sees no animal there). Default: "
+        "the localiser finds the animal (ImageNet animal classes and motion).",
     ),
     box_frame: int = typer.Option(
         0, "--box-frame", help="The frame --box is drawn on (a stored frame number; default 0)."

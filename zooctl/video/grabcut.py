@@ -1,12 +1,16 @@
 """The classical automatic segmenter: a seed mask on one frame, then GrabCut tracked along the flow.
 
-Seed: with a box (on any frame, ``box_frame``), the pixels inside it that move unlike the camera
-(flow residual after a RANSAC homography) and have the box's colours (Lab histograms, box against
-the rest) seed GrabCut. Without one, the localiser (`zooctl.video.localise`: ImageNet animal class
-maps fused with motion) looks at keyframes, picks the one where it sees an animal most surely and
-seeds GrabCut around the main animal there, also from the part of the seed the class map is surest
-of (what moves with the animal, its reflection or wake, has its colours but less class evidence);
-that tighter mask wins where the class map says that what it leaves out is not the animal.
+Seed: the localiser (`zooctl.video.localise`: ImageNet animal class maps fused with motion) looks
+at keyframes, picks the one where it sees an animal most surely and seeds GrabCut around the main
+animal there (the class map's region starts as probably the animal), also from the part of the
+seed the class map is surest of (what moves with the animal, its reflection or wake, has its
+colours but less class evidence); that tighter mask wins where the class map says that what it
+leaves out is not the animal. A box (on any frame, ``box_frame``) chooses which animal: the
+localiser's region inside it is carried along the flow (`zooctl.video.hint`) and only evidence
+connected to it counts, on every frame; the seeding is then the same as without a box. Where the
+localiser sees no animal in the box, or the result on the box's frame is not what the box was drawn
+around, the box's own pixels that move unlike the camera (flow residual after a RANSAC homography)
+and have the box's colours (Lab histograms, box against the rest) seed GrabCut on the box's frame.
 Tracking, forwards and backwards from the seed frame: the neighbouring mask, warped along the flow,
 is the shape prior; the colour histograms are tracked and the motion cue is recomputed; together
 they build GrabCut's trimap in a window around the prior. On keyframes, and when the mask shrinks
@@ -22,7 +26,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError, UsageError
-from . import cues
+from . import cues, hint
 from .flow import DISFlow, VideoFlow, compute_video_flow, fb_inconsistent, resize_flow, warp
 from .localise import Evidence, Localiser, class_name, fuse, main_region
 
@@ -54,7 +58,12 @@ class GrabCutTracker:
     tracked mask. ``reliable_motion``: flow that fails the forward-backward check (ripples, glints) is no motion
     evidence, in the seed, the localiser and tracking. ``core_quantile``: a localiser seed is also cut
     from its core, its pixels at or over this quantile of the class map (0.5: the more animal-like
-    half) in the colours typical of them (0: never; see `_seed_in_box`).
+    half) in the colours typical of them (0: never; see `_seed_in_box`). ``hold_still``: the
+    propagated mask's interior (eroded by an eighth of its size) that keeps the seed frame's animal
+    colours stays sure foreground when it does not move (else only where it moves too).
+    ``seed_from_map``: a localiser seed starts GrabCut with the class map's region (over half its
+    peak, inside the seed's box) as probably the animal, not only the box's moving, box-coloured
+    pixels (the animal's parts in the ground's colours).
     """
 
     name = "grabcut"
@@ -84,6 +93,8 @@ class GrabCutTracker:
         reliable_motion: bool = False,
         reseed_colour: float = 0.5,
         core_quantile: float = 0.5,
+        hold_still: bool = True,
+        seed_from_map: bool = True,
     ) -> None:
         if iterations < 1 or first_iterations < 1:
             raise UsageError("GrabCut needs at least one iteration")
@@ -115,6 +126,8 @@ class GrabCutTracker:
         if not 0.0 <= core_quantile < 1.0:
             raise UsageError(f"core_quantile must be in [0, 1), got {core_quantile}")
         self.core_quantile = core_quantile
+        self.hold_still = hold_still
+        self.seed_from_map = seed_from_map
         self._loc: Localiser | None = None
         self.report: dict = {}
 
@@ -144,28 +157,36 @@ class GrabCutTracker:
             flow = compute_video_flow(DISFlow(self.flow_preset), frames)
         scale = self.work_size / max(h, w) if self.work_size and max(h, w) > self.work_size else 1.0
         if scale == 1.0:
-            return self._segment(frames, box, box_frame, progress, flow)
+            return self._honour(frames, box, box_frame, progress, flow)
         # GrabCut and its cues work at a bounded size (4x faster at 480p, and the band/window sizes
         # were tuned there); the masks come back up with a linear upsample of their 0/1 values
         sw, sh = round(w * scale), round(h * scale)
         small = np.stack([cv2.resize(f, (sw, sh), interpolation=cv2.INTER_AREA) for f in frames])
         small_flow = VideoFlow(*(_resize_flow(f, sw, sh) for f in (flow.forward, flow.backward)), None, None)
         small_box = None if box is None else tuple(int(round(v * scale)) for v in box)
-        masks = self._segment(small, small_box, box_frame, progress, small_flow)
+        masks = self._honour(small, small_box, box_frame, progress, small_flow)
         return np.stack(
             [cv2.resize(m.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR) > 0.5 for m in masks]
         )
 
-    def _segment(self, frames, box, box_frame, progress, flow) -> np.ndarray:
+    def _honour(self, frames, box, box_frame, progress, flow) -> np.ndarray:
+        """`_segment`, and with a box whose animal the localiser chose: again from the box's own seed
+        when the mask on the box's frame is not what the box was drawn around."""
+        masks = self._segment(frames, box, box_frame, progress, flow)
+        if box is None or self.report["box_use"] == "seeded" or hint.agrees(masks[box_frame], box):
+            return masks
+        cv2.setRNGSeed(0)
+        return self._segment(frames, box, box_frame, progress, flow, box_seed=True)
+
+    def _segment(self, frames, box, box_frame, progress, flow, box_seed: bool = False) -> np.ndarray:
         t, h, w = frames.shape[:3]
         bins = [cues.lab_bins(f) for f in frames]
         self._evidence: dict[int, Evidence] = {}
         self._animals_seen = 0
+        self._within: np.ndarray | None = None  # (T, H, W) bool: where the box's animal is
         how = ["tracked"] * t
         if box is not None:
-            s = box_frame
-            masks_s = self._first(frames[s], bins[s], self._residual(flow, s), box)
-            how[s] = "box"
+            s, masks_s, how[s] = self._start_from_box(frames, bins, flow, box, box_frame, box_seed)
         else:
             s, masks_s = self._start(frames, bins, flow)
             how[s] = "localiser"
@@ -220,6 +241,9 @@ class GrabCutTracker:
                 if progress:
                     progress(done, t)
         self.report = self._report(how, s)
+        if box is not None:
+            self.report["box_frame"] = box_frame
+            self.report["box_use"] = "seeded" if how[s] == "box" else "chose the animal"
         return masks
 
     # -- the localiser: where to start and when to start again -------------------------------------
@@ -264,12 +288,15 @@ class GrabCutTracker:
         score = fuse(ev, motion)
         if ev.confidence < self.min_confidence:  # no part of the frame surely an animal: motion alone
             score = np.zeros_like(score) if motion is None else motion
+        if self._within is not None:  # a box chose the animal: only the evidence connected to it counts
+            score = hint.focus(score, self._within[i])
         return score, ev
 
-    def _start(self, frames, bins, flow) -> tuple[int, np.ndarray]:
-        """The frame to start from (the most confidently seen animal among keyframes) and its mask."""
+    def _start(self, frames, bins, flow, extra: int | None = None) -> tuple[int, np.ndarray]:
+        """The frame to start from (the most confidently seen animal among keyframes, and frame
+        ``extra``) and its mask."""
         t = len(frames)
-        keys = sorted(set(range(0, t, self.key_every)) | {t - 1})
+        keys = sorted(set(range(0, t, self.key_every)) | {t - 1} | ({extra} - {None}))
         best, best_score = keys[0], -1.0
         for k in keys:
             ev = self._seen(frames, k)
@@ -278,6 +305,26 @@ class GrabCutTracker:
             if score > best_score:
                 best, best_score = k, score
         return best, self._seed(frames, bins, flow, best)
+
+    def _start_from_box(self, frames, bins, flow, box: Box, b: int, box_seed: bool):
+        """(seed frame, its mask, how it was seeded) given a box on frame b.
+
+        The box chooses the animal: the localiser's main region inside it, carried along the flow
+        to every frame, is the only place the localiser may seed (and re-seed) from; the seed frame
+        and the seed are then found as without a box. Where the localiser sees no animal in the box
+        (a class map it does not trust, or ``box_seed``), the box's own pixels seed frame b.
+        """
+        if self.localise and not box_seed:
+            score, ev = self._fused(frames, flow, b)
+            region, _ = main_region(hint.focus(score, cues.box_mask(score.shape, box)))
+            region &= cues.box_mask(score.shape, box)
+            if ev.confidence >= self.min_confidence and region.any():
+                self._within = hint.carry(region, flow.forward, flow.backward, b)
+                s, seed = self._start(frames, bins, flow, extra=b)
+                if seed.any():
+                    return s, seed, "localiser"
+                self._within = None
+        return b, self._first(frames[b], bins[b], self._residual(flow, b), box), "box"
 
     def _seed(self, frames, bins, flow, i: int) -> np.ndarray:
         """A mask of the main animal in frame i from the localiser alone (empty when none is seen)."""
@@ -310,7 +357,7 @@ class GrabCutTracker:
         and what it leaves out is big (a quarter of the animal or more: a reflection or wake, not a
         leg in other colours).
         """
-        plain = self._first(frame, bins, residual, box)
+        plain = self._first(frame, bins, residual, box, likely=animal >= 0.5 if self.seed_from_map else None)
         if not self.core_quantile:
             return plain
         core = self._first(frame, bins, residual, box, animal)
@@ -383,10 +430,12 @@ class GrabCutTracker:
         residual: np.ndarray,
         box: Box,
         animal: np.ndarray | None = None,
+        likely: np.ndarray | None = None,
     ) -> np.ndarray:
         """Frame mask from a box: the box's moving, box-coloured pixels seed GrabCut. ``animal``: the
         class map; the seed keeps its core, its pixels at or over the map's ``core_quantile`` among
-        them whose colours are more typical of the core than of the frame outside the box."""
+        them whose colours are more typical of the core than of the frame outside the box.
+        ``likely``: (H, W) bool, pixels GrabCut starts as probably the animal too (in the box)."""
         h, w = bins.shape
         inbox = cues.box_mask((h, w), box)
         p_colour = cues.colour_probability(
@@ -412,6 +461,8 @@ class GrabCutTracker:
         m = round(self.box_margin * max(bw, bh))
         trimap = np.full((h, w), cv2.GC_BGD, np.uint8)
         trimap[cues.box_mask((h, w), (x - m, y - m, bw + 2 * m, bh + 2 * m))] = cv2.GC_PR_BGD
+        if likely is not None:
+            trimap[inbox & likely] = cv2.GC_PR_FGD
         trimap[seed] = cv2.GC_PR_FGD
         out = _clean(_grabcut(frame, trimap, self.first_iterations), seed)
         # a box that cuts through the animal puts its colours in the background model and GrabCut
@@ -445,8 +496,8 @@ class GrabCutTracker:
         around = cv2.dilate(grow.astype(np.uint8), cues.disk(self.band * size)).astype(bool) & window
         sure = (
             cv2.erode(prior.astype(np.uint8), cues.disk(0.12 * size)).astype(bool)
-            & (cue > 0.5)
             & (p_colour > 0.3)
+            & ((cue > 0.5) | (self.hold_still & (p_first > 0.5)))
         )
         trimap = np.full((h, w), cv2.GC_BGD, np.uint8)
         trimap[around] = cv2.GC_PR_BGD

@@ -16,7 +16,16 @@ def video_stats(rec) -> dict[str, Any]:
     mag = np.linalg.norm(rec.flow_forward, axis=-1)
     occ = np.concatenate([rec.occlusion_forward.reshape(-1), rec.occlusion_backward.reshape(-1)])
     seg = rec.segmenter or {}
-    keys = ("seeding", "seed_frame", "animal_classes", "animals_seen", "empty_frames", "small_frames")
+    keys = (
+        "seeding",
+        "seed_frame",
+        "box_frame",
+        "box_use",
+        "animal_classes",
+        "animals_seen",
+        "empty_frames",
+        "small_frames",
+    )
     return {
         "seeding": {k: seg[k] for k in keys if k in seg} or None,
         "mask_coverage": [round(float(c), 5) for c in coverage],
@@ -44,6 +53,13 @@ def seeding_lines(seeding: dict[str, Any] | None) -> list[str]:
             + ", ".join(f"{n} {k}" for k, n in counts.items() if n)
             + f" (first seed on frame {seeding.get('seed_frame')})"
         )
+    if seeding.get("box_use") == "chose the animal":
+        out.append(
+            f"the box on frame {seeding.get('box_frame')} chose the animal; the localiser seeded it "
+            "where it saw it most surely"
+        )
+    elif seeding.get("box_use") == "seeded":
+        out.append(f"the box on frame {seeding.get('box_frame')} seeded the masks")
     classes = seeding.get("animal_classes") or []
     if classes:
         seen = ", ".join(f"{c['name']} {c['probability']:.0%}" for c in classes)
