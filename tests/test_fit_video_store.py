@@ -65,3 +65,12 @@ def test_box_needs_grabcut(davis_folder, store):
     with pytest.raises(UsageError, match="--box"):
         fit_job(str(folder), store, tiny_fit_config(), name="x", template="tube", box=(1, 1, 20, 20))
     assert VideoStore(store).names() == []  # nothing stored on a usage error
+
+
+def test_the_summary_line_says_what_the_mask_iou_is_measured_against():
+    from zooctl.cli.fit import masks_measured_against
+
+    assert masks_measured_against("masks") == "your masks"
+    assert "not ground truth" in masks_measured_against("grabcut")
+    assert "not ground truth" in masks_measured_against("auto")
+    assert "ground truth" not in masks_measured_against("given")

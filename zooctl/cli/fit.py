@@ -168,11 +168,23 @@ def fit(
         )
     m = rec["metrics"]
     console.print(
-        f"fitted [bold]{escape(rec['name'])}[/] with template {escape(rec['template'])}: mask IoU {m['mask_iou']:.3f}, "
-        f"{rec['timings']['total_wall']:.1f} s",
+        f"fitted [bold]{escape(rec['name'])}[/] with template {escape(rec['template'])}: mask IoU {m['mask_iou']:.3f} "
+        f"(against {escape(masks_measured_against(rec.get('mask_source')))}), {rec['timings']['total_wall']:.1f} s",
         highlight=False,
     )
     for k, p in rec["outputs"].items():
         console.print(f"  {k}: {escape(p)}", highlight=False)
     for n in rec.get("notes", []):
         err_console.print(f"[yellow]note:[/] {escape(n)}", highlight=False)
+
+
+def masks_measured_against(source: str | None) -> str:
+    """What a fit's mask IoU is measured against, for its one-line summary: a video's automatic
+    masks are not ground truth, and the line must not read as if they were."""
+    return {
+        "given": "your masks",
+        "masks": "your masks",
+        "davis": "the folder's annotation masks",
+        None: "the video's stored masks",
+        "stored": "the video's stored masks",
+    }.get(source, f"the video's automatic {source} masks, not ground truth")
