@@ -181,3 +181,28 @@ def test_bench_run_pose_prior_option(tmp_path):
     assert component_overrides(None, None) is None
     r = zooctl("bench", "run", str(tmp_path), "--pose-prior", "bogus", store=tmp_path / "store")
     assert r.code == 2 and "pose_prior: kind 'bogus'" in r.err and "Traceback" not in r.err, r.err
+
+
+def test_bench_run_config_file(tmp_path):
+    from cli_helpers import zooctl
+
+    from zooctl.cli.bench_fit import config_overrides
+
+    cfg = tmp_path / "w.json"
+    cfg.write_text('{"weights": {"pose_prior": 0.1}, "pose_prior": {"kind": "rest", "min_std_deg": 5}}')
+    flags = {"pose_prior": {"kind": "clips"}}
+    assert config_overrides(cfg, flags) == {
+        "weights": {"pose_prior": 0.1},
+        "pose_prior": {"kind": "clips", "min_std_deg": 5},  # the flag wins, the file's other field stays
+    }
+    assert config_overrides(None, flags) == flags
+    (tmp_path / "bad.json").write_text('{"weights": {"no_such_term": 1}}')
+    r = zooctl(
+        "bench", "run", str(tmp_path), "--config", str(tmp_path / "bad.json"), store=tmp_path / "store"
+    )
+    assert r.code == 2 and "no_such_term" in r.err and "Traceback" not in r.err, r.err
+    (tmp_path / "preset.json").write_text('{"preset": "quality"}')
+    r = zooctl(
+        "bench", "run", str(tmp_path), "--config", str(tmp_path / "preset.json"), store=tmp_path / "store"
+    )
+    assert r.code == 2 and "--preset" in r.err, r.err

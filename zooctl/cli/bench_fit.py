@@ -81,6 +81,12 @@ def run(
     ),
     renderer: str = RendererOpt,
     articulation: str = ArticulationOpt,
+    config: Path = typer.Option(
+        None,
+        "--config",
+        help='JSON fit config applied to every fit on top of the preset, e.g. {"weights": {"pose_prior": 0.1}} '
+        "(the options above win where both set a field).",
+    ),
     report: Path = typer.Option(None, "--report", help="Also write the markdown table here."),
     json_out: bool = JsonOpt,
     batch: batch_opts.BatchOptions = batch_opts.BatchOpts,
@@ -109,7 +115,7 @@ def run(
     opts = dict(
         known_camera=known_camera,
         own_template=own_template,
-        overrides=component_overrides(renderer, articulation, pose_prior),
+        overrides=config_overrides(config, component_overrides(renderer, articulation, pose_prior)),
     )
     if batch.executor is not None or resume:  # a batch: each fit one task
         ex = batch.make_executor(None)
@@ -160,6 +166,28 @@ def component_overrides(
     if articulation is not None:
         out["articulation"] = articulation
     return out or None
+
+
+def config_overrides(path: Path | None, flags: dict | None) -> dict | None:
+    """A `--config` file's fields with the component flags' on top (nested dicts merged)."""
+    if path is None:
+        return flags
+    from ..errors import UsageError
+    from ..fit.config import read_config_file
+
+    data = read_config_file(path)
+    if not isinstance(data, dict):
+        raise UsageError(f"config file {path} must hold a JSON object of config fields")
+    if "preset" in data:
+        raise UsageError(f"config file {path} sets the preset", hint="choose it with --preset")
+
+    def merge(a: dict, b: dict) -> dict:
+        out = dict(a)
+        for k, v in b.items():
+            out[k] = merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+        return out
+
+    return merge(data, flags or {}) or None
 
 
 def register(app: typer.Typer) -> None:

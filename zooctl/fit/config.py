@@ -246,18 +246,23 @@ def preset(name: str) -> FitConfig:
     return PRESETS[name]()
 
 
+def read_config_file(path: Path) -> Any:
+    """The JSON of a config file (any subset of `FitConfig`'s fields), or one clear error."""
+    path = Path(path)
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise InputError(f"config file {path} does not exist") from None
+    except (OSError, json.JSONDecodeError) as exc:
+        raise InputError(f"config file {path} is not valid JSON: {exc}") from None
+
+
 def load_config(path: Path | None, preset_name: str = "fast") -> FitConfig:
     """The preset, with a JSON config file applied on top (when given)."""
     cfg = preset(preset_name)
     if path is None:
         return cfg
-    path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputError(f"config file {path} does not exist") from None
-    except (OSError, json.JSONDecodeError) as exc:
-        raise InputError(f"config file {path} is not valid JSON: {exc}") from None
+    data = read_config_file(path)
     if isinstance(data, dict) and "preset" in data and data["preset"] != preset_name:
         cfg = preset(str(data["preset"]))
     return FitConfig.from_dict(data, cfg)
