@@ -144,3 +144,13 @@ def test_batched_rasterisation_equals_one_image_at_a_time(monkeypatch):
             assert torch.equal(ids[b], ids1)
             assert torch.equal(bary[b], bary1)
     assert (one[0][0] >= 0).any() and not (one[4][0] >= 0).any()  # behind the camera: nothing drawn
+
+
+def test_render_in_bounded_passes_equals_one_pass(monkeypatch):
+    import zooctl.render.preview as P
+
+    a = build_animal("fish")
+    clip = next(iter(a.clips))
+    whole = render_asset(a, clip, range(5), size=40)
+    monkeypatch.setattr(P, "_BATCH_PIXELS", 2 * (40 * 2) ** 2)  # two frames per pass at supersample 2
+    assert np.array_equal(render_asset(a, clip, range(5), size=40), whole)

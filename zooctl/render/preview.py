@@ -27,7 +27,8 @@ BACKGROUND_TOP = (0.93, 0.94, 0.96)
 BACKGROUND_BOTTOM = (0.78, 0.80, 0.84)
 _FACE_BITS = 24  # face ids below 2**24 (16.7 million faces)
 _DEPTH_LEVELS = 2**38
-_BATCH_PIXELS = 1 << 22  # rendered pixels per rasteriser pass in `render_asset`
+_BATCH_PIXELS = 1 << 22  # rendered pixels per rasteriser pass of `PreviewRenderer.render`
+_BATCH_FACES = 1 << 21  # and faces (memory: a few (B, F, 3, 3) float arrays per pass)
 
 
 def vertex_normals(vertices: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
@@ -176,7 +177,20 @@ class PreviewRenderer:
         try:
             normals = vertex_normals(verts, f)
             cull = is_closed_and_oriented(f)
-            img = self._render_batch(verts, normals, f, col, cam, cull)
+            # Passes of at most _BATCH_PIXELS rendered pixels and _BATCH_FACES faces: bounded memory.
+            step = max(1, min(_BATCH_PIXELS // (cam.height * cam.width), _BATCH_FACES // len(f)))
+            parts = []
+            for i in range(0, len(verts), step):
+                c = Camera(
+                    cam.intrinsics[i : i + step],
+                    cam.rotation[i : i + step],
+                    cam.translation[i : i + step],
+                    cam.height,
+                    cam.width,
+                    cam.near,
+                )
+                parts.append(self._render_batch(verts[i : i + step], normals[i : i + step], f, col, c, cull))
+            img = torch.cat(parts)
         finally:
             torch.set_num_threads(threads)
         # img: (B, H*s, W*s, 3) linear RGB in [0, 1]
@@ -389,8 +403,9 @@ def render_asset(
     """Render an asset (`zooctl.asset.RiggedAsset`) posed at frames of a clip, or its rest pose.
 
     Returns uint8 (T, size, width or size, 3). The camera is fixed for the whole clip, framing
-    every vertex of every rendered frame, so motion is visible. Frames are rasterised ``batch`` at
-    a time (default: as many as fit in about 4 million rendered pixels).
+    every vertex of every rendered frame, so motion is visible. ``batch``: frames per renderer call
+    (default: all; the renderer rasterises at most about 4 million pixels and 2 million faces per
+    pass).
     """
     if clip is None:
         posed = asset.pose(None)[None]
@@ -407,8 +422,7 @@ def render_asset(
             raise InputError("no frames to render")
         posed = asset.pose(clip, idx)
     W = width or size
-    if batch is None:
-        batch = max(1, _BATCH_PIXELS // (size * W * max(1, supersample) ** 2))
+    batch = len(posed) if batch is None else batch  # the renderer bounds its passes itself
     cam = fit_camera(posed.reshape(-1, 3), size, W, azimuth, elevation)
     renderer = PreviewRenderer(device=device, supersample=supersample)
     colors = asset.vertex_colors
