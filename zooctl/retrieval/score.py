@@ -87,7 +87,11 @@ def fuse(
     scores: dict[str, np.ndarray], how: str = "zsum", weights: dict[str, float] | None = None
 ) -> np.ndarray:
     """Combine per-embedder (A,) scores (lower is better) into one (A,) score, lower is better."""
-    terms = fuse_terms(scores, how, weights)
+    return sum_terms(fuse_terms(scores, how, weights))
+
+
+def sum_terms(terms: dict[str, np.ndarray]) -> np.ndarray:
+    """The fused (A,) score from `fuse_terms`' terms."""
     if not terms:
         raise UsageError("no embedder scores to combine")
     return np.sum(list(terms.values()), axis=0)

@@ -21,7 +21,7 @@ from ..errors import UsageError
 from . import query_cache
 from .index import cached_embedder, current_pack, embed_inputs, needs_masks
 from .query import DEFAULT_QUERY_FRAMES, QueryFrames, load_query, stored_query
-from .score import aggregate, best_views, fuse, fuse_terms
+from .score import aggregate, best_views, fuse, fuse_terms, sum_terms
 
 DEFAULT_TOP = 5
 DEFAULT_SHORTLIST = 256
@@ -288,7 +288,7 @@ def score_packs(
         per_e[e] = aggregate(d, aggregation, k)
         views_best[e] = best_views(d)
     terms = fuse_terms(per_e, fusion, weights)
-    total = fuse(per_e, fusion, weights)
+    total = sum_terms(terms)
     ranked = np.argsort(total, kind="stable")
     ranks = {e: np.argsort(np.argsort(s, kind="stable"), kind="stable") + 1 for e, s in per_e.items()}
     lead = next(iter(query_emb))
