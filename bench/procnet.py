@@ -36,6 +36,15 @@ from zooctl.retrieval.procnet_eval import (
 )
 
 
+def print_rows(rows: list[dict]) -> None:
+    for row in rows:
+        print(
+            f"  {row['set']:<15} {row['embedders']:<28} top-1 {row['top1']:>2}/{row['queries']}"
+            f" (answerable {row['top1_answerable']}/{row['answerable']}), top-3 {row['top3']}/{row['queries']}"
+            + (f"  misses: {', '.join(row['misses'])}" if row.get("misses") else "")
+        )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--weights", action="append", default=[], type=Path)
@@ -62,12 +71,7 @@ def main() -> None:
         r = evaluate_weights(feats, w)
         report["models"][str(w)] = r
         print(f"== {w or 'effnet + silhouette only'}")
-        for row in r["rows"]:
-            print(
-                f"  {row['set']:<15} {row['embedders']:<28} top-1 {row['top1']:>2}/{row['queries']}"
-                f" (answerable {row['top1_answerable']}/{row['answerable']}), top-3 {row['top3']}/{row['queries']}"
-                + (f"  misses: {', '.join(row['misses'])}" if row.get("misses") else "")
-            )
+        print_rows(r["rows"])
     if args.adapt is not None:
         from zooctl.embed.procnet import load_head
         from zooctl.retrieval.train_data import read_cached
@@ -80,12 +84,7 @@ def main() -> None:
         print(
             f"== {args.weights[0]} adapted to the bank, leave-one-out ({'untagged' if args.untagged else 'tagged'}, {args.adapt_steps} steps)"
         )
-        for row in r["rows"]:
-            print(
-                f"  {row['set']:<15} {row['embedders']:<28} top-1 {row['top1']:>2}/{row['queries']}"
-                f" (answerable {row['top1_answerable']}/{row['answerable']}), top-3 {row['top3']}/{row['queries']}"
-                + (f"  misses: {', '.join(row['misses'])}" if row.get("misses") else "")
-            )
+        print_rows(r["rows"])
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(report, indent=1, default=lambda o: np.asarray(o).tolist()))
     print(f"machine: {report['machine']}\nwrote {args.out}")

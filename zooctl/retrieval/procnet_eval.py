@@ -155,6 +155,23 @@ def rank_query(
     return idx[np.argsort(fuse(scores, "zsum"), kind="stable")]
 
 
+def _empty_row() -> dict[str, Any]:
+    return {"queries": 0, "top1": 0, "top3": 0, "answerable": 0, "top1_answerable": 0, "misses": []}
+
+
+def _tally(row: dict[str, Any], names: list[str], plans: list, i: int, order: np.ndarray, others) -> None:
+    """Count query i, ranked ``order`` (candidate indices, best first) among ``others``, into ``row``."""
+    got = [plans[j] for j in order[:3]]
+    answerable = any(plans[j] == plans[i] for j in others)
+    row["queries"] += 1
+    row["top1"] += got[0] == plans[i]
+    row["top3"] += plans[i] in got
+    row["answerable"] += answerable
+    row["top1_answerable"] += answerable and got[0] == plans[i]
+    if got[0] != plans[i]:
+        row["misses"].append(f"{names[i]}->{names[order[0]]}")
+
+
 def loo_rows(
     names: list[str],
     plans: list[str | None],
@@ -163,34 +180,18 @@ def loo_rows(
     embedders: list[str],
     n_query: int,
 ) -> dict[str, Any]:
-    """Leave-one-out over the first ``n_query`` entries: {top1, top3, top1_answerable, answerable, misses}.
-    ``views`` holds every entry (the queries first); queries[e] (n_query, Q, D)."""
+    """Leave-one-out over the first ``n_query`` entries: {queries, top1, top3, answerable,
+    top1_answerable, misses}. ``views`` holds every entry (the queries first); queries[e] (n_query, Q, D)."""
     A = len(names)
-    top1 = top3 = ans = top1_ans = 0
-    misses = []
+    row = _empty_row()
     for i in range(n_query):
         if plans[i] is None:
             continue
         keep = np.ones(A, bool)
         keep[i] = False
         order = rank_query({e: queries[e][i] for e in embedders}, views, keep, embedders)
-        got = [plans[j] for j in order[:3]]
-        answerable = any(plans[j] == plans[i] for j in range(A) if j != i)
-        top1 += got[0] == plans[i]
-        top3 += plans[i] in got
-        ans += answerable
-        top1_ans += answerable and got[0] == plans[i]
-        if got[0] != plans[i]:
-            misses.append(f"{names[i]}->{names[order[0]]}")
-    n = sum(p is not None for p in plans[:n_query])
-    return {
-        "queries": n,
-        "top1": top1,
-        "top3": top3,
-        "answerable": ans,
-        "top1_answerable": top1_ans,
-        "misses": misses,
-    }
+        _tally(row, names, plans, i, order, (j for j in range(A) if j != i))
+    return row
 
 
 def held_out_rows(ts: TrainingSet, emb: dict[str, np.ndarray], embedders: list[str]) -> dict[str, Any]:
@@ -266,17 +267,8 @@ def loo_adapted(
     inputs = list(cfg.inputs)
     n = len(ff.names)
     labels = list(ts.labels)
-    out: dict[str, dict[str, Any]] = {}
     sets = [["procnet"], ["effnet", "procnet"], ["effnet", "silhouette", "procnet"]]
-    for es in sets:
-        out["+".join(es)] = {
-            "queries": 0,
-            "top1": 0,
-            "top3": 0,
-            "answerable": 0,
-            "top1_answerable": 0,
-            "misses": [],
-        }
+    out = {"+".join(es): _empty_row() for es in sets}
     for i in range(n):
         if ff.plans[i] is None:
             continue
@@ -297,16 +289,7 @@ def loo_adapted(
             keep = np.ones(n, bool)
             keep[i] = False
             order = rank_query({e: emb_q[e][i] for e in es}, emb_bank, keep, es)
-            got = [ff.plans[j] for j in order[:3]]
-            answerable = any(ff.plans[j] == ff.plans[i] for j in others)
-            r = out["+".join(es)]
-            r["queries"] += 1
-            r["top1"] += got[0] == ff.plans[i]
-            r["top3"] += ff.plans[i] in got
-            r["answerable"] += answerable
-            r["top1_answerable"] += answerable and got[0] == ff.plans[i]
-            if got[0] != ff.plans[i]:
-                r["misses"].append(f"{ff.names[i]}->{ff.names[order[0]]}")
+            _tally(out["+".join(es)], ff.names, ff.plans, i, order, others)
         if progress:
             progress(f"fold {ff.names[i]}")
     return {"rows": [{"set": "shared", "embedders": k, **v} for k, v in out.items()]}
