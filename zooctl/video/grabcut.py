@@ -171,17 +171,18 @@ class GrabCutTracker:
 
     def _honour(self, frames, box, box_frame, progress, flow) -> np.ndarray:
         """`_segment`, and with a box whose animal the localiser chose: again from the box's own seed
-        when the mask on the box's frame is not what the box was drawn around."""
-        masks = self._segment(frames, box, box_frame, progress, flow)
+        when the mask on the box's frame is not what the box was drawn around. The frames' colour
+        bins and the localiser's looks (they depend on the frames alone) serve both passes."""
+        bins = [cues.lab_bins(f) for f in frames]
+        self._evidence: dict[int, Evidence] = {}
+        masks = self._segment(frames, bins, box, box_frame, progress, flow)
         if box is None or self.report["box_use"] == "seeded" or hint.agrees(masks[box_frame], box):
             return masks
         cv2.setRNGSeed(0)
-        return self._segment(frames, box, box_frame, progress, flow, box_seed=True)
+        return self._segment(frames, bins, box, box_frame, progress, flow, box_seed=True)
 
-    def _segment(self, frames, box, box_frame, progress, flow, box_seed: bool = False) -> np.ndarray:
+    def _segment(self, frames, bins, box, box_frame, progress, flow, box_seed: bool = False) -> np.ndarray:
         t, h, w = frames.shape[:3]
-        bins = [cues.lab_bins(f) for f in frames]
-        self._evidence: dict[int, Evidence] = {}
         self._animals_seen = 0
         self._within: np.ndarray | None = None  # (T, H, W) bool: where the box's animal is
         how = ["tracked"] * t
