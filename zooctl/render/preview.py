@@ -226,18 +226,34 @@ class PreviewRenderer:
         hit = face_ids >= 0
         if not bool(hit.any()):
             return img
-        b = torch.nonzero(hit)[:, 0]  # image of each covered pixel
-        w = bary[hit]  # (P, 3) perspective-correct barycentrics
-        tri = f[face_ids[hit]]  # (P, 3)
-        normal = torch.nn.functional.normalize((n[b[:, None], tri] * w[..., None]).sum(1), dim=-1, eps=1e-12)
-        albedo = (col[tri] * w[..., None]).sum(1)
-        # Two-sided: turn normals that face away from the camera towards it.
-        view = torch.nn.functional.normalize(v[b, tri[:, 0]] - centers[b], dim=-1)
-        flip = (normal * view).sum(-1, keepdim=True) > 0
-        normal = torch.where(flip, -normal, normal)
+        _, normal, albedo = surface_at(v, n, f, col, centers, face_ids, bary)
         diffuse = (normal @ self.light).clamp(min=0)[:, None]
         img[hit] = albedo * (self.ambient + (1 - self.ambient) * diffuse)
         return img
+
+
+def surface_at(
+    v: torch.Tensor,
+    n: torch.Tensor,
+    f: torch.Tensor,
+    col: torch.Tensor,
+    centers: torch.Tensor,
+    face_ids: torch.Tensor,
+    bary: torch.Tensor,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """What each covered pixel of `zbuffer_mesh`'s (B, H, W) output sees: v, n (B, V, 3) vertices
+    and unit normals, f (F, 3), col (V, 3) linear colours, centers (B, 3) camera centres ->
+    (image index (P,), unit normal (P, 3) turned towards the camera (two-sided), albedo (P, 3)) for
+    the P pixels where ``face_ids >= 0``, in their row-major order."""
+    hit = face_ids >= 0
+    b = torch.nonzero(hit)[:, 0]
+    w = bary[hit][..., None]  # (P, 3, 1) perspective-correct barycentrics
+    tri = f[face_ids[hit]]  # (P, 3)
+    normal = torch.nn.functional.normalize((n[b[:, None], tri] * w).sum(1), dim=-1, eps=1e-12)
+    albedo = (col[tri] * w).sum(1)
+    view = torch.nn.functional.normalize(v[b, tri[:, 0]] - centers[b], dim=-1)
+    normal = torch.where((normal * view).sum(-1, keepdim=True) > 0, -normal, normal)
+    return b, normal, albedo
 
 
 def zbuffer_mesh(

@@ -135,7 +135,7 @@ def shade_frames(
     import torch  # here, not at module level: `bank search` imports this module and rarely renders
 
     from ..render.camera import Camera
-    from ..render.preview import vertex_normals, zbuffer_mesh
+    from ..render.preview import surface_at, vertex_normals, zbuffer_mesh
 
     dev = torch.device(device)
     f = torch.as_tensor(faces, dtype=torch.long, device=dev)
@@ -155,17 +155,11 @@ def shade_frames(
     img = torch.as_tensor(np.stack(backgrounds), dtype=torch.float32, device=dev).clone()
     hit = face_ids >= 0
     if bool(hit.any()):
-        b = torch.nonzero(hit)[:, 0]  # frame of each covered pixel
-        tri = f[face_ids[hit]]
-        w = bary[hit][..., None]
-        n = torch.nn.functional.normalize((normals[b[:, None], tri] * w).sum(1), dim=-1, eps=1e-12)
-        centers = cam.centers()[0]
-        view_dir = torch.nn.functional.normalize(verts[b, tri[:, 0]] - centers[b], dim=-1)
-        n = torch.where(((n * view_dir).sum(-1, keepdim=True) > 0), -n, n)  # two-sided
+        b, n, albedo = surface_at(verts, normals, f, col, cam.centers()[0], face_ids, bary)
         gain_t = torch.as_tensor(np.asarray(gain, np.float32), device=dev)[b, None]
         amb = torch.as_tensor(np.asarray(ambient, np.float32), device=dev)[b, None]
         light = torch.as_tensor(np.asarray(lights, np.float32), device=dev)[b]
-        albedo = (col[tri] * w).sum(1) * gain_t
+        albedo = albedo * gain_t
         lam = (n * light).sum(-1, keepdim=True).clamp(min=0)
         img[hit] = albedo * (amb + (1 - amb) * lam)
     rgb = (img.clamp(0, 1) ** (1 / 2.2) * 255 + 0.5).to(torch.uint8).cpu().numpy()
