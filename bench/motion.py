@@ -67,12 +67,24 @@ def main() -> None:
     ap.add_argument("--rot-velocity-weight", type=float, default=MotionConfig.rot_velocity_weight)
     ap.add_argument("--z-tokens", type=int, default=MotionConfig.z_tokens, help="trajectory model's z tokens")
     ap.add_argument("--sampler", default=MotionConfig.sampler, choices=("mixture", "posterior", "normal"))
+    ap.add_argument(
+        "--donors", type=int, default=None, help="mixture sampling's donor skeletons (default: the model's)"
+    )
+    ap.add_argument(
+        "--donor-share", type=float, default=None, help="share of windows from donors (default: the model's)"
+    )
     ap.add_argument("--arch", default=None, choices=("ponymation", "trajectory"), help="default: by device")
     ap.add_argument("--lr", type=float, default=None)
     ap.add_argument("--batch-size", type=int, default=None)
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--samples", type=int, default=32)
+    ap.add_argument(
+        "--seeds",
+        type=int,
+        default=5,
+        help="sampling seeds 0..N-1; the table is their mean (one seed is noisy)",
+    )
     ap.add_argument(
         "--temperature",
         type=float,
@@ -119,13 +131,18 @@ def main() -> None:
     if args.load:
         prior = PonymationPrior.load(args.load, device=args.device)
         cfg = prior.cfg
-    else:
+    for field in ("donors", "donor_share"):  # sampling only: may change a loaded prior's
+        if getattr(args, field) is not None:
+            setattr(prior.cfg, field, getattr(args, field))
+    if not args.load:
         train_prior(prior, data, args)
     if args.save:
         prior.save(args.save, "bench-motion")
     prior.device = torch.device("cpu")
     prior.model.to("cpu")
-    result = evaluate(prior, train, test, samples=args.samples, temperature=args.temperature)
+    result = evaluate(
+        prior, train, test, samples=args.samples, temperature=args.temperature, seeds=args.seeds
+    )
     # Sampling + export timing on the largest skeleton, CPU.
     big = max(assets, key=lambda a: a.num_joints)
     timing = default = None

@@ -139,12 +139,19 @@ def test_train_list_show_animate_bench_rm(seeded_store, capsys, monkeypatch, tmp
         "1",
         "--frames",
         "12",
+        "--seeds",
+        "2",
         "--json",
     )
     assert r.code == 0, r.err
     res = r.json()
     assert set(res["table"]) == {"ponymation", "pca", "retrieval", "real"}
     assert res["table"]["ponymation"]["recon_mpjpe"] is not None and res["table"]["pca"]["mcd"] is not None
+    # Two sampling seeds: the table is their mean, with their spread beside it.
+    assert res["seeds"] == [0, 1] and len(res["per_seed"]) == 2
+    mcd = [t["pca"]["mcd"] for t in res["per_seed"]]
+    assert res["table"]["pca"]["mcd"] == pytest.approx(np.mean(mcd))
+    assert res["table_sd"]["pca"]["mcd"] == pytest.approx(np.std(mcd)) and np.std(mcd) > 0
     assert res["sampling"]["asset"] == "quadruped"
 
     r = run_inprocess(capsys, "motion", "rm", "tiny")

@@ -15,7 +15,10 @@ def bench_motion(
     samples: int = typer.Option(
         32, "--samples", min=2, help="Generated windows per skeleton (at least as many as held-out windows)."
     ),
-    seed: int = typer.Option(0, "--seed", help="Sampling seed."),
+    seed: int = typer.Option(0, "--seed", help="Sampling seed (the first, with --seeds)."),
+    seeds: int = typer.Option(
+        1, "--seeds", min=1, help="Sample with this many seeds and report their mean and standard deviation."
+    ),
     temperature: float = typer.Option(
         None,
         "--temperature",
@@ -54,7 +57,7 @@ def bench_motion(
     bank = Bank.open(store_root())
     assets = [bank.get(a) for a in training.get("assets", sorted(holdout))]
     train, test, _ = split_assets(assets, holdout=holdout)
-    result = evaluate(prior, train, test, samples=samples, seed=seed, temperature=temperature)
+    result = evaluate(prior, train, test, samples=samples, seed=seed, temperature=temperature, seeds=seeds)
     big = max(assets, key=lambda a: a.num_joints)
     times = []
     for r in range(max(1, repeats)):

@@ -66,9 +66,45 @@ def evaluate(
     seed: int = 0,
     temperature: float | None = None,
     long_frames: int = 30,
+    seeds: int = 1,
 ) -> dict[str, Any]:
     """Metrics of ``prior`` (a `PonymationPrior`, sampled at ``temperature``, default its calibrated
-    one) and of both baselines on the held-out windows."""
+    one) and of both baselines on the held-out windows.
+
+    With ``seeds`` > 1 every method samples with seeds ``seed`` .. ``seed + seeds - 1``; ``table``
+    is the mean over them, ``table_sd`` their standard deviation and ``per_seed`` each one's table:
+    with 32 windows per skeleton one seed's diversity moves by about 0.5, a method's own gap to
+    another (BENCHMARKS.md). ``per_skeleton`` is the first seed's.
+    """
+    runs = [
+        _evaluate_seed(prior, train, test, samples, seed + i, temperature, long_frames)
+        for i in range(max(1, seeds))
+    ]
+    out = runs[0]
+    if len(runs) > 1:
+        tables = [r["table"] for r in runs]
+        mean: dict[str, dict[str, float | None]] = {}
+        sd: dict[str, dict[str, float | None]] = {}
+        for m in out["table"]:
+            mean[m], sd[m] = {}, {}
+            for k in out["table"][m]:
+                v = [t[m][k] for t in tables if t.get(m, {}).get(k) is not None]
+                mean[m][k] = float(np.mean(v)) if v else None
+                sd[m][k] = float(np.std(v)) if v else None
+        out = {**out, "table": mean, "table_sd": sd, "per_seed": tables}
+    out["seeds"] = [seed + i for i in range(len(runs))]
+    return out
+
+
+def _evaluate_seed(
+    prior: Any,
+    train: Sequence[MotionSequence],
+    test: Sequence[MotionSequence],
+    samples: int,
+    seed: int,
+    temperature: float | None,
+    long_frames: int,
+) -> dict[str, Any]:
     L, fps = prior.cfg.length, prior.cfg.fps
     train_w, test_w = _windows(train, L, fps), _windows(test, L, fps)
     pca, retrieval = _baselines(train_w)
@@ -174,10 +210,11 @@ def format_table(result: dict[str, Any]) -> list[list[str]]:
     rows = []
     for m in METHODS:
         r = result["table"].get(m, {})
+        sd = result.get("table_sd", {}).get(m, {})
         cells = [m]
         for k in ("recon_mpjpe", "mcd", "diversity", "amplitude", "speed", "gait", "foot_sliding"):
-            v = r.get(k)
-            cells.append("-" if v is None else f"{v:.3f}")
+            v, e = r.get(k), sd.get(k)
+            cells.append("-" if v is None else f"{v:.3f}" + ("" if not e else f" ± {e:.2f}"))
         seam = r.get("seam_jump") if m == "ponymation" else r.get("jump_p95") if m == "real" else None
         cells.append("-" if seam is None else f"{seam:.3f}")
         rows.append(cells)

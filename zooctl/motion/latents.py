@@ -8,6 +8,12 @@ skeleton's own posteriors decodes to motions like its clips, and new ones where 
 interpolates between them. A skeleton the prior never saw uses its nearest trained skeleton
 (same joint count, nearest rest pose), else the Gaussian of every window.
 
+Mixture sampling also borrows from *donors*: the trained skeletons whose window latents lie
+closest to this skeleton's (`donors_of`). The encoder puts animals of one body plan in the same
+region (the horse's nearest are the deer, alpaca and cow; the koi's other fish; the T-rex the
+other dinosaurs), so a donor's window decoded on this skeleton is that action performed by this
+animal: motions its own clips lack, which held-out clips often show (BENCHMARKS.md).
+
 Shapes: Z latent size; ``mean`` (Z,), ``factor`` (Z, Z) with ``factor @ factor.T`` the covariance.
 """
 
@@ -21,6 +27,7 @@ import torch
 from .skeleton import Skeleton
 
 ALL = "*"  # key of the pooled Gaussian
+MAX_DONORS = 8  # donors kept per skeleton; sampling uses the first `MotionConfig.donors`
 
 
 class LatentGaussians:
@@ -34,6 +41,7 @@ class LatentGaussians:
         # per joint, the largest angle (degrees) its training windows turn away from rest (J,):
         # samples are kept inside it (`limit_rotations`), so no bone turns further than the data's
         self.max_angle: dict[str, np.ndarray] = {}
+        self.donors: dict[str, list[str]] = {}  # see `donors_of`; filled on first use when absent
 
     def __len__(self) -> int:
         return len(self.mean)
@@ -71,6 +79,7 @@ class LatentGaussians:
                 win = np.stack([dataset._rot6d[i][:, : sk.num_joints] for i in np.flatnonzero(ids == sid)])
                 out.max_angle[sk.key] = rot6d_angle_deg(win).max(axis=(0, 1))
         out.mean[ALL], out.factor[ALL] = cls._gaussian(mu)
+        out.donors = {k: out.donors_of(k, MAX_DONORS) for k in out.points}
         return out
 
     def key_for(self, skeleton: Skeleton) -> str:
@@ -83,19 +92,65 @@ class LatentGaussians:
             return ALL
         return min(same, key=lambda k: float(np.abs(self.rest[k] - skeleton.rest_positions).sum()))
 
+    def donors_of(self, key: str, count: int = 3, reach: float = 0.45) -> list[str]:
+        """Up to ``count`` trained skeletons whose window latents overlap ``key``'s, nearest first.
+
+        Distance: the symmetric mean nearest-neighbour (Chamfer) distance between the two sets of
+        posterior means; a donor is kept when it is at most ``reach`` times the sum of the two
+        sets' radii (mean distance to their centre). On the 28 shared assets' latents that keeps
+        animals of the same body plan and leaves the isolated ones (wasp, snake, manta ray) none.
+        """
+        cached = self.donors.get(key)  # stored with the prior: what it was trained and measured with
+        if cached is not None:
+            return cached[:count]
+        if key not in self.points or count < 1:
+            return []
+        own = self.points[key].astype(np.float64)
+        r_own = _radius(own)
+        dist = {}
+        for other, pts in self.points.items():
+            if other != key:
+                pts = pts.astype(np.float64)
+                d = _chamfer(own, pts)
+                if d <= reach * (r_own + _radius(pts)):
+                    dist[other] = d
+        out = sorted(dist, key=dist.__getitem__)
+        self.donors[key] = out[: max(count, MAX_DONORS)]
+        return out[:count]
+
     def sample(
-        self, skeleton: Skeleton, n: int, temperature: float, gen: torch.Generator, mixture: bool = False
+        self,
+        skeleton: Skeleton,
+        n: int,
+        temperature: float,
+        gen: torch.Generator,
+        mixture: bool = False,
+        donors: int = 0,
+        donor_share: float = 0.5,
     ) -> torch.Tensor:
         """(n, Z) latents; ``temperature`` scales the spread around the skeleton's mean latent, or
         with ``mixture`` around a random training window's posterior mean (the aggregate posterior
         itself, a mixture of the windows' posteriors: a single Gaussian blends a walk's latents
-        with an eating's into poses of neither)."""
+        with an eating's into poses of neither). With ``donors`` > 0, a ``donor_share`` of the
+        windows comes from the skeleton's donors (`donors_of`), spread by their own sigma."""
         k = self.key_for(skeleton)
         if mixture and k in self.points:
             pts = torch.as_tensor(self.points[k], dtype=torch.float32)
             pick = torch.randint(len(pts), (n,), generator=gen)
             eps = torch.randn(n, pts.shape[1], generator=gen)
-            return pts[pick] + temperature * eps * torch.as_tensor(self.sigma[k], dtype=torch.float32)
+            base, sigma = pts[pick], torch.as_tensor(self.sigma[k], dtype=torch.float32).expand(n, -1)
+            names = self.donors_of(k, donors) if donors > 0 and donor_share > 0 else []
+            if names:
+                other = torch.as_tensor(np.concatenate([self.points[d] for d in names]), dtype=torch.float32)
+                other_sigma = torch.as_tensor(
+                    np.concatenate([np.repeat(self.sigma[d][None], len(self.points[d]), 0) for d in names]),
+                    dtype=torch.float32,
+                )
+                borrow = torch.rand(n, generator=gen) < donor_share
+                j = torch.randint(len(other), (n,), generator=gen)
+                base = torch.where(borrow[:, None], other[j], base)
+                sigma = torch.where(borrow[:, None], other_sigma[j], sigma)
+            return base + temperature * eps * sigma
         m = torch.as_tensor(self.mean[k], dtype=torch.float32)
         f = torch.as_tensor(self.factor[k], dtype=torch.float32)
         eps = torch.randn(n, len(m), generator=gen)
@@ -120,6 +175,8 @@ class LatentGaussians:
                 arrays[f"points_{i}"], arrays[f"sigma_{i}"] = self.points[k], self.sigma[k]
             if k in self.max_angle:
                 arrays[f"max_angle_{i}"] = self.max_angle[k]
+            if k in self.donors:
+                arrays[f"donors_{i}"] = np.array([str(d) for d in self.donors[k]], dtype=str)
         keys = np.array(list(self.mean), dtype=object)
         with open(path, "wb") as fh:
             np.savez(fh, keys=np.array([str(k) for k in keys]), **arrays)
@@ -136,7 +193,21 @@ class LatentGaussians:
                     out.points[k], out.sigma[k] = z[f"points_{i}"], z[f"sigma_{i}"]
                 if f"max_angle_{i}" in z:
                     out.max_angle[k] = z[f"max_angle_{i}"]
+                if f"donors_{i}" in z:
+                    out.donors[k] = [str(d) for d in z[f"donors_{i}"].tolist()]
         return out
+
+
+def _radius(points: np.ndarray) -> float:
+    """Mean distance of points (N, Z) to their centre."""
+    return float(np.linalg.norm(points - points.mean(0), axis=1).mean())
+
+
+def _chamfer(a: np.ndarray, b: np.ndarray) -> float:
+    """Symmetric mean nearest-neighbour distance between point sets a (N, Z) and b (M, Z)."""
+    d = (a**2).sum(1)[:, None] + (b**2).sum(1)[None] - 2 * a @ b.T
+    d = np.sqrt(np.maximum(d, 0.0))
+    return 0.5 * float(d.min(1).mean() + d.min(0).mean())
 
 
 def rot6d_angle_deg(r: np.ndarray) -> np.ndarray:

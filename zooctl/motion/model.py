@@ -62,6 +62,11 @@ class MotionConfig:
     # posterior means (`latents`); "mixture", around a random training window's posterior mean
     # (the aggregate posterior); or "normal", N(0, I).
     sampler: str = "mixture"
+    # Mixture sampling: this share of the windows comes from up to `donors` other trained
+    # skeletons whose latents overlap this one's (`latents.LatentGaussians.donors_of`): the same
+    # body plan's actions on this animal. 0 draws from the skeleton's own windows only.
+    donors: int = 3
+    donor_share: float = 0.5
     # "ponymation": per-frame spatial and temporal transformers (the paper's); "trajectory": one
     # token per bone carrying its whole window (`TrajectoryVAE`), T times fewer tokens.
     arch: str = "ponymation"
@@ -84,6 +89,10 @@ class MotionConfig:
             raise InputError(f"sampler must be 'posterior', 'mixture' or 'normal', got {self.sampler!r}")
         if self.rot_loss not in ("mse", "relative"):
             raise InputError(f"rot_loss must be 'mse' or 'relative', got {self.rot_loss!r}")
+        if self.donors < 0 or not 0.0 <= self.donor_share <= 1.0:
+            raise InputError(
+                f"donors must be >= 0 and donor_share in [0, 1], got {self.donors}, {self.donor_share}"
+            )
         if self.z_tokens < 1:
             raise InputError(f"z_tokens must be >= 1, got {self.z_tokens}")
         if self.layers < 1 or self.latent < 1 or self.length < 2 or not self.fps > 0:

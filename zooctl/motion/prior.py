@@ -230,7 +230,16 @@ class PonymationPrior:
         from N(0, temperature^2 I)."""
         if self.latents is not None:
             mixture = self.cfg.sampler == "mixture"
-            return self.latents.sample(skeleton, n, temperature, gen, mixture).to(self.device)
+            z = self.latents.sample(
+                skeleton,
+                n,
+                temperature,
+                gen,
+                mixture,
+                donors=self.cfg.donors,
+                donor_share=self.cfg.donor_share,
+            )
+            return z.to(self.device)
         return (torch.randn(n, self.cfg.latent, generator=gen) * temperature).to(self.device)
 
     def seams(self, frames: int) -> list[int]:

@@ -1,0 +1,81 @@
+"""Mixture sampling borrows windows from donor skeletons whose latents overlap (issue 24), and
+the held-out evaluation averages over sampling seeds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from zooctl.errors import InputError
+from zooctl.motion.latents import LatentGaussians
+from zooctl.motion.model import MotionConfig
+from zooctl.motion.skeleton import Skeleton
+
+
+def _chain(name: str, joints: int) -> Skeleton:
+    pos = np.zeros((joints, 3))
+    pos[:, 1] = np.arange(joints)
+    return Skeleton.from_joint_positions(name, np.arange(joints) - 1, pos)
+
+
+def _latents() -> tuple[LatentGaussians, dict[str, Skeleton]]:
+    """Three skeletons: a and b with overlapping latent clouds, c far from both."""
+    rng = np.random.default_rng(0)
+    sks = {n: _chain(n, j) for n, j in (("a", 3), ("b", 4), ("c", 5))}
+    centre = {"a": 0.0, "b": 0.5, "c": 40.0}
+    lat = LatentGaussians()
+    for n, sk in sks.items():
+        pts = centre[n] + rng.normal(size=(60, 4))
+        lat.mean[sk.key], lat.factor[sk.key] = LatentGaussians._gaussian(pts)
+        lat.rest[sk.key] = sk.rest_positions
+        lat.points[sk.key] = pts.astype(np.float32)
+        lat.sigma[sk.key] = np.full(4, 0.1)
+    return lat, sks
+
+
+def test_donors_are_the_overlapping_skeletons_only():
+    lat, sks = _latents()
+    a, b, c = (sks[n].key for n in "abc")
+    assert lat.donors_of(a) == [b]
+    assert lat.donors_of(b) == [a]
+    assert lat.donors_of(c) == []  # an isolated animal borrows nothing
+    assert lat.donors_of(a, 0) == []
+
+
+def test_donor_share_decides_where_the_windows_come_from():
+    lat, sks = _latents()
+    a, b = sks["a"].key, sks["b"].key
+    gen = torch.Generator().manual_seed(0)
+
+    def nearest_owner(z: torch.Tensor) -> np.ndarray:
+        own = np.abs(z.numpy()[:, None] - lat.points[a][None]).sum(-1).min(1)
+        other = np.abs(z.numpy()[:, None] - lat.points[b][None]).sum(-1).min(1)
+        return own < other
+
+    z_own = lat.sample(sks["a"], 200, 0.0, gen, mixture=True, donors=0)
+    assert nearest_owner(z_own).all()
+    z_all = lat.sample(sks["a"], 200, 0.0, gen, mixture=True, donors=3, donor_share=1.0)
+    assert not nearest_owner(z_all).any()
+    z_half = lat.sample(sks["a"], 400, 0.0, gen, mixture=True, donors=3, donor_share=0.5)
+    assert 0.4 < nearest_owner(z_half).mean() < 0.6
+    # The isolated skeleton draws its own windows whatever the share.
+    z_c = lat.sample(sks["c"], 50, 0.0, gen, mixture=True, donors=3, donor_share=1.0)
+    assert float(z_c.mean()) > 30
+
+
+def test_donors_survive_save_and_load(tmp_path):
+    lat, sks = _latents()
+    lat.donors = {k: lat.donors_of(k, 8) for k in list(lat.points)}
+    lat.save(tmp_path / "latents.npz")
+    again = LatentGaussians.load(tmp_path / "latents.npz")
+    assert again.donors == lat.donors
+    assert again.donors_of(sks["a"].key, 1) == [sks["b"].key]
+
+
+def test_bad_donor_settings_are_clear_errors():
+    with pytest.raises(InputError, match="donor_share"):
+        MotionConfig(donor_share=1.5)
+    with pytest.raises(InputError, match="donors"):
+        MotionConfig(donors=-1)
+    assert MotionConfig.from_json({"width": 64, "layers": 2}).donors == MotionConfig.donors
