@@ -33,7 +33,7 @@ import torch
 from _util import SHARED, machine
 
 from zooctl.io.gltf_import import load_gltf
-from zooctl.motion.evaluate import TABLE_COLUMNS, evaluate, format_table, split_assets
+from zooctl.motion.evaluate import TABLE_COLUMNS, evaluate, format_table, pca_curve, split_assets
 from zooctl.motion.model import MotionConfig
 from zooctl.motion.prior import PonymationPrior, motion_clip
 from zooctl.motion.train import TrainOptions, loss_curve_png
@@ -91,6 +91,13 @@ def main() -> None:
         default=None,
         help="scale of the prior's sigma (default: its calibrated one)",
     )
+    ap.add_argument(
+        "--pca-spread",
+        type=float,
+        action="append",
+        default=None,
+        help="also score the PCA baseline with its spread scaled by this (repeatable): MCD at equal diversity",
+    )
     ap.add_argument("--out", type=Path, default=Path("bench/out/motion.json"))
     ap.add_argument("--save", type=Path, default=None, help="also save the trained prior in this folder")
     ap.add_argument("--load", type=Path, default=None, help="evaluate a prior saved with --save, no training")
@@ -143,6 +150,9 @@ def main() -> None:
     result = evaluate(
         prior, train, test, samples=args.samples, temperature=args.temperature, seeds=args.seeds
     )
+    curve = None
+    if args.pca_spread:
+        curve = pca_curve(train, test, cfg.length, cfg.fps, args.pca_spread, args.samples, args.seeds)
     # Sampling + export timing on the largest skeleton, CPU.
     big = max(assets, key=lambda a: a.num_joints)
     timing = default = None
@@ -165,6 +175,7 @@ def main() -> None:
         "per_skeleton": result["per_skeleton"],
         "sampling": timing,
         "sampling_default_size": default,
+        "pca_curve": curve,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(out, indent=1) + "\n")
@@ -184,6 +195,8 @@ def main() -> None:
         f"reconstruction amplitude ratio (posterior mean): training windows {t.get('train_recon_amplitude'):.3f}, "
         f"held-out {t.get('recon_amplitude'):.3f}; temperature {out['temperature']}"
     )
+    for c in curve or []:
+        print(f"PCA at spread {c['spread']}: MCD {c['mcd']:.2f}, diversity {c['diversity']:.3f}")
     print(f"results in {args.out}")
 
 

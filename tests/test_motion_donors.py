@@ -1,5 +1,5 @@
 """Mixture sampling borrows windows from donor skeletons whose latents overlap (issue 24), and
-the held-out evaluation averages over sampling seeds."""
+the PCA baseline can be scored at other spreads (MCD at equal diversity)."""
 
 from __future__ import annotations
 
@@ -8,6 +8,9 @@ import pytest
 import torch
 
 from zooctl.errors import InputError
+from zooctl.motion.baselines import PCABaseline
+from zooctl.motion.dataset import MotionSequence
+from zooctl.motion.evaluate import pca_curve
 from zooctl.motion.latents import LatentGaussians
 from zooctl.motion.model import MotionConfig
 from zooctl.motion.skeleton import Skeleton
@@ -79,3 +82,24 @@ def test_bad_donor_settings_are_clear_errors():
     with pytest.raises(InputError, match="donors"):
         MotionConfig(donors=-1)
     assert MotionConfig.from_json({"width": 64, "layers": 2}).donors == MotionConfig.donors
+
+
+def _swinging(sk: Skeleton, name: str, amp: float) -> MotionSequence:
+    t = np.arange(40) / 30.0
+    q = np.zeros((len(t), sk.num_joints, 4))
+    q[..., 0] = 1.0
+    a = amp * np.sin(2 * np.pi * t)
+    q[:, 1, 0], q[:, 1, 3] = np.cos(a / 2), np.sin(a / 2)
+    return MotionSequence(name, sk, q, 30.0)
+
+
+def test_pca_spread_scales_the_baselines_diversity():
+    sk = _chain("c", 4)
+    train = [_swinging(sk, f"c/{i}", a) for i, a in enumerate((0.2, 0.5, 0.9))]
+    test = [_swinging(sk, "c/held", 0.7)]
+    curve = pca_curve(train, test, 8, 30.0, [0.0, 0.5, 1.0], samples=8, seeds=2)
+    assert [c["spread"] for c in curve] == [0.0, 0.5, 1.0]
+    assert curve[0]["diversity"] < 1e-6 < curve[1]["diversity"] < curve[2]["diversity"]
+    pca = PCABaseline()
+    pca.add(sk, np.stack([s.rotations[:8] for s in train]))
+    np.testing.assert_allclose(pca.sample(sk, 3, seed=1), pca.sample(sk, 3, seed=1, spread=1.0))

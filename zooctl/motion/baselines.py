@@ -83,8 +83,9 @@ class PCABaseline(_PerSkeleton):
             self._fit[key] = (mean, vt[:k], std, w.shape[1:3])
         return self._fit[key]
 
-    def sample(self, skeleton: Skeleton, n: int, seed: int = 0) -> np.ndarray:
+    def sample(self, skeleton: Skeleton, n: int, seed: int = 0, spread: float = 1.0) -> np.ndarray:
+        """n windows; ``spread`` scales the Gaussian's standard deviations (1: the data's)."""
         mean, basis, std, (T, J) = self._model(self.nearest(skeleton))
         rng = np.random.default_rng(seed)
-        x = mean + (rng.standard_normal((n, len(std))) * std) @ basis
+        x = mean + (rng.standard_normal((n, len(std))) * std * spread) @ basis
         return matrix_to_quat(rot6d_to_matrix_np(x.reshape(n, T, J, 6)))

@@ -161,6 +161,37 @@ def _evaluate_seed(
     }
 
 
+def pca_curve(
+    train: Sequence[MotionSequence],
+    test: Sequence[MotionSequence],
+    length: int,
+    fps: float,
+    spreads: Sequence[float],
+    samples: int = 32,
+    seeds: int = 1,
+) -> list[dict[str, float]]:
+    """MCD and diversity of the PCA baseline at each Gaussian ``spread`` (1: its own), averaged
+    over ``seeds`` and skeletons as in `evaluate`'s table: what the baseline scores at the
+    prior's diversity, so the two compare at equal diversity."""
+    train_w, test_w = _windows(train, length, fps), _windows(test, length, fps)
+    pca, _ = _baselines(train_w)
+    out = []
+    for spread in spreads:
+        mcd, div = [], []
+        for seed in range(max(1, seeds)):
+            per = []
+            for key, (sk, real) in sorted(test_w.items()):
+                if key in train_w:
+                    p = M.joint_positions(
+                        pca.sample(sk, max(samples, len(real)), seed=seed, spread=spread), sk
+                    )
+                    per.append((M.motion_chamfer(p, M.joint_positions(real, sk)), M.diversity(p)))
+            mcd.append(np.mean([m for m, _ in per]))
+            div.append(np.mean([d for _, d in per]))
+        out.append({"spread": float(spread), "mcd": float(np.mean(mcd)), "diversity": float(np.mean(div))})
+    return out
+
+
 def _long_metrics(row, prior, sk, real, pca, retrieval, samples, seed, temperature) -> None:
     """Amplitude and speed ratios, gait periodicity and seams on long windows real (N, F, J, 4),
     added to each method's entry of ``row``."""

@@ -97,8 +97,8 @@ class LatentGaussians:
 
         Distance: the symmetric mean nearest-neighbour (Chamfer) distance between the two sets of
         posterior means; a donor is kept when it is at most ``reach`` times the sum of the two
-        sets' radii (mean distance to their centre). On the 28 shared assets' latents that keeps
-        animals of the same body plan and leaves the isolated ones (wasp, snake, manta ray) none.
+        sets' radii (mean distance to their centre): animals of one body plan pass it, an animal
+        alone in its plan gets none (BENCHMARKS.md).
         """
         cached = self.donors.get(key)  # stored with the prior: what it was trained and measured with
         if cached is not None:
@@ -140,6 +140,7 @@ class LatentGaussians:
             eps = torch.randn(n, pts.shape[1], generator=gen)
             base, sigma = pts[pick], torch.as_tensor(self.sigma[k], dtype=torch.float32).expand(n, -1)
             names = self.donors_of(k, donors) if donors > 0 and donor_share > 0 else []
+            names = [d for d in names if d in self.points]
             if names:
                 other = torch.as_tensor(np.concatenate([self.points[d] for d in names]), dtype=torch.float32)
                 other_sigma = torch.as_tensor(
