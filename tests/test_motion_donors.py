@@ -103,3 +103,20 @@ def test_pca_spread_scales_the_baselines_diversity():
     pca = PCABaseline()
     pca.add(sk, np.stack([s.rotations[:8] for s in train]))
     np.testing.assert_allclose(pca.sample(sk, 3, seed=1), pca.sample(sk, 3, seed=1, spread=1.0))
+
+
+def test_only_the_nearest_cluster_of_donors_counts():
+    """A near twin (as the starter bank's variants sharing clips) makes a merely overlapping
+    skeleton too far to lend: in a briefly trained prior all plans still overlap."""
+    rng = np.random.default_rng(1)
+    base = rng.normal(size=(60, 4))
+    lat = LatentGaussians()
+    for name, pts in (
+        ("a", base),
+        ("twin", base + 0.01 * rng.normal(size=base.shape)),
+        ("near", 0.5 + rng.normal(size=(60, 4))),
+    ):
+        lat.points[name], lat.sigma[name] = pts.astype(np.float32), np.full(4, 0.1)
+    assert lat.donors_of("a") == ["twin"]
+    lat.donors = {}
+    assert lat.donors_of("a", gap=100.0) == ["twin", "near"]

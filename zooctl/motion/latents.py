@@ -92,13 +92,15 @@ class LatentGaussians:
             return ALL
         return min(same, key=lambda k: float(np.abs(self.rest[k] - skeleton.rest_positions).sum()))
 
-    def donors_of(self, key: str, count: int = 3, reach: float = 0.45) -> list[str]:
+    def donors_of(self, key: str, count: int = 3, reach: float = 0.45, gap: float = 2.0) -> list[str]:
         """Up to ``count`` trained skeletons whose window latents overlap ``key``'s, nearest first.
 
         Distance: the symmetric mean nearest-neighbour (Chamfer) distance between the two sets of
         posterior means; a donor is kept when it is at most ``reach`` times the sum of the two
-        sets' radii (mean distance to their centre): animals of one body plan pass it, an animal
-        alone in its plan gets none (BENCHMARKS.md).
+        sets' radii (mean distance to their centre) and at most ``gap`` times the nearest donor's
+        distance: animals of one body plan pass, an animal alone in its plan gets none, and in a
+        briefly trained prior, whose plans still overlap, only the nearest cluster counts
+        (BENCHMARKS.md).
         """
         cached = self.donors.get(key)  # stored with the prior: what it was trained and measured with
         if cached is not None:
@@ -115,6 +117,7 @@ class LatentGaussians:
                 if d <= reach * (r_own + _radius(pts)):
                     dist[other] = d
         out = sorted(dist, key=dist.__getitem__)
+        out = [d for d in out if dist[d] <= gap * dist[out[0]]]
         self.donors[key] = out[: max(count, MAX_DONORS)]
         return out[:count]
 
