@@ -73,8 +73,8 @@ def evaluate(
 
     With ``seeds`` > 1 every method samples with seeds ``seed`` .. ``seed + seeds - 1``; ``table``
     is the mean over them, ``table_sd`` their standard deviation and ``per_seed`` each one's table:
-    with 32 windows per skeleton one seed's diversity moves by about 0.5, a method's own gap to
-    another (BENCHMARKS.md). ``per_skeleton`` is the first seed's.
+    with 32 windows per skeleton one seed's diversity moves by about 0.5, as much as the gap
+    between two methods (BENCHMARKS.md). ``per_skeleton`` is the first seed's.
     """
     runs = [
         _evaluate_seed(prior, train, test, samples, seed + i, temperature, long_frames)
