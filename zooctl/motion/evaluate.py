@@ -76,8 +76,11 @@ def evaluate(
     with 32 windows per skeleton one seed's diversity moves by about 0.5, as much as the gap
     between two methods (BENCHMARKS.md). ``per_skeleton`` is the first seed's.
     """
+    L, fps = prior.cfg.length, prior.cfg.fps
+    short, long = _Split(train, test, L, fps), _Split(train, test, max(long_frames, L), fps)
+    recon: dict[str, dict[str, float | None]] = {}  # does not depend on the seed: computed once
     runs = [
-        _evaluate_seed(prior, train, test, samples, seed + i, temperature, long_frames)
+        _evaluate_seed(prior, short, long, samples, seed + i, temperature, recon)
         for i in range(max(1, seeds))
     ]
     out = runs[0]
@@ -96,21 +99,30 @@ def evaluate(
     return out
 
 
+class _Split:
+    """Training and held-out windows of one length per skeleton key, and the baselines fitted to
+    the training ones."""
+
+    def __init__(
+        self, train: Sequence[MotionSequence], test: Sequence[MotionSequence], length: int, fps: float
+    ):
+        self.length = length
+        self.train, self.test = _windows(train, length, fps), _windows(test, length, fps)
+        self.pca, self.retrieval = _baselines(self.train)
+
+
 def _evaluate_seed(
     prior: Any,
-    train: Sequence[MotionSequence],
-    test: Sequence[MotionSequence],
+    short: _Split,
+    long: _Split,
     samples: int,
     seed: int,
     temperature: float | None,
-    long_frames: int,
+    recon: dict[str, dict[str, float | None]],
 ) -> dict[str, Any]:
-    L, fps = prior.cfg.length, prior.cfg.fps
-    train_w, test_w = _windows(train, L, fps), _windows(test, L, fps)
-    pca, retrieval = _baselines(train_w)
-    F = max(long_frames, L)
-    train_long, test_long = _windows(train, F, fps), _windows(test, F, fps)
-    pca_long, retrieval_long = _baselines(train_long)
+    """`evaluate`'s table at one sampling seed; ``recon`` caches the reconstruction metrics per key."""
+    L, F = short.length, long.length
+    train_w, test_w, pca, retrieval = short.train, short.test, short.pca, short.retrieval
     per: dict[str, dict[str, dict[str, float | None]]] = {}
     for key, (sk, real) in sorted(test_w.items()):
         if key not in train_w:
@@ -133,17 +145,23 @@ def _evaluate_seed(
                 "smoothness": M.smoothness(p),
                 "foot_sliding": M.foot_sliding(p, feet),
             }
-        rec = prior.reconstruct(real, sk)
-        row["ponymation"]["recon_mpjpe"] = M.mpjpe(M.joint_positions(rec, sk), p_real)
-        row["ponymation"]["recon_rot_deg"] = M.rotation_error_deg(rec, real)
-        row["ponymation"]["recon_amplitude"] = M.motion_ratio(M.joint_amplitude(rec), M.joint_amplitude(real))
-        tw = train_w[key][1][:: max(1, len(train_w[key][1]) // 64)]  # decoding seen windows: underfit or not
-        row["ponymation"]["train_recon_amplitude"] = M.motion_ratio(
-            M.joint_amplitude(prior.reconstruct(tw, sk)), M.joint_amplitude(tw)
-        )
-        if key in test_long and key in train_long:
+        if key not in recon:
+            rec = prior.reconstruct(real, sk)
+            tw = train_w[key][1][
+                :: max(1, len(train_w[key][1]) // 64)
+            ]  # decoding seen windows: underfit or not
+            recon[key] = {
+                "recon_mpjpe": M.mpjpe(M.joint_positions(rec, sk), p_real),
+                "recon_rot_deg": M.rotation_error_deg(rec, real),
+                "recon_amplitude": M.motion_ratio(M.joint_amplitude(rec), M.joint_amplitude(real)),
+                "train_recon_amplitude": M.motion_ratio(
+                    M.joint_amplitude(prior.reconstruct(tw, sk)), M.joint_amplitude(tw)
+                ),
+            }
+        row["ponymation"].update(recon[key])
+        if key in long.test and key in long.train:
             _long_metrics(
-                row, prior, sk, test_long[key][1], pca_long, retrieval_long, samples, seed, temperature
+                row, prior, sk, long.test[key][1], long.pca, long.retrieval, samples, seed, temperature
             )
         per[key] = row
     table = {m: _mean([per[k][m] for k in per]) for m in METHODS}
@@ -173,8 +191,8 @@ def pca_curve(
     """MCD and diversity of the PCA baseline at each Gaussian ``spread`` (1: its own), averaged
     over ``seeds`` and skeletons as in `evaluate`'s table: what the baseline scores at the
     prior's diversity, so the two compare at equal diversity."""
-    train_w, test_w = _windows(train, length, fps), _windows(test, length, fps)
-    pca, _ = _baselines(train_w)
+    split = _Split(train, test, length, fps)
+    train_w, test_w, pca = split.train, split.test, split.pca
     out = []
     for spread in spreads:
         mcd, div = [], []

@@ -146,14 +146,14 @@ class LatentGaussians:
             names = [d for d in names if d in self.points]
             if names:
                 other = torch.as_tensor(np.concatenate([self.points[d] for d in names]), dtype=torch.float32)
-                other_sigma = torch.as_tensor(
-                    np.concatenate([np.repeat(self.sigma[d][None], len(self.points[d]), 0) for d in names]),
-                    dtype=torch.float32,
-                )
+                owner = np.repeat(
+                    np.arange(len(names)), [len(self.points[d]) for d in names]
+                )  # donor of each
+                other_sigma = torch.as_tensor(np.stack([self.sigma[d] for d in names]), dtype=torch.float32)
                 borrow = torch.rand(n, generator=gen) < donor_share
                 j = torch.randint(len(other), (n,), generator=gen)
                 base = torch.where(borrow[:, None], other[j], base)
-                sigma = torch.where(borrow[:, None], other_sigma[j], sigma)
+                sigma = torch.where(borrow[:, None], other_sigma[owner[j.numpy()]], sigma)
             return base + temperature * eps * sigma
         m = torch.as_tensor(self.mean[k], dtype=torch.float32)
         f = torch.as_tensor(self.factor[k], dtype=torch.float32)
