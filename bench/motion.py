@@ -34,6 +34,7 @@ from _util import SHARED, machine
 
 from zooctl.io.gltf_import import load_gltf
 from zooctl.motion.evaluate import TABLE_COLUMNS, evaluate, format_table, pca_curve, split_assets
+from zooctl.motion.mirror import mirror_sequence
 from zooctl.motion.model import MotionConfig
 from zooctl.motion.prior import PonymationPrior, motion_clip
 from zooctl.motion.train import TrainOptions, loss_curve_png
@@ -72,6 +73,12 @@ def main() -> None:
     )
     ap.add_argument(
         "--donor-share", type=float, default=None, help="share of windows from donors (default: the model's)"
+    )
+    ap.add_argument("--mirror", action="store_true", help="train on the clips' left-right mirrors too")
+    ap.add_argument(
+        "--mirror-baselines",
+        action="store_true",
+        help="fit the PCA and nearest-clip baselines on the training clips and their mirrors too",
     )
     ap.add_argument("--arch", default=None, choices=("ponymation", "trajectory"), help="default: by device")
     ap.add_argument("--lr", type=float, default=None)
@@ -127,6 +134,7 @@ def main() -> None:
         z_tokens=args.z_tokens,
         sampler=args.sampler,
         arch=args.arch,
+        mirror=args.mirror,
     )
     prior = PonymationPrior(cfg, device=args.device)
     data = prior.dataset(train)
@@ -147,8 +155,11 @@ def main() -> None:
         prior.save(args.save, "bench-motion")
     prior.device = torch.device("cpu")
     prior.model.to("cpu")
+    base = train
+    if args.mirror_baselines:
+        base = train + [m for m in map(mirror_sequence, train) if m is not None]
     result = evaluate(
-        prior, train, test, samples=args.samples, temperature=args.temperature, seeds=args.seeds
+        prior, base, test, samples=args.samples, temperature=args.temperature, seeds=args.seeds
     )
     curve = None
     if args.pca_spread:

@@ -59,6 +59,11 @@ class PonymationPrior:
     def dataset(
         self, sequences: Sequence[MotionSequence], speeds: Sequence[float] = (0.8, 1.25)
     ) -> MotionDataset:
+        if self.cfg.mirror:
+            from .mirror import mirror_sequence
+
+            mirrored = [m for m in (mirror_sequence(s) for s in sequences) if m is not None]
+            sequences = [*sequences, *mirrored]
         return MotionDataset(sequences, length=self.cfg.length, fps=self.cfg.fps, speeds=speeds)
 
     def fit(
