@@ -79,7 +79,7 @@ def test_mirrored_pose_is_the_reflected_pose(quadruped):
     assert np.abs(reflected - Pm).max() < 1e-6 * size
     # The walk really moves, so the check above is not between two rest poses.
     assert np.abs(P - P[:1]).max() > 0.05 * size
-    # The legs swap: the mirrored left front foot goes where the right one went.
+    # The legs swap sides: the mirrored left front foot does not retrace the original one.
     lf = sk.joint_names.index("front_foot_l")
     assert np.abs(Pm[:, lf] - P[:, lf]).max() > 0.05 * size
     # Twice mirrored is the original motion.

@@ -24,7 +24,7 @@ from ..geometry import compose_trs, global_transforms, quat_mul, quat_normalize
 from .dataset import MotionSequence, quat_conj
 from .skeleton import Skeleton
 
-# (pattern, left form, right form): a side marker as a separate token of the name.
+# (pattern, swap): a side marker as a token of its own in the name, and what it becomes mirrored.
 _SIDES = (
     (r"(?<=[._\-\s])([LlRr])(?=$|[._\-\s\d])", {"L": "R", "R": "L", "l": "r", "r": "l"}),
     (r"^([LlRr])(?=[._\-\s])", {"L": "R", "R": "L", "l": "r", "r": "l"}),
@@ -115,7 +115,6 @@ def mirror_sequence(seq: MotionSequence) -> MotionSequence | None:
         return None
     A_rest, _ = _rest_globals(sk)
     local = seq.local_rotations()  # (T, J, 4)
-    T, J = local.shape[:2]
     A = np.zeros_like(local)
     for j, p in enumerate(sk.parents):
         A[:, j] = local[:, j] if p < 0 else quat_mul(A[:, p], local[:, j])

@@ -75,8 +75,8 @@ class MotionConfig:
     # through the feed-forward layers; with 8 each bone attends to its own mix (on the two-motion
     # toy of tests/test_motion_collapse.py: amplitude / speed ratio 1.0 / 0.9 against 1.3 / 1.6).
     z_tokens: int = 8
-    # Train on every clip's left-right mirror too (`mirror`; skeletons with named left/right
-    # joints): twice the motions, e.g. gaits led by the other foot.
+    # Train on every clip's left-right mirror too (`zooctl.motion.mirror`; skeletons with named
+    # left/right joints). Off: it was not better in a 20-minute A/B (BENCHMARKS.md).
     mirror: bool = False
 
     def __post_init__(self) -> None:
