@@ -158,9 +158,7 @@ def main() -> None:
     base = train
     if args.mirror_baselines:
         base = train + [m for m in map(mirror_sequence, train) if m is not None]
-    result = evaluate(
-        prior, base, test, samples=args.samples, temperature=args.temperature, seeds=args.seeds
-    )
+    result = evaluate(prior, base, test, samples=args.samples, temperature=args.temperature, seeds=args.seeds)
     curve = None
     if args.pca_spread:
         curve = pca_curve(train, test, cfg.length, cfg.fps, args.pca_spread, args.samples, args.seeds)
