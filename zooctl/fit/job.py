@@ -312,7 +312,7 @@ def write_outputs(
         {"source": f"zooctl fit of {result.video.name}"},
     )
     fits.save_character(name, asset)
-    cam = result.input_camera()
+    cam = result.input_camera().to("cpu")  # the outputs pose and render the exported asset on the CPU
     files: dict[str, str] = {}
     notes: list[str] = []
     if "usd" in outputs:
