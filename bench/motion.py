@@ -33,6 +33,7 @@ import torch
 from _util import SHARED, machine
 
 from zooctl.io.gltf_import import load_gltf
+from zooctl.motion.calibrate import calibrate_temperature
 from zooctl.motion.evaluate import TABLE_COLUMNS, evaluate, format_table, pca_curve, split_assets
 from zooctl.motion.mirror import mirror_sequence
 from zooctl.motion.model import MotionConfig
@@ -73,6 +74,16 @@ def main() -> None:
     )
     ap.add_argument(
         "--donor-share", type=float, default=None, help="share of windows from donors (default: the model's)"
+    )
+    ap.add_argument(
+        "--independent",
+        action="store_true",
+        help="mixture sampling draws each sample's window independently (default: spread, `diverse`)",
+    )
+    ap.add_argument(
+        "--recalibrate",
+        action="store_true",
+        help="with --load: calibrate the temperature again (sampling settings as set)",
     )
     ap.add_argument("--mirror", action="store_true", help="train on the clips' left-right mirrors too")
     ap.add_argument(
@@ -149,6 +160,12 @@ def main() -> None:
     for field in ("donors", "donor_share"):  # sampling only: may change a loaded prior's
         if getattr(args, field) is not None:
             setattr(prior.cfg, field, getattr(args, field))
+    if args.independent:
+        prior.cfg.diverse = False
+    if args.load and args.recalibrate:
+        cal = calibrate_temperature(prior, prior.dataset(train))
+        prior.training["sample_temperature"] = cal["temperature"]
+        print(f"calibrated again: temperature {cal['temperature']} {cal['diversity']}", flush=True)
     if not args.load:
         train_prior(prior, data, args)
     if args.save:

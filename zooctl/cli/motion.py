@@ -6,6 +6,7 @@ import time
 
 import typer
 
+from ..motion.temperature import default_temperature, draws_diversely
 from ._common import JsonOpt, console, err_console, print_json, print_table, store_root
 
 app = typer.Typer(help="Train and manage generative motion priors (Ponymation).", no_args_is_help=True)
@@ -153,11 +154,9 @@ def train(
     )
     steps = f": {tr['steps']} steps in {tr.get('seconds', 0):.0f} s" if "steps" in tr else ""
     early = " (stopped at --max-minutes)" if tr.get("stopped_early") else ""
-    temp = (
-        f"; sampling temperature {tr['sample_temperature']:g} (calibrated to the clips' diversity)"
-        if "sample_temperature" in tr
-        else ""
-    )
+    model = cfg.get("model", {})
+    how = "each window's posterior" if draws_diversely(model) else "calibrated to the clips' diversity"
+    temp = f"; sampling temperature {default_temperature(model, tr):g} ({how})"
     console.print(
         f"trained motion prior {cfg['name']!r} ({cfg.get('plugin')}, {tr.get('size', '')}){steps}{early}"
         f"{loss}{temp}; in {cfg['path']}",
@@ -187,7 +186,7 @@ def list_(json_out: bool = JsonOpt) -> None:
                 str(len(t.get("skeletons", []))),
                 str(t.get("windows", "?")),
                 str(t.get("steps", "?")),
-                f"{t.get('sample_temperature', 1.0):g}",
+                f"{default_temperature(m, t):g}",
                 c.get("created", ""),
             ]
         )

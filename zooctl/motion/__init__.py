@@ -8,7 +8,8 @@
 - `train`: the training loop (time budget, reconstruction warm-up then KL annealing, loss-curve PNG).
 - `prior`: `PonymationPrior`, the object the ``ponymation`` motion-prior plugin returns
   (``fit``, ``save``, ``sample``), with chained sampling and optimised transition latents.
-- `latents`: where samples draw z: each skeleton's aggregate posterior from its training windows.
+- `latents`: where samples draw z: each skeleton's aggregate posterior from its training windows;
+  `temperature`: the temperature samples use by default; `calibrate`: its calibration.
 - `baselines`: nearest-clip retrieval and a per-skeleton Gaussian/PCA prior; `pca_prior`: the
   latter as a trainable, stored, sampleable prior (``pca`` plugin).
 - `metrics`: reconstruction error, motion Chamfer distance, diversity, smoothness, foot sliding,

@@ -68,8 +68,8 @@ def evaluate(
     long_frames: int = 30,
     seeds: int = 1,
 ) -> dict[str, Any]:
-    """Metrics of ``prior`` (a `PonymationPrior`, sampled at ``temperature``, default its calibrated
-    one) and of both baselines on the held-out windows.
+    """Metrics of ``prior`` (a `PonymationPrior`, sampled at ``temperature``, default its
+    `sample_temperature`) and of both baselines on the held-out windows.
 
     With ``seeds`` > 1 every method samples with seeds ``seed`` .. ``seed + seeds - 1``; ``table``
     is the mean over them, ``table_sd`` their standard deviation and ``per_seed`` each one's table:

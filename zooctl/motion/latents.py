@@ -14,6 +14,10 @@ region (the horse's nearest are the deer, alpaca and cow; the koi's other fish; 
 other dinosaurs), so a donor's window decoded on this skeleton is that action performed by this
 animal: motions its own clips lack, which held-out clips often show (BENCHMARKS.md).
 
+The windows one sampling call starts from are drawn together (`diverse_indices`, k-means++
+seeding over their latents), not one by one: independent draws follow how many windows each
+clip has, so the actions of the longest clips fill most of a batch.
+
 Shapes: Z latent size; ``mean`` (Z,), ``factor`` (Z, Z) with ``factor @ factor.T`` the covariance.
 """
 
@@ -130,30 +134,36 @@ class LatentGaussians:
         mixture: bool = False,
         donors: int = 0,
         donor_share: float = 0.5,
+        diverse: bool = False,
     ) -> torch.Tensor:
         """(n, Z) latents; ``temperature`` scales the spread around the skeleton's mean latent, or
         with ``mixture`` around a random training window's posterior mean (the aggregate posterior
         itself, a mixture of the windows' posteriors: a single Gaussian blends a walk's latents
         with an eating's into poses of neither). With ``donors`` > 0, a ``donor_share`` of the
-        windows comes from the skeleton's donors (`donors_of`), spread by their own sigma."""
+        windows comes from the skeleton's donors (`donors_of`), spread by their own sigma. With
+        ``diverse``, the n windows are drawn together by `diverse_indices` instead of one by one,
+        so the n latents are far apart (in draw order: the first ones are the most spread)."""
         k = self.key_for(skeleton)
         if mixture and k in self.points:
+            pick = diverse_indices if diverse else _uniform_indices
             pts = torch.as_tensor(self.points[k], dtype=torch.float32)
-            pick = torch.randint(len(pts), (n,), generator=gen)
-            eps = torch.randn(n, pts.shape[1], generator=gen)
-            base, sigma = pts[pick], torch.as_tensor(self.sigma[k], dtype=torch.float32).expand(n, -1)
+            base = torch.empty(n, pts.shape[1])
+            sigma = torch.as_tensor(self.sigma[k], dtype=torch.float32).expand(n, -1).clone()
             names = self.donors_of(k, donors) if donors > 0 and donor_share > 0 else []
             names = [d for d in names if d in self.points]
-            if names:
+            borrow = torch.rand(n, generator=gen) < donor_share if names else torch.zeros(n, dtype=torch.bool)
+            own = torch.nonzero(~borrow).flatten()
+            base[own] = pts[pick(pts, len(own), gen)]
+            if borrow.any():
                 other = torch.as_tensor(np.concatenate([self.points[d] for d in names]), dtype=torch.float32)
                 owner = np.repeat(
                     np.arange(len(names)), [len(self.points[d]) for d in names]
                 )  # donor of each
                 other_sigma = torch.as_tensor(np.stack([self.sigma[d] for d in names]), dtype=torch.float32)
-                borrow = torch.rand(n, generator=gen) < donor_share
-                j = torch.randint(len(other), (n,), generator=gen)
-                base = torch.where(borrow[:, None], other[j], base)
-                sigma = torch.where(borrow[:, None], other_sigma[owner[j.numpy()]], sigma)
+                lent = torch.nonzero(borrow).flatten()
+                j = pick(other, len(lent), gen)
+                base[lent], sigma[lent] = other[j], other_sigma[owner[j.numpy()]]
+            eps = torch.randn(n, pts.shape[1], generator=gen)
             return base + temperature * eps * sigma
         m = torch.as_tensor(self.mean[k], dtype=torch.float32)
         f = torch.as_tensor(self.factor[k], dtype=torch.float32)
@@ -200,6 +210,35 @@ class LatentGaussians:
                 if f"donors_{i}" in z:
                     out.donors[k] = [str(d) for d in z[f"donors_{i}"].tolist()]
         return out
+
+
+def _uniform_indices(points: torch.Tensor, n: int, gen: torch.Generator) -> torch.Tensor:
+    """(n,) indices into points (N, Z), each uniform and independent."""
+    return torch.randint(len(points), (n,), generator=gen)
+
+
+def diverse_indices(points: torch.Tensor, n: int, gen: torch.Generator) -> torch.Tensor:
+    """(n,) indices into points (N, Z) drawn as k-means++ seeds: the first uniformly, each next one
+    with probability proportional to its squared distance to the nearest already drawn.
+
+    Independent draws follow the windows' frequencies, so a long walk clip's many overlapping
+    windows fill most of a batch; these draws cover the skeleton's repertoire first (where many
+    windows lie close together, one stands for them all). After every point has been drawn
+    (n > N), a new round starts.
+    """
+    p = points.double()
+    out = torch.empty(n, dtype=torch.long)
+    d2 = torch.zeros(len(p), dtype=torch.float64)
+    for i in range(n):
+        total = float(d2.sum())
+        if total > 0:
+            j = int(torch.multinomial(d2 / total, 1, generator=gen))
+        else:  # first draw, or every point drawn already
+            j = int(torch.randint(len(p), (1,), generator=gen))
+        out[i] = j
+        dj = ((p - p[j]) ** 2).sum(1)
+        d2 = dj if total <= 0 else torch.minimum(d2, dj)
+    return out
 
 
 def _radius(points: np.ndarray) -> float:

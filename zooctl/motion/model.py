@@ -67,6 +67,10 @@ class MotionConfig:
     # body plan's actions on this animal. 0 draws from the skeleton's own windows only.
     donors: int = 3
     donor_share: float = 0.5
+    # Mixture sampling: the windows of one call's samples are drawn together and spread over the
+    # skeleton's latents (`latents.diverse_indices`) instead of independently, so a call's samples
+    # are different actions. Sampling only; priors saved without it get it.
+    diverse: bool = True
     # "ponymation": per-frame spatial and temporal transformers (the paper's); "trajectory": one
     # token per bone carrying its whole window (`TrajectoryVAE`), T times fewer tokens.
     arch: str = "ponymation"

@@ -32,6 +32,7 @@ from .dataset import MotionDataset, MotionSequence, quat_mul
 from .latents import LatentGaussians
 from .model import MotionConfig, build_model
 from .skeleton import Skeleton, SkeletonBatch
+from .temperature import default_temperature, draws_diversely
 from .train import TrainHistory, TrainOptions, train_vae
 
 WEIGHTS = "weights.pt"
@@ -97,15 +98,18 @@ class PonymationPrior:
             }
         )
         self.latents = LatentGaussians.fit(self.model, ds) if self.cfg.sampler != "normal" else None
-        cal = calibrate_temperature(self, ds)
-        self.training["sample_temperature"] = cal["temperature"]
-        self.training["calibration"] = cal
+        if draws_diversely(self.cfg.to_json()):
+            self.training["sample_temperature"] = 1.0
+        else:
+            cal = calibrate_temperature(self, ds)
+            self.training["sample_temperature"] = cal["temperature"]
+            self.training["calibration"] = cal
         return self.history
 
     @property
     def sample_temperature(self) -> float:
-        """Default sampling temperature: calibrated at training (`zooctl.motion.calibrate`), 1.0 for older priors."""
-        return float(self.training.get("sample_temperature", 1.0))
+        """Default sampling temperature (`default_temperature`)."""
+        return default_temperature(self.cfg.to_json(), self.training)
 
     # -- persistence --------------------------------------------------------------------------
     def config_json(self, name: str, extra: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -200,7 +204,7 @@ class PonymationPrior:
         """(n, frames, J, 4) rotations relative to rest, chained with optimised transitions.
 
         ``temperature`` scales the prior's standard deviation (z ~ N(0, temperature^2 I)); default:
-        the prior's calibrated `sample_temperature`.
+        the prior's `sample_temperature`.
         """
         temperature = self.sample_temperature if temperature is None else temperature
         if n < 1 or frames < 1:
@@ -210,7 +214,13 @@ class PonymationPrior:
         L = self.cfg.length
         gen = torch.Generator().manual_seed(int(seed))
         K = 1 if frames <= L else int(np.ceil((frames + L - 2) / (2 * L - 2)))
-        z_content = self._draw(skeleton, n * K, temperature, gen)
+        # The samples' first segments are drawn together (different actions when `diverse`); the
+        # segments that continue them one by one, so a sample does not leap between extremes.
+        z_content = self._draw(skeleton, n, temperature, gen, diverse=self.cfg.diverse)[:, None]
+        if K > 1:
+            z_next = self._draw(skeleton, n * (K - 1), temperature, gen).reshape(n, K - 1, -1)
+            z_content = torch.cat([z_content, z_next], 1)
+        z_content = z_content.reshape(n * K, -1)
         with torch.no_grad():
             content = self.model.frame_features(z_content, self._skeletons(skeleton, n * K))
             content = content.reshape(n, K, L, -1)  # (n, K, L, W)
@@ -230,9 +240,11 @@ class PonymationPrior:
         q = self._to_quat(rot)
         return q if self.latents is None else self.latents.limit_rotations(skeleton, q)
 
-    def _draw(self, skeleton: Skeleton, n: int, temperature: float, gen: torch.Generator) -> torch.Tensor:
+    def _draw(
+        self, skeleton: Skeleton, n: int, temperature: float, gen: torch.Generator, diverse: bool = False
+    ) -> torch.Tensor:
         """(n, Z) latents: from the skeleton's aggregate posterior when the prior has one, else
-        from N(0, temperature^2 I)."""
+        from N(0, temperature^2 I); ``diverse``: see `latents.LatentGaussians.sample`."""
         if self.latents is not None:
             mixture = self.cfg.sampler == "mixture"
             z = self.latents.sample(
@@ -243,6 +255,7 @@ class PonymationPrior:
                 mixture,
                 donors=self.cfg.donors,
                 donor_share=self.cfg.donor_share,
+                diverse=diverse,
             )
             return z.to(self.device)
         return (torch.randn(n, self.cfg.latent, generator=gen) * temperature).to(self.device)

@@ -25,7 +25,7 @@ class AnimateOptions:
     sample: int = 5
     frames: int = 60
     seed: int = 0
-    temperature: float | None = None  # default: the prior's calibrated temperature
+    temperature: float | None = None  # default: the prior's `sample_temperature`
     prior: str | None = None  # default: the most recently trained
     formats: tuple[str, ...] = ("usd", "glb")
     preview: bool = True
