@@ -13,32 +13,16 @@ import numpy as np
 import pytest
 import torch
 from cli_helpers import run_inprocess
+from fit_helpers import small_quadruped_video
 
 pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="PyTorch sees no CUDA device")
 
-SMALL = {
-    "fit_size": 64,
-    "stage1": {"iters": 12, "batch": 10},
-    "stage2": {"iters": 16, "batch": 5},
-    "camera": {"azimuths": 8, "elevations": [0.0, 25.0]},
-}
 TINY_PRIOR = ["--arch", "ponymation", "--width", "16", "--layers", "1", "--epochs", "2", "--batch-size", "8"]
 
 
 @pytest.fixture(scope="module")
 def store_and_video(tmp_path_factory):
-    from zooctl.benchdata.make import make_video
-    from zooctl.procedural import build_animal
-    from zooctl.store.bank import Bank
-
-    root = tmp_path_factory.mktemp("cuda")
-    store = root / "store"
-    asset = build_animal("quadruped", name="quadruped")
-    Bank(store).add(asset)
-    folder = make_video(asset, root / "videos", frames=10, size=96, seed=3)
-    cfg = root / "small.json"
-    cfg.write_text(json.dumps(SMALL))
-    return store, folder, cfg
+    return small_quadruped_video(tmp_path_factory.mktemp("cuda"))
 
 
 def _fit(capsys, monkeypatch, store: Path, folder: Path, cfg: Path, device: str) -> dict:

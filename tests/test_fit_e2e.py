@@ -12,14 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from cli_helpers import run_inprocess
+from fit_helpers import small_quadruped_video
 
 REPO = Path(__file__).resolve().parents[1]
-SMALL = {
-    "fit_size": 64,
-    "stage1": {"iters": 12, "batch": 10},
-    "stage2": {"iters": 16, "batch": 5},
-    "camera": {"azimuths": 8, "elevations": [0.0, 25.0]},
-}
 
 
 def schema(name: str) -> dict:
@@ -38,19 +33,7 @@ def validate_record(rec: dict) -> None:
 
 @pytest.fixture(scope="module")
 def animal_video(tmp_path_factory):
-    from zooctl.benchdata.make import make_video
-    from zooctl.procedural import build_animal
-
-    root = tmp_path_factory.mktemp("fit")
-    store = root / "store"
-    from zooctl.store.bank import Bank
-
-    asset = build_animal("quadruped", name="quadruped")
-    Bank(store).add(asset)
-    folder = make_video(asset, root / "videos", frames=10, size=96, seed=3)
-    cfg = root / "small.json"
-    cfg.write_text(json.dumps(SMALL))
-    return store, folder, cfg
+    return small_quadruped_video(tmp_path_factory.mktemp("fit"))
 
 
 @pytest.fixture(scope="module")
