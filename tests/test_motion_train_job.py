@@ -92,6 +92,21 @@ def test_training_on_fits(store_root, capsys, monkeypatch):
     assert r.code == 2 and "no fit named 'ghost'" in r.err
 
 
+def test_a_step_budget_stops_training_and_is_recorded(store_root, capsys, monkeypatch):
+    import jsonschema
+
+    monkeypatch.setenv("ZOOCTL_STORE", str(store_root))
+    tiny = ["--width", "16", "--layers", "1", "--latent", "8", "--length", "8", "--epochs", "50"]
+    r = run_inprocess(capsys, "motion", "train", "--all", "--name", "steps", "--max-steps", "7", *tiny)
+    assert r.code == 0, r.err
+    assert "7 steps or 20 min budget" in r.err and "(stopped at --max-steps)" in r.out
+    cfg = json.loads((store_root / "motion" / "steps" / "config.json").read_text())
+    jsonschema.validate(cfg, json.loads(SCHEMA.read_text()))
+    assert cfg["training"]["steps"] == 7 and cfg["training"]["max_steps"] == 7
+    r = run_inprocess(capsys, "motion", "train", "--all", "--name", "x", "--max-steps", "0", *tiny)
+    assert r.code == 2 and "Traceback" not in r.err
+
+
 def test_amplitude_of_a_statue_is_zero(store_root):
     from zooctl.pipelines.animate import motion_amplitude, reference_clip
     from zooctl.store.bank import Bank

@@ -13,6 +13,10 @@ import sys
 import time
 from pathlib import Path
 
+# The motion prior's budget as steps, not minutes: about 2 minutes on an idle 2-core CPU, and the
+# same prior on a busy machine (a 2-minute budget there gave statues; BENCHMARKS.md).
+DEMO_PRIOR_STEPS = 1600
+
 
 def main(argv: list[str] | None = None) -> int:
     from rich.console import Console
@@ -91,7 +95,7 @@ def _export_and_animate(con, args, rec) -> int:
     _zooctl("bank", "add", glb, "--name", "demo-fit", "--replace", "--no-views", "--tag", "fitted")
     _zooctl(
         "motion", "train", "--assets", "quadruped,quadruped-longneck,quadruped-stout,biped,bird,spider,insect",
-        "--name", "demo", "--max-minutes", "2", "--replace",
+        "--name", "demo", "--max-steps", str(DEMO_PRIOR_STEPS), "--max-minutes", "4", "--replace",
     )  # fmt: skip
     _zooctl("animate", "demo-fit", "--sample", "5", "--prior", "demo", "--out", str(out / "animate"))
     con.print(f"done: everything is in {out}/ (fit, exports, bank.png, animate/)")

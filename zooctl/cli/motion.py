@@ -55,6 +55,13 @@ def train(
         help="Time budget: stop after this many minutes (at the end of a step); the learning-rate and "
         "KL schedules follow it. Default: 20.",
     ),
+    max_steps: int = typer.Option(
+        None,
+        "--max-steps",
+        min=1,
+        help="Step budget: stop after this many steps, or at --max-minutes if that comes first; the "
+        "schedules follow whichever ends first (a fixed amount of work, whatever the machine's load).",
+    ),
     device: str = typer.Option(None, "--device", help="cpu or cuda (default: cpu)."),
     width: int = typer.Option(
         None, "--width", help="Transformer width. Default by device: 256 on CUDA (Ponymation's), 64 on a CPU."
@@ -102,6 +109,7 @@ def train(
         "arch": arch,
         "epochs": epochs,
         "max_minutes": max_minutes,
+        "max_steps": max_steps,
         "device": device,
         "width": width,
         "layers": layers,
@@ -153,7 +161,10 @@ def train(
         else ""
     )
     steps = f": {tr['steps']} steps in {tr.get('seconds', 0):.0f} s" if "steps" in tr else ""
-    early = " (stopped at --max-minutes)" if tr.get("stopped_early") else ""
+    at_steps = tr.get("max_steps") is not None and tr.get("steps") == tr.get("max_steps")
+    early = (
+        f" (stopped at {'--max-steps' if at_steps else '--max-minutes'})" if tr.get("stopped_early") else ""
+    )
     model = cfg.get("model", {})
     how = "each window's posterior" if draws_diversely(model) else "calibrated to the clips' diversity"
     temp = f"; sampling temperature {default_temperature(model, tr):g} ({how})"

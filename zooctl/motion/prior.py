@@ -91,6 +91,7 @@ class PonymationPrior:
                 "batch_size": opts.batch_size,
                 "lr": opts.lr,
                 "max_minutes": opts.max_minutes,
+                "max_steps": opts.max_steps,
                 "recon_warmup": opts.recon_warmup,
                 "kl_anneal": opts.kl_anneal,
                 "device": str(opts.device),

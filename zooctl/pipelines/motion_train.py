@@ -45,6 +45,7 @@ class MotionTrainOptions:
     length: int | None = None  # frames per window; default: the prior's own
     epochs: int = 1000
     max_minutes: float | None = None
+    max_steps: int | None = None  # a fixed amount of work: the schedules follow it where it ends first
     batch_size: int | None = None
     lr: float | None = None
     kl_weight: float | None = None  # default: the model's (`MotionConfig`)
@@ -69,7 +70,9 @@ class MotionTrainOptions:
         )
         note = (
             f"{out.arch} {out.width} x {out.layers}, batch {out.batch_size}, lr {out.lr:g}, "
-            f"{out.max_minutes:g} min budget on {self.device}" + (f": {why}" if picked else "")
+            + (f"{out.max_steps} steps or " if out.max_steps else "")
+            + f"{out.max_minutes:g} min budget on {self.device}"
+            + (f": {why}" if picked else "")
         )
         return out, note
 
@@ -230,6 +233,7 @@ def _fit(prior: Any, seqs: list[Any], opts: MotionTrainOptions, on_step) -> Any:
             batch_size=opts.batch_size,
             lr=opts.lr,
             max_minutes=opts.max_minutes,
+            max_steps=opts.max_steps,
             seed=opts.seed,
             device=opts.device,
         )
