@@ -183,6 +183,20 @@ def test_bench_run_pose_prior_option(tmp_path):
     assert r.code == 2 and "pose_prior: kind 'bogus'" in r.err and "Traceback" not in r.err, r.err
 
 
+def test_bench_run_device_option(tmp_path):
+    import torch
+    from cli_helpers import zooctl
+
+    from zooctl.cli.bench_fit import component_overrides
+
+    assert component_overrides(None, None, None, "cuda") == {"device": "cuda"}
+    r = zooctl("bench", "run", str(tmp_path), "--device", "gpu", store=tmp_path / "store")
+    assert r.code == 2 and "'gpu' is not cpu or cuda" in r.err and "Traceback" not in r.err, r.err
+    if not torch.cuda.is_available():  # one clear line, not one failed row per video
+        r = zooctl("bench", "run", str(tmp_path), "--device", "cuda", store=tmp_path / "store")
+        assert r.code == 2 and "no CUDA device" in r.err and "Traceback" not in r.err, r.err
+
+
 def test_bench_run_config_file(tmp_path):
     from cli_helpers import zooctl
 

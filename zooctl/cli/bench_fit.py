@@ -81,6 +81,12 @@ def run(
     ),
     renderer: str = RendererOpt,
     articulation: str = ArticulationOpt,
+    device: str = typer.Option(
+        None,
+        "--device",
+        help="cpu or cuda for every fit (default: the preset's, cpu). With --executor, each task asks for "
+        "--gpus-per-task GPUs (default 1 on cuda; 0.25 runs four fits on one GPU).",
+    ),
     config: Path = typer.Option(
         None,
         "--config",
@@ -111,14 +117,23 @@ def run(
                 markup=False,
             )
 
+    if device is not None and device.startswith("cuda"):
+        import torch
+
+        if not torch.cuda.is_available():  # else every fit would fail the same way
+            from ..errors import UsageError
+
+            raise UsageError(
+                "--device cuda was asked for, but PyTorch sees no CUDA device", hint="use --device cpu"
+            )
     args = (folder, store_root(), preset_name, list(ablation) if ablation else None, template, limit)
     opts = dict(
         known_camera=known_camera,
         own_template=own_template,
-        overrides=config_overrides(config, component_overrides(renderer, articulation, pose_prior)),
+        overrides=config_overrides(config, component_overrides(renderer, articulation, pose_prior, device)),
     )
     if batch.executor is not None or resume:  # a batch: each fit one task
-        ex = batch.make_executor(None)
+        ex = batch.make_executor(device)
         from ..pipelines.batch import BatchInterrupted
 
         try:
@@ -153,11 +168,11 @@ def _num(x: float | None) -> str:
 
 
 def component_overrides(
-    renderer: str | None, articulation: str | None, pose_prior: str | None = None
+    renderer: str | None, articulation: str | None, pose_prior: str | None = None, device: str | None = None
 ) -> dict | None:
-    """Config overrides naming registered components or the pose prior (checked when the config is
-    validated)."""
-    out: dict = {}
+    """Config overrides naming registered components, the pose prior or the device (checked when the
+    config is validated)."""
+    out: dict = {} if device is None else {"device": device}
     if pose_prior is not None:
         out["pose_prior"] = {"kind": pose_prior}
     if renderer is not None:
