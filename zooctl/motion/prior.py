@@ -199,7 +199,7 @@ class PonymationPrior:
         n: int,
         frames: int,
         seed: int = 0,
-        transition_steps: int = 20,
+        transition_steps: int = 10,
         temperature: float | None = None,
     ) -> np.ndarray:
         """(n, frames, J, 4) rotations relative to rest, chained with optimised transitions.
