@@ -117,15 +117,10 @@ def run(
                 markup=False,
             )
 
-    if device is not None and device.startswith("cuda"):
-        import torch
+    if device is not None:  # up front: else every fit would fail the same way
+        from ..fit.run import check_device
 
-        if not torch.cuda.is_available():  # else every fit would fail the same way
-            from ..errors import UsageError
-
-            raise UsageError(
-                "--device cuda was asked for, but PyTorch sees no CUDA device", hint="use --device cpu"
-            )
+        check_device(device)
     args = (folder, store_root(), preset_name, list(ablation) if ablation else None, template, limit)
     opts = dict(
         known_camera=known_camera,

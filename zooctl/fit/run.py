@@ -90,6 +90,14 @@ def check_template(template: RiggedAsset) -> None:
         )
 
 
+def check_device(device: str) -> None:
+    """Refuse a CUDA device PyTorch cannot see, with a clear reason."""
+    if device.startswith("cuda") and not torch.cuda.is_available():
+        raise UsageError(
+            "--device cuda was asked for, but PyTorch sees no CUDA device", hint="use --device cpu"
+        )
+
+
 def fit_video(
     video: FitVideo,
     template: RiggedAsset,
@@ -107,10 +115,7 @@ def fit_video(
     rep = reporter or _Silent()
     cfg.validate()
     check_template(template)
-    if cfg.device.startswith("cuda") and not torch.cuda.is_available():
-        raise UsageError(
-            "--device cuda was asked for, but PyTorch sees no CUDA device", hint="use --device cpu"
-        )
+    check_device(cfg.device)
     torch.manual_seed(cfg.seed)
     video = video.truncated(cfg.max_frames).check()
     timings: dict[str, float] = dict(resume.get("timings", {})) if resume else {}
