@@ -170,29 +170,22 @@ class PreviewRenderer:
             cam = Camera(
                 cam.intrinsics * s, cam.rotation, cam.translation, cam.height * s, cam.width * s, cam.near
             )
-        # Per-frame work is many small tensor ops: on a CPU, intra-op threads only add contention.
-        threads = torch.get_num_threads()
-        if self.device.type == "cpu":
-            torch.set_num_threads(1)
-        try:
-            normals = vertex_normals(verts, f)
-            cull = is_closed_and_oriented(f)
-            # Passes of at most _BATCH_PIXELS rendered pixels and _BATCH_FACES faces: bounded memory.
-            step = max(1, min(_BATCH_PIXELS // (cam.height * cam.width), _BATCH_FACES // len(f)))
-            parts = []
-            for i in range(0, len(verts), step):
-                c = Camera(
-                    cam.intrinsics[i : i + step],
-                    cam.rotation[i : i + step],
-                    cam.translation[i : i + step],
-                    cam.height,
-                    cam.width,
-                    cam.near,
-                )
-                parts.append(self._render_batch(verts[i : i + step], normals[i : i + step], f, col, c, cull))
-            img = torch.cat(parts)
-        finally:
-            torch.set_num_threads(threads)
+        normals = vertex_normals(verts, f)
+        cull = is_closed_and_oriented(f)
+        # Passes of at most _BATCH_PIXELS rendered pixels and _BATCH_FACES faces: bounded memory.
+        step = max(1, min(_BATCH_PIXELS // (cam.height * cam.width), _BATCH_FACES // len(f)))
+        parts = []
+        for i in range(0, len(verts), step):
+            c = Camera(
+                cam.intrinsics[i : i + step],
+                cam.rotation[i : i + step],
+                cam.translation[i : i + step],
+                cam.height,
+                cam.width,
+                cam.near,
+            )
+            parts.append(self._render_batch(verts[i : i + step], normals[i : i + step], f, col, c, cull))
+        img = torch.cat(parts)
         # img: (B, H*s, W*s, 3) linear RGB in [0, 1]
         if s > 1:
             img = torch.nn.functional.avg_pool2d(img.permute(0, 3, 1, 2), s).permute(0, 2, 3, 1)
