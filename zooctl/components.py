@@ -53,6 +53,8 @@ class ExporterSpec:
     ``formats`` are the ``--format`` values it serves (``("usd", "usda", "usdz")``) and
     ``suffixes`` the file suffix of each, in the same order (default: ``"." + format``); every
     export command resolves paths and formats through them (`zooctl.io.export.export_asset`).
+    ``preload()``, optional, imports what ``save`` needs (a heavy library) ahead of the first file:
+    `zooctl.io.export_worker` calls it in its process while the command does other work.
     """
 
     name: str
@@ -60,6 +62,7 @@ class ExporterSpec:
     save: Callable[..., None]
     description: str = ""
     suffixes: tuple[str, ...] = ()
+    preload: Callable[[], None] | None = None
     kind: str = field(default="exporter", init=False)
 
     def __post_init__(self) -> None:

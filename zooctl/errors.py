@@ -21,6 +21,10 @@ class ZooctlError(Exception):
     def __str__(self) -> str:  # pragma: no cover - trivial
         return self.message
 
+    def __reduce__(self):
+        # Pickled whole, hint included: errors cross processes (`zooctl.io.export_worker`).
+        return (type(self), (self.message, self.hint))
+
 
 class UsageError(ZooctlError):
     """The user asked for something that cannot be done as asked (bad option, bad value)."""

@@ -14,6 +14,12 @@ def _save(asset, path: Path, clips=None, **options):
     return save_usd(asset, path, clips, **options)
 
 
+def _preload():
+    from pxr import Sdf, Usd, UsdGeom, UsdSkel, Vt  # noqa: F401
+
+    from ..io import usd_export  # noqa: F401
+
+
 def _load(path: Path, name: str):
     from ..io.usd_import import load_usd
 
@@ -28,6 +34,7 @@ def register_exporters(register):
             ("usd", "usda", "usdc", "usdz"),
             _save,
             "UsdSkel: SkelRoot, Skeleton, skinned Mesh, one SkelAnimation per clip",
+            preload=_preload,
         )
     )
 

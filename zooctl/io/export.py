@@ -93,6 +93,14 @@ def export_asset(
     the path's suffix); ``path`` may be a folder (``asset.name`` + suffix inside it). ``opts`` go to
     the exporter (e.g. ``camera`` for USD). Returns the file written."""
     spec, fmt, path = resolve_export(path, fmt, asset.name)
+    return write_export(spec, asset, path, clips, **opts)
+
+
+def write_export(
+    spec: ExporterSpec, asset: Any, path: Path, clips: list[str] | None = None, **opts: Any
+) -> Path:
+    """Write ``asset`` to ``path`` (resolved: `resolve_export`) through ``spec``; a folder that
+    cannot be written or a full disk is a `UsageError` that says so. Returns ``path``."""
     check_writable(path)
     try:
         spec.save(asset, path, clips, **opts)
