@@ -38,6 +38,7 @@ from zooctl.motion.evaluate import TABLE_COLUMNS, evaluate, format_table, pca_cu
 from zooctl.motion.mirror import mirror_sequence
 from zooctl.motion.model import MotionConfig
 from zooctl.motion.prior import PonymationPrior, motion_clip
+from zooctl.motion.temperature import draws_diversely
 from zooctl.motion.train import TrainOptions, loss_curve_png
 from zooctl.names import sanitize_name
 from zooctl.pipelines.motion_train import device_defaults
@@ -83,7 +84,8 @@ def main() -> None:
     ap.add_argument(
         "--recalibrate",
         action="store_true",
-        help="with --load: calibrate the temperature again (sampling settings as set)",
+        help="with --load: calibrate the temperature again (sampling settings as set; a prior that "
+        "draws diversely samples at 1 whatever it is, so this needs --independent there)",
     )
     ap.add_argument("--mirror", action="store_true", help="train on the clips' left-right mirrors too")
     ap.add_argument(
@@ -163,6 +165,11 @@ def main() -> None:
     if args.independent:
         prior.cfg.diverse = False
     if args.load and args.recalibrate:
+        if draws_diversely(dataclasses.asdict(prior.cfg)):
+            raise SystemExit(
+                "--recalibrate: this prior draws diversely and samples at temperature 1 whatever the "
+                "calibration says; add --independent to calibrate independent draws"
+            )
         cal = calibrate_temperature(prior, prior.dataset(train))
         prior.training["sample_temperature"] = cal["temperature"]
         print(f"calibrated again: temperature {cal['temperature']} {cal['diversity']}", flush=True)

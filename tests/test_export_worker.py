@@ -118,3 +118,11 @@ def test_errors_come_back_whole(asset, tmp_path):
 def test_zooctl_errors_pickle_with_their_hint():
     err = pickle.loads(pickle.dumps(UsageError("bad", hint="do this")))
     assert type(err) is UsageError and (err.message, err.hint, str(err)) == ("bad", "do this", "bad")
+
+
+def test_without_an_interpreter_to_start_it_writes_here(asset, tmp_path, monkeypatch):
+    spec, _ = pid_exporter(tmp_path, "pid_exporter_noexe")
+    monkeypatch.setattr(sys, "executable", "")  # an embedded Python has none
+    with ExportWorker([spec]) as worker:
+        worker.submit(asset, [(spec, tmp_path / "e.pid", None)]).result(timeout=120)
+    assert int((tmp_path / "e.pid").read_text().split()[0]) == os.getpid()

@@ -47,7 +47,7 @@ class ExportWorker:
             self._proc: subprocess.Popen | None = subprocess.Popen(
                 [sys.executable, "-m", __name__], stdin=subprocess.PIPE, stdout=subprocess.PIPE
             )
-        except OSError:
+        except (OSError, TypeError, ValueError):  # no interpreter to start (an embedded Python)
             self._proc = None
         preloads = [s.preload for s in specs if s.preload is not None]
         if preloads:
