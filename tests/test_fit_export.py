@@ -8,6 +8,7 @@ import torch
 
 from zooctl.fit.export import fitted_asset
 from zooctl.fit.scene import FitScene
+from zooctl.rig.rotations import quat_to_matrix
 from zooctl.rig.synthetic import tube_asset
 
 
@@ -30,3 +31,34 @@ def test_exported_asset_matches_the_model(bone_scale, tol):
         want = scene.pose().vertices.numpy()
     err = np.abs(asset.pose("fit", np.arange(4)) - want).max() / tmpl.size()
     assert err < tol, err
+
+
+def test_a_displaced_mesh_keeps_its_skeleton():
+    """A displacement field that moves the whole mesh (what fits drift into) is the root's
+    translation in the export, not a shift of the mesh off its bones: the exported posed mesh is
+    the model's, and the skeleton moves with the mesh, in the model (`Pose.joints`) and the export."""
+    tmpl = tube_asset(bones=3, name="tube")
+    scene = FitScene(tmpl, 4, 32, 32, 40.0, hidden=16)
+    g = torch.Generator().manual_seed(1)
+    size = tmpl.size()
+    shift = torch.tensor([0.08, -0.05, 0.03]) * size
+    with torch.no_grad():
+        scene.rotations.add_(0.4 * torch.randn(scene.rotations.shape, generator=g))
+        scene.root_rotation.add_(0.3 * torch.randn(scene.root_rotation.shape, generator=g))
+        scene.root_translation.copy_(torch.randn(4, 3, generator=g))
+        bare = scene.pose()  # no displacement yet
+        last = scene.model.displacement.mlp[-1]
+        last.bias.copy_(shift / scene.model.displacement.extent)  # the mesh moved by ~10% of its size
+        last.weight.normal_(0.0, 1e-4, generator=g)  # and a small change of shape
+        pose = scene.pose()
+        mean_d = scene.model.displacement(scene.model.global_scale() * scene.model.points).mean(0)
+        R = quat_to_matrix(scene.root_rotation)  # (T, 3, 3), the model's own
+    assert torch.linalg.norm(mean_d - shift) < 0.01 * size
+    moved = bare.joints + (R @ mean_d)[:, None]
+    assert torch.allclose(pose.joints, moved, atol=1e-4 * size), "the skeleton did not follow the mesh"
+    asset = fitted_asset(scene, tmpl, "fitted", 24.0)
+    err = np.abs(asset.pose("fit", np.arange(4)) - pose.vertices.numpy()).max() / size
+    assert err < 2e-3, err
+    clip = asset.clips["fit"]
+    joints = asset.joint_transforms(clip.local_matrices())[..., :3, 3]
+    assert np.abs(joints - pose.joints.numpy()).max() / size < 2e-3

@@ -1,15 +1,19 @@
 """The fitted character as a `RiggedAsset`: what the USD and glTF exporters write.
 
 Bind pose = the fitted rest pose: the template's rest rotations with stretched bones, scaled by
-the global scale u, the displacement field folded into the vertices. The global scale goes into
+the global scale u, the displacement field (less its mean, below) folded into the vertices. The global scale goes into
 each root joint's local scale, the per-frame root transform into each root's local transform, so
 the asset has one clip (named ``fit``) with a sample per video frame, root motion included:
 
-    root local_t = T(t_root) R(q_root) S(u) @ T(o) R(q_t) S(s)
-                 = T(t_root + u R_root o) R(q_root q_t) S(u s).
+    root local_t = T(t_root + R_root c) R(q_root) S(u) @ T(o) R(q_t) S(s)
+                 = T(t_root + R_root (u o + c)) R(q_root q_t) S(u s).
 
-Linear blend skinning of that asset reproduces the fitted model up to the part of the
-displacement field that CASA does not skin (eq. 3 adds it after skinning): small by design.
+The displacement field (CASA eq. 3) is added after skinning, so skinning cannot carry it
+exactly. Its mean over the vertices is a translation of the whole posed mesh: it goes into the
+root's translation, ``t_root + R_root c``, not into the bind-pose vertices, where it would move
+the mesh off its skeleton and bend it about the wrong points. The rest, ``d(p) - c``, is folded
+into the bind-pose vertices: linear blend skinning of the asset reproduces the fitted model up to
+that part turning with the bones (small by design).
 """
 
 from __future__ import annotations
@@ -49,6 +53,10 @@ def fitted_asset(
     for j, p in enumerate(parents):
         glob[j] = rest_local[j] if p < 0 else glob[p] @ rest_local[j]
     vertices = m().vertices.double().cpu().numpy()  # rest pose, scaled, displaced
+    mean_d = np.zeros(3)  # the displacement's mean: the root carries it (module docstring)
+    if m.displacement is not None:
+        mean_d = m.displacement(u * m.points).double().mean(0).cpu().numpy()
+        vertices = vertices - mean_d
     # Per-frame locals.
     T, J = scene.num_frames, len(parents)
     q = quat_normalize(scene.rotations.double().cpu().numpy())
@@ -61,7 +69,7 @@ def fitted_asset(
 
     R_root = quat_to_matrix(rq)  # (T, 3, 3)
     for j in np.nonzero(roots)[0]:
-        clip_t[:, j] = rt + u * np.einsum("tab,b->ta", R_root, trans[j])
+        clip_t[:, j] = rt + np.einsum("tab,b->ta", R_root, u * trans[j] + mean_d)
         clip_q[:, j] = _quat_mul(rq, q[:, j])
         clip_s[:, j] = u * rest_s[j]
     dense = m.skin.dense(J).double().cpu().numpy()

@@ -190,9 +190,14 @@ class ArticulatedModel(nn.Module):
         )
         u = self.global_scale()
         v = u * v
-        if self.displacement is not None:
-            v = v + self.displacement(u * self.points)
         joints = u * G[..., :3, 3]
+        if self.displacement is not None:
+            d = self.displacement(u * self.points)  # (V, 3)
+            v = v + d
+            # The field's mean moves the whole mesh (a fit drifts into one: the root translation
+            # can take it just as well); the skeleton goes with it, so it stays where the template
+            # has it inside the mesh, as in the exported rig (`zooctl.fit.export`).
+            joints = joints + d.mean(0)
         if root_rotation is not None:
             R = quat_to_matrix(root_rotation)[..., None, :, :]
             v = (R @ v[..., None]).squeeze(-1)
