@@ -1,9 +1,10 @@
 """The fitted character as a `RiggedAsset`: what the USD and glTF exporters write.
 
 Bind pose = the fitted rest pose: the template's rest rotations with stretched bones, scaled by
-the global scale u, the displacement field (less its mean, below) folded into the vertices. The global scale goes into
-each root joint's local scale, the per-frame root transform into each root's local transform, so
-the asset has one clip (named ``fit``) with a sample per video frame, root motion included:
+the global scale u, the displacement field (less its mean, below) folded into the vertices. The
+global scale goes into each root joint's local scale, the per-frame root transform into each
+root's local transform, so the asset has one clip (named ``fit``) with a sample per video frame,
+root motion included:
 
     root local_t = T(t_root + R_root c) R(q_root) S(u) @ T(o) R(q_t) S(s)
                  = T(t_root + R_root (u o + c)) R(q_root q_t) S(u s).
