@@ -165,7 +165,7 @@ def main() -> None:
     if args.independent:
         prior.cfg.diverse = False
     if args.load and args.recalibrate:
-        if draws_diversely(dataclasses.asdict(prior.cfg)):
+        if draws_diversely(prior.cfg.to_json()):
             raise SystemExit(
                 "--recalibrate: this prior draws diversely and samples at temperature 1 whatever the "
                 "calibration says; add --independent to calibrate independent draws"

@@ -55,8 +55,9 @@ def fitted_asset(
         glob[j] = rest_local[j] if p < 0 else glob[p] @ rest_local[j]
     vertices = m().vertices.double().cpu().numpy()  # rest pose, scaled, displaced
     mean_d = np.zeros(3)  # the displacement's mean: the root carries it (module docstring)
-    if m.displacement is not None:
-        mean_d = m.displacement(u * m.points).double().mean(0).cpu().numpy()
+    d = m.displacement_offsets()
+    if d is not None:
+        mean_d = d.double().mean(0).cpu().numpy()
         vertices = vertices - mean_d
     # Per-frame locals.
     T, J = scene.num_frames, len(parents)

@@ -152,9 +152,8 @@ class StageRunner:
                 terms["bone_length"] = w.bone_length * scene.model.bone_length_loss()
             if ab.learn_skinning:
                 terms["skin"] = w.skin_prior * skin_prior(scene.model.skin.logits, scene.init_logits)
-            if scene.model.displacement is not None:
-                u = scene.model.global_scale()
-                disp = scene.model.displacement(u * scene.model.points)
+            disp = scene.model.displacement_offsets()
+            if disp is not None:
                 terms["displacement"] = w.displacement * displacement_prior(disp, scene.size)
             kind = self.cfg.pose_prior.kind
             if kind == "rest":

@@ -191,8 +191,8 @@ class ArticulatedModel(nn.Module):
         u = self.global_scale()
         v = u * v
         joints = u * G[..., :3, 3]
-        if self.displacement is not None:
-            d = self.displacement(u * self.points)  # (V, 3)
+        d = self.displacement_offsets()
+        if d is not None:
             v = v + d
             # The field's mean moves the whole mesh (a fit drifts into one: the root translation
             # can take it just as well); the skeleton goes with it, so it stays where the template
@@ -221,11 +221,16 @@ class ArticulatedModel(nn.Module):
                 return tuple(t.shape[:-tail])
         return ()
 
+    def displacement_offsets(self) -> Tensor | None:
+        """(V, 3) the displacement field's offsets ``V(u p)`` (CASA eq. 3, added after skinning);
+        None without a field."""
+        return None if self.displacement is None else self.displacement(self.global_scale() * self.points)
+
     def canonical_vertices(self) -> Tensor:
         """(V, 3) the rest-shape template after global scale and displacement: ``u p + V(u p)``."""
-        u = self.global_scale()
-        v = u * self.points
-        return v if self.displacement is None else v + self.displacement(v)
+        v = self.global_scale() * self.points
+        d = self.displacement_offsets()
+        return v if d is None else v + d
 
     # -- priors ----------------------------------------------------------------------------
     def symmetry_plane(self) -> tuple[Tensor, float]:
