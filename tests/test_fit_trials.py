@@ -117,3 +117,41 @@ def test_fit_cli_prints_the_trial_ious(tmp_path, store, capsys, monkeypatch):
     r = run_inprocess(capsys, "fit", str(folder), "--config", str(tmp_path / "tiny.json"), "--name", "t")
     assert r.code == 0, r.err
     assert r.out.count("trial IoU") == 2 and "fitted t with template thin" in r.out
+
+
+def test_bench_run_counts_the_right_body_plans(tmp_path, store, monkeypatch):
+    """With retrieval, every bench row says whether its template has the video's body plan, and
+    the summary counts them at retrieval's top-1, among the tried candidates and after the trials."""
+    from zooctl.benchdata.run import markdown_table, run_benchmark
+    from zooctl.retrieval.index import index_asset
+    from zooctl.store.bank import Bank
+
+    monkeypatch.setenv("ZOOCTL_EMBEDDERS", "silhouette")
+    bank = Bank(store)
+    thin = tube_asset(bones=3, name="thin")
+    twin = tube_asset(bones=3, radius=0.12, name="twin")
+    fat = tube_asset(bones=2, bone_length=0.5, radius=0.6, name="fat")
+    for a, plan in ((thin, "snake"), (twin, "snake"), (fat, "fish")):
+        a.meta["body_plan"] = plan
+        bank.add(a)
+        index_asset(bank, a, ["silhouette"], n_views=3, size=48)
+    make_video(thin, tmp_path / "v", frames=3, size=32, seed=0)
+    res = run_benchmark(tmp_path / "v", store, overrides=TINY)
+    (row,) = res["rows"]
+    plan = row["plan"]
+    assert row["template"] in ("twin", "fat")  # the video's own asset is left out
+    assert plan["video"] == "snake" and plan["answerable"]
+    assert plan["right"] == (row["template"] == "twin") and plan["tried_right"]  # both were tried
+    counts = res["summary"]["full"]["plan"]
+    assert counts == {
+        "labelled": 1,
+        "answerable": 1,
+        "top1": int(plan["top1_right"]),
+        "tried": 1,
+        "template": int(plan["right"]),
+    }
+    table = markdown_table(res)
+    assert "Right body plan (full): " in table and "of 1 labelled videos (1 with another" in table
+    assert ("(right plan)" if plan["right"] else "(other plan)") in table
+    own = run_benchmark(tmp_path / "v", store, own_template=True, overrides=TINY)
+    assert "plan" not in own["rows"][0] and "plan" not in own["summary"]["full"]

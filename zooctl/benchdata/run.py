@@ -6,6 +6,10 @@ each video with its own asset (what a bank that holds the animal allows: the bou
 leave-one-out bank is measured against). Ablations (CASA tables 2-5)
 are config switches applied on top of the preset: ``no-flow``, ``no-symmetry``, ``no-smoothness``,
 ``no-stretch``, ``no-displacement``, ``fixed-skinning`` and ``retrieval-only``.
+
+With retrieval, each row also says whether the fit's template has the video's body plan
+(`zooctl.retrieval.evaluate.body_plan`), and the summary counts the videos whose plan is right at
+retrieval's top-1, among the candidates the template trials tried, and after the trials.
 """
 
 from __future__ import annotations
@@ -84,11 +88,17 @@ def run_benchmark(
         rows = _run_batch(*args, executor, resume, batch_progress)
     else:
         rows = _run_inline(*args, bank, progress)
+    if template is None and not own_template:
+        _add_body_plans(rows, {v.name: _own_asset(v) for v in vids}, bank)
+    for r in rows:
+        r.pop("candidates", None)
     summary = {}
     for a in abl:
         rs = [r for r in rows if r["ablation"] == a and "error" not in r]
         summary[a] = {k: _mean([r.get(k) for r in rs]) for k in COLUMNS}
         summary[a]["videos"] = len(rs)
+        if any("plan" in r for r in rs):
+            summary[a]["plan"] = plan_counts(rs)
     return {
         "rows": rows,
         "summary": summary,
@@ -138,6 +148,7 @@ def _run_inline(
                     "video": v.name,
                     "ablation": a,
                     "template": rec["template"],
+                    "candidates": rec.get("retrieval") or [],
                     "wall_s": time.perf_counter() - t,
                 }
                 row.update({k: m.get(k) for k in COLUMNS if k != "wall_s"})
@@ -194,9 +205,63 @@ def _run_batch(
             rows.append({"video": v, "ablation": a, "error": r.error})
             continue
         m = r.summary.get("metrics", {})
-        row = {"video": v, "ablation": a, "template": r.summary["template"], "wall_s": r.summary.get("fit_s")}
+        row = {
+            "video": v,
+            "ablation": a,
+            "template": r.summary["template"],
+            "candidates": r.summary.get("retrieval") or [],
+            "wall_s": r.summary.get("fit_s"),
+        }
         rows.append(row | {k: m.get(k) for k in COLUMNS if k != "wall_s"})
     return rows
+
+
+def _add_body_plans(rows: list[dict[str, Any]], own: dict[str, str], bank) -> None:
+    """Each fitted row gets ``plan``: the body plans of its video and template, and whether the
+    template, retrieval's top-1 and any candidate the trials tried have the video's plan
+    (None where the video's asset has no label); ``answerable``: another bank asset has it."""
+    from ..errors import ZooctlError
+    from ..retrieval.evaluate import plan_label
+
+    names = [s["name"] for s in bank.list()]
+    plans: dict[str, str | None] = {}
+    for n in names:  # from the cards: no asset file is opened
+        try:
+            plans[n] = plan_label(n, bank.card(n).get("meta"))
+        except ZooctlError:
+            plans[n] = None
+    for r in rows:
+        if "error" in r:
+            continue
+        asset = own.get(r["video"], r["video"])
+        want = plans.get(asset)
+        cands = r.pop("candidates", None) or []
+        tried = [c["name"] for c in cands if c.get("trial_iou") is not None] or [r["template"]]
+
+        def right(name: str | None, want: str | None = want) -> bool | None:
+            return None if want is None or name is None else plans.get(name) == want
+
+        r["plan"] = {
+            "video": want,
+            "template": plans.get(r["template"]),
+            "right": right(r["template"]),
+            "top1_right": right(cands[0]["name"] if cands else r["template"]),
+            "tried_right": None if want is None else any(right(n) for n in tried),
+            "answerable": want is not None and any(plans[n] == want for n in names if n != asset),
+        }
+
+
+def plan_counts(rows: list[dict[str, Any]]) -> dict[str, int]:
+    """How many of ``rows`` (with ``plan``) are labelled, answerable, and right at retrieval's
+    top-1, among the tried candidates and after the trials."""
+    ps = [r["plan"] for r in rows if r.get("plan", {}).get("video") is not None]
+    return {
+        "labelled": len(ps),
+        "answerable": sum(p["answerable"] for p in ps),
+        "top1": sum(bool(p["top1_right"]) for p in ps),
+        "tried": sum(bool(p["tried_right"]) for p in ps),
+        "template": sum(bool(p["right"]) for p in ps),
+    }
 
 
 def _mean(vals: list) -> float | None:
@@ -226,6 +291,14 @@ def markdown_table(res: dict[str, Any]) -> str:
 
     for a, s in res["summary"].items():
         lines.append(f"| {a} | {s['videos']} | " + " | ".join(f(s[k], k) for k in COLUMNS) + " |")
+    for a, s in res["summary"].items():
+        if "plan" in s:
+            p = s["plan"]
+            lines.append(
+                f"\nRight body plan ({a}): {p['top1']} at retrieval's top-1, {p['tried']} among the "
+                f"candidates tried, {p['template']} after the trials, of {p['labelled']} labelled videos "
+                f"({p['answerable']} with another asset of their plan in the bank)."
+            )
     lines += [
         "",
         "| video | ablation | template | 2D mask IoU | novel-view IoU | mIoU | mCham | Joint | Skinning | Re-anim. | wall s |",
@@ -235,8 +308,10 @@ def markdown_table(res: dict[str, Any]) -> str:
         if "error" in r:
             lines.append(f"| {r['video']} | {r['ablation']} | error: {r['error']} |" + " |" * 8)
         else:
+            right = r.get("plan", {}).get("right")
+            mark = "" if right is None else (" (right plan)" if right else " (other plan)")
             lines.append(
-                f"| {r['video']} | {r['ablation']} | {r['template']} | "
+                f"| {r['video']} | {r['ablation']} | {r['template']}{mark} | "
                 + " | ".join(f(r.get(k), k) for k in COLUMNS)
                 + " |"
             )

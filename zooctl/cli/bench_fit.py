@@ -100,7 +100,8 @@ def run(
         False, "--resume", help="Keep the fits a previous run of this benchmark finished (runs as a batch)."
     ),
 ) -> None:
-    """Fit every benchmark video (its own asset excluded from retrieval) and report CASA's metrics."""
+    """Fit every benchmark video (its own asset excluded from retrieval) and report CASA's metrics and
+    how many templates have the video's body plan."""
     from ..benchdata.run import markdown_table, run_benchmark
     from ..store.fs import write_bytes_atomic
 

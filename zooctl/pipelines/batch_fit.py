@@ -238,6 +238,7 @@ def fit_summary(record: dict[str, Any]) -> dict[str, Any]:
         "fit_s": record.get("timings", {}).get("total_wall"),
         "out": record.get("out"),
         "metrics": m,
+        "retrieval": record.get("retrieval") or [],
     }
 
 

@@ -61,10 +61,15 @@ STARTER_PLANS = {
 
 def body_plan(asset) -> str | None:
     """The body-plan label of an asset, or None when it has none."""
-    plan = asset.meta.get("body_plan") if isinstance(asset.meta, dict) else None
+    return plan_label(asset.name, asset.meta)
+
+
+def plan_label(name: str, meta: Any) -> str | None:
+    """The body-plan label of the asset called ``name`` with ``meta`` (its own, or a bank card's)."""
+    plan = meta.get("body_plan") if isinstance(meta, dict) else None
     if plan:
         return STARTER_PLANS.get(plan, plan)
-    return BODY_PLANS.get(asset.name)
+    return BODY_PLANS.get(name)
 
 
 def render_query_video(
