@@ -68,7 +68,7 @@ def test_fit_records_and_uses_the_pose_prior(tmp_path):
         "pose_prior": {"kind": "clips"},
     }
     cfg = FitConfig.from_dict(json.loads(json.dumps(tiny)))
-    assert cfg.to_dict()["pose_prior"] == {"kind": "clips", "min_std_deg": 10.0}
+    assert cfg.to_dict()["pose_prior"] == {"kind": "clips", "min_std_deg": 10.0, "motion": None}
     asset = tube_asset(bones=3, name="tube")
     video = load_fit_video(make_video(asset, tmp_path / "v", frames=4, size=32, seed=0))
     res = fit_video(video, asset, cfg)

@@ -98,7 +98,10 @@ def register_motion_priors(register):
 
     ``factory(path=None, device="cpu", **options)`` returns an object that can ``fit`` a motion
     dataset, ``save(path)``, and ``sample(asset, n, frames, seed) -> (n, frames, J, 4)`` local
-    rotations for any skeleton.
+    rotations for any skeleton. Optionally ``sequence_prior(asset, video_fps)`` returns an object
+    whose ``loss(rotations (T, J, 4), frames (B,)) -> scalar tensor`` scores a fit's local rotations
+    around the given video frames, differentiably (lower: more like the motion it learned); the
+    fit's pose prior ``motion`` uses it.
     """
 
 

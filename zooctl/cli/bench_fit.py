@@ -77,7 +77,7 @@ def run(
     pose_prior: str = typer.Option(
         None,
         "--pose-prior",
-        help="Pose prior of every fit: none, rest (rotations near the rest pose) or clips (the template's clip statistics); default: the preset's.",
+        help="Pose prior of every fit: none, rest (rotations near the rest pose), clips (the template's clip statistics) or motion (the store's latest motion prior scores the fitted motion; another one: --config); default: the preset's.",
     ),
     renderer: str = RendererOpt,
     articulation: str = ArticulationOpt,

@@ -80,14 +80,17 @@ class TemplateTrials:
 @dataclass
 class PosePrior:
     """Which prior ``weights.pose_prior`` weighs (`zooctl.fit.pose_prior`): ``none``, ``rest``
-    (rotations near the rest pose) or ``clips`` (per-joint rotation statistics of the template's
-    own clips, deviations floored at ``min_std_deg``)."""
+    (rotations near the rest pose), ``clips`` (per-joint rotation statistics of the template's
+    own clips, deviations floored at ``min_std_deg``) or ``motion`` (a trained motion prior
+    scoring windows of the fitted motion: ``motion`` names it in the store, or is its folder;
+    None: the store's latest)."""
 
     kind: str = "rest"
     min_std_deg: float = 10.0
+    motion: str | None = None
 
 
-POSE_PRIORS = ("none", "rest", "clips")
+POSE_PRIORS = ("none", "rest", "clips", "motion")
 
 
 @dataclass

@@ -222,6 +222,11 @@ def fit_job(
         exclude = set(old.get("excluded", [])) or exclude
         cameras = old.get("cameras")
     cfg = (cfg or preset("fast")).validate()
+    if cfg.pose_prior.kind == "motion":  # the prior's folder, so the record says which one
+        from ..store.motion_store import MotionStore
+
+        cfg = FitConfig.from_dict(cfg.to_dict(), preset(cfg.preset))
+        cfg.pose_prior.motion = str(MotionStore.open(store_root).resolve(cfg.pose_prior.motion))
     t_start = time.perf_counter()
     video = load_source(source, store_root, masks, cfg.max_frames, box, reporter)
     if cameras is not None and not resume:  # a resumed fit's camera search is done already

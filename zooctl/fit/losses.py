@@ -9,7 +9,7 @@
 | scale | `scale_prior` | ``scale_prior`` |
 | skin | `skin_prior` | ``skin_prior`` |
 | displacement | `displacement_prior` | ``displacement`` |
-| pose | `pose_prior` (``pose_prior.kind`` rest) or `clip_pose_loss` (clips) | ``pose_prior`` |
+| pose | `pose_prior` (``pose_prior.kind`` rest), `clip_pose_loss` (clips) or the motion prior's ``loss`` (motion; `zooctl.motion.fit_prior`) | ``pose_prior`` |
 | smooth, symmetry, bone_length | the articulation model's ``smoothness_loss``, ``symmetry_loss``, ``bone_length_loss`` (CASA eq. 6, 7; `zooctl.rig.priors`, since they belong to the model) | ``smooth`` (lambda2), ``symmetry`` (lambda3), ``bone_length`` |
 
 `zooctl.fit.stages.StageRunner.loss` weights and sums them; change a weight's default in

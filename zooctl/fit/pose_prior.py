@@ -1,4 +1,4 @@
-"""Pose priors on the fitted joint rotations (``FitConfig.pose_prior``: none, rest, clips).
+"""Pose priors on the fitted joint rotations (``FitConfig.pose_prior``: none, rest, clips, motion).
 
 ``rest``: rotations near the rest pose (`zooctl.fit.losses.pose_prior`). ``clips``: a Gaussian per
 joint over the rotation vector of rest^-1 q, learned from the template's own clips (every frame of
@@ -6,12 +6,15 @@ every clip): how this skeleton moves. The loss is the mean Mahalanobis distance 
 freedom; each joint's standard deviations are floored at ``min_std_deg`` (joints a clip never
 moves still may move a little, and a template's clips are not the video animal's motion).
 Without clips the prior falls back to ``rest`` statistics: mean 0, the floor as the deviation.
+``motion``: a trained motion prior scores windows of the fitted motion (`motion_sequence_prior`;
+for ``ponymation`` priors its VAE's negative ELBO, `zooctl.motion.fit_prior`).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -57,3 +60,23 @@ def clip_pose_stats(asset: RiggedAsset, min_std_deg: float = 10.0, device: str =
         n = len(aa)
     prec = torch.linalg.inv(cov)
     return ClipPoseStats(mean.float().to(device), prec.float().to(device), n)
+
+
+def motion_sequence_prior(folder: str | None, asset: RiggedAsset, video_fps: float, device: str = "cpu"):
+    """The ``motion`` pose prior: the prior stored in ``folder`` (resolved by the fit job from a
+    name) as a prior on ``asset``'s fitted rotations; its ``loss(rotations, frames)`` is the term."""
+    from ..errors import UsageError
+    from ..store.motion_store import load_prior_dir
+
+    if not folder:
+        raise UsageError(
+            "the motion pose prior needs a trained motion prior",
+            hint='train one with `zooctl motion train`, then {"pose_prior": {"kind": "motion", "motion": "NAME"}}',
+        )
+    prior = load_prior_dir(Path(folder), device)
+    if not callable(getattr(prior, "sequence_prior", None)):
+        raise UsageError(
+            f"the motion prior in {folder} ({type(prior).__name__}) cannot score a fitted motion",
+            hint="use a ponymation prior (`zooctl motion train --kind ponymation`), or another pose prior",
+        )
+    return prior.sequence_prior(asset, video_fps)

@@ -161,6 +161,8 @@ class StageRunner:
             elif kind == "clips":
                 q = scene.rotations[frames]
                 terms["pose"] = w.pose_prior * clip_pose_loss(q, scene.model.rest_rotation, scene.clip_stats)
+            elif kind == "motion":
+                terms["pose"] = w.pose_prior * scene.sequence_prior.loss(scene.rotations, frames)
         total = sum(terms.values())
         return total, {k: float(v.detach()) for k, v in terms.items()}
 

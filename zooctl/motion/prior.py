@@ -2,7 +2,8 @@
 
 Interface of every motion prior (see `zooctl.hookspecs.register_motion_priors`): ``fit(sequences)``,
 ``save(directory)``, ``sample(asset, n, frames, seed) -> (n, frames, J, 4)`` local rotations (wxyz),
-plus ``load(directory)`` as a classmethod.
+plus ``load(directory)`` as a classmethod; optionally ``sequence_prior(asset, video_fps)``, a prior
+on a fit's rotations (the fit's ``motion`` pose prior; `zooctl.motion.fit_prior`).
 
 Long motions (Ponymation appendix A): the VAE decodes ``length``-frame segments. For more frames,
 K independent *content* segments are sampled, and between each pair a *transition* segment whose
@@ -192,6 +193,12 @@ class PonymationPrior:
         sk = self._skeletons(skeleton, len(windows))
         pred, _, _ = self.model(x, sk, sample=False)
         return self._to_quat(pred)
+
+    def sequence_prior(self, asset: Any, video_fps: float) -> Any:
+        """The VAE as a prior on a fit's rotations of ``asset`` (`zooctl.motion.fit_prior`)."""
+        from .fit_prior import SequencePrior
+
+        return SequencePrior(self.model, self.cfg, asset, video_fps, self.device)
 
     def sample_delta(
         self,

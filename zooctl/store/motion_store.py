@@ -25,6 +25,20 @@ from .indexed import NamedStore
 CONFIG = "config.json"
 
 
+def load_prior_dir(path: Path, device: str = "cpu") -> Any:
+    """The prior in folder ``path`` through its plugin (``config["plugin"]``)."""
+    from ..plugins import get_registry
+
+    try:
+        cfg = json.loads((Path(path) / CONFIG).read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise StoreError(
+            f"{path} holds no readable motion prior: {exc}", hint="give a folder made by `zooctl motion train`"
+        ) from None
+    spec = get_registry().get("motion_prior", cfg.get("plugin", "ponymation"))
+    return spec.create(path=Path(path), device=device)
+
+
 class MotionStore(NamedStore):
     noun, article, place, list_cmd = "motion prior", "a", "the store", "zooctl motion list"
     exists_hint = "use --replace or another --name"
@@ -74,11 +88,17 @@ class MotionStore(NamedStore):
 
     def load(self, name: str, device: str = "cpu") -> Any:
         """The prior through its plugin (``config["plugin"]``), so third-party priors load too."""
-        from ..plugins import get_registry
+        self.config(name)  # a missing or unreadable prior is its own clear error
+        return load_prior_dir(self.path(name), device)
 
-        cfg = self.config(name)
-        spec = get_registry().get("motion_prior", cfg.get("plugin", "ponymation"))
-        return spec.create(path=self.path(name), device=device)
+    def resolve(self, name: str | None) -> Path:
+        """The folder of a prior given by name in this store, by a folder written by `zooctl motion
+        train` (a path with its config.json), or None for the latest."""
+        if name and (Path(name).expanduser() / CONFIG).is_file():
+            return Path(name).expanduser().resolve()
+        name = name or self.latest()
+        self.config(name)
+        return self.path(name).resolve()
 
     def add(self, name: str, write: Callable[[Path], None], replace: bool = False) -> Path:
         """Publish a prior: ``write(tmpdir)`` fills a temporary directory (must write config.json)."""
