@@ -7,6 +7,7 @@ record marked ``interrupted`` and its last state in ``state.pt`` for ``--resume`
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 from typing import Any
@@ -225,8 +226,8 @@ def fit_job(
     if cfg.pose_prior.kind == "motion":  # the prior's folder, so the record says which one
         from ..store.motion_store import MotionStore
 
-        cfg = FitConfig.from_dict(cfg.to_dict(), preset(cfg.preset))
-        cfg.pose_prior.motion = str(MotionStore.open(store_root).resolve(cfg.pose_prior.motion))
+        folder = str(MotionStore.open(store_root).resolve(cfg.pose_prior.motion))
+        cfg = dataclasses.replace(cfg, pose_prior=dataclasses.replace(cfg.pose_prior, motion=folder))
     t_start = time.perf_counter()
     video = load_source(source, store_root, masks, cfg.max_frames, box, reporter)
     if cameras is not None and not resume:  # a resumed fit's camera search is done already

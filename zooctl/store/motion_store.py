@@ -27,16 +27,20 @@ CONFIG = "config.json"
 
 def load_prior_dir(path: Path, device: str = "cpu") -> Any:
     """The prior in folder ``path`` through its plugin (``config["plugin"]``)."""
-    from ..plugins import get_registry
-
     try:
         cfg = json.loads((Path(path) / CONFIG).read_text())
     except (OSError, json.JSONDecodeError) as exc:
         raise StoreError(
             f"{path} holds no readable motion prior: {exc}", hint="give a folder made by `zooctl motion train`"
         ) from None
+    return _create(cfg, Path(path), device)
+
+
+def _create(cfg: dict[str, Any], path: Path, device: str) -> Any:
+    from ..plugins import get_registry
+
     spec = get_registry().get("motion_prior", cfg.get("plugin", "ponymation"))
-    return spec.create(path=Path(path), device=device)
+    return spec.create(path=path, device=device)
 
 
 class MotionStore(NamedStore):
@@ -88,8 +92,7 @@ class MotionStore(NamedStore):
 
     def load(self, name: str, device: str = "cpu") -> Any:
         """The prior through its plugin (``config["plugin"]``), so third-party priors load too."""
-        self.config(name)  # a missing or unreadable prior is its own clear error
-        return load_prior_dir(self.path(name), device)
+        return _create(self.config(name), self.path(name), device)
 
     def resolve(self, name: str | None) -> Path:
         """The folder of a prior given by name in this store, by a folder written by `zooctl motion
