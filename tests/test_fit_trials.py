@@ -53,6 +53,31 @@ def test_trials_pick_the_template_whose_fit_matches_best(tmp_path, store):
     assert asset.name == "fat" and "trial_iou" not in out[0] and state is None  # one candidate: no trial fits
 
 
+def test_a_margin_keeps_retrievals_order_among_near_equal_trials(tmp_path, store):
+    """``trials.margin``: a later candidate wins only by more than the margin; the state handed on
+    is the winner's own trial."""
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.run import fit_video
+    from zooctl.fit.template import pick_trial, try_candidates
+
+    assert pick_trial([0.80, 0.83, 0.81]) == 1
+    assert pick_trial([0.80, 0.83, 0.81], margin=0.02) == 1  # beaten by 0.03
+    assert pick_trial([0.82, 0.83, 0.81], margin=0.02) == 0
+    assert pick_trial([0.70, 0.83, 0.82], margin=0.02) == 1  # the first within the margin
+    assert pick_trial([0.5, 0.5]) == 0  # ties keep the retrieval order
+    bank, thin = _bank_with_views(store)
+    video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
+    cfg = FitConfig.from_dict(
+        {**json.loads(json.dumps(TINY)), "trials": {"candidates": 2, "iters": 2, "margin": 0.99}}
+    )
+    cands = [{"name": "fat", "score": -2.0}, {"name": "thin", "score": -1.0}]
+    asset, out, state = try_candidates(bank, video, cands, cfg)
+    assert out[1]["trial_iou"] > out[0]["trial_iou"]  # thin fits better, within the margin
+    assert asset.name == "fat"
+    again = fit_video(video, asset, cfg, resume=state)  # fat's trial: another's state would not load
+    assert len(again.history["stage2"]) == cfg.stage2.iters
+
+
 def test_the_full_fit_continues_the_winning_trial(tmp_path, store):
     """A trial is the start of the full fit, paused: continuing the winner's trial gives the same
     fit as one run from scratch, without searching the camera or running stage 1 again."""

@@ -75,6 +75,10 @@ class TemplateTrials:
     # Stage-2 iterations of each trial: the first ones of the full fit's schedule (after the camera
     # search and stage 1), so the winner's fit goes on from its trial.
     iters: int = 200
+    # The winner is the first candidate in retrieval's order whose trial mask IoU is within
+    # ``margin`` of the best one's (0: the best trial), for users who trust the ranking over small
+    # silhouette differences.
+    margin: float = 0.0
 
 
 @dataclass
@@ -174,9 +178,10 @@ class FitConfig:
                 f"pose_prior: kind {self.pose_prior.kind!r} must be one of {', '.join(POSE_PRIORS)} "
                 "and min_std_deg positive"
             )
-        if self.trials.candidates < 1 or self.trials.iters < 0:
+        if self.trials.candidates < 1 or self.trials.iters < 0 or not 0 <= self.trials.margin < 1:
             raise UsageError(
-                "trials: candidates >= 1 and iters >= 0 are required", hint="e.g. --candidates 3"
+                "trials: candidates >= 1, iters >= 0 and 0 <= margin < 1 are required",
+                hint="e.g. --candidates 3",
             )
         return self
 

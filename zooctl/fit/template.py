@@ -4,9 +4,9 @@ Retrieval is `zooctl.retrieval` (CASA's embedding search over rendered views of 
 the masked crops of a few frames are embedded with the enabled embedders and the bank ranked.
 `try_candidates` then gives the best few a short fit each and keeps the one whose silhouettes fit
 the video best (``FitConfig.trials``): the embeddings rank body plans right about 7 times in 10
-(BENCHMARKS.md, Retrieval), the fit's own mask IoU is a direct check. A trial is the beginning of
-the full fit, paused: the winner's fit goes on from its trial, so the trials cost only the losers'
-fits.
+(BENCHMARKS.md, Retrieval), the fit's own mask IoU is a direct check (``trials.margin`` lets
+retrieval's order settle near-ties). A trial is the beginning of the full fit, paused: the
+winner's fit goes on from its trial, so the trials cost only the losers' fits.
 """
 
 from __future__ import annotations
@@ -106,14 +106,14 @@ def try_candidates(
 
     A trial is the start of the full fit (camera search, stage 1 and the first ``cfg.trials.iters``
     stage-2 iterations of the configured schedule), paused; the state returned continues the
-    winner's fit exactly where its trial stopped (`fit_video`'s ``resume``). Ties keep the
-    retrieval order."""
+    winner's fit exactly where its trial stopped (`fit_video`'s ``resume``). The winner is
+    `pick_trial`'s (``cfg.trials.margin``)."""
     from .run import fit_video
 
     tried = candidates[: cfg.trials.candidates]
     if len(tried) < 2:
         return bank.get(candidates[0]["name"]), candidates, None
-    best, best_iou, best_state = None, -1.0, None
+    trials = []  # (asset, trial IoU, paused state) in retrieval order
     for i, cand in enumerate(tried):
         if reporter is not None:
             reporter.message(f"trial fit {i + 1}/{len(tried)}: template {cand['name']}")
@@ -122,10 +122,17 @@ def try_candidates(
         # Frames with an empty mask have no IoU (NaN); a video of empty masks is refused earlier.
         iou = float(np.nanmean(result.iou)) if np.isfinite(result.iou).any() else 0.0
         cand["trial_iou"] = round(iou, 4)
-        if iou > best_iou:
-            best, best_iou, best_state = asset, iou, result.paused
+        trials.append((asset, iou, result.paused))
+    best, best_iou, best_state = trials[pick_trial([t[1] for t in trials], cfg.trials.margin)]
     if reporter is not None:
         reporter.message(f"template {best.name}: trial mask IoU {best_iou:.3f}")
     if best_state is not None:
         best_state["timings"] = {}  # the trials are timed as a whole by the caller
     return best, candidates, best_state
+
+
+def pick_trial(ious: list[float], margin: float = 0.0) -> int:
+    """Index of the winning trial: the first in retrieval order whose trial IoU is within
+    ``margin`` of the best (``margin`` 0: the best, ties keeping the retrieval order)."""
+    top = max(ious)
+    return next(i for i, iou in enumerate(ious) if iou >= top - margin)
