@@ -213,17 +213,14 @@ def load_packs(
     """The current pack of each embedder (one read of the bank index) and notes on missing views.
     ``identities``: the query's embedder identities, checked against the views' (`check_identities`)."""
     entries = bank.list()
-    notes = []
     packs = {}
+    missing: dict[str, list[str]] = {}
     for e in embedders:
         check_identities(entries, e, (identities or {}).get(e))
-        pack, missing = current_pack(bank, e, entries)
-        if missing:
-            notes.append(
-                f"{e}: {len(missing)} assets have no views for it (run `zooctl bank reindex --embedder {e}`)"
-            )
+        pack, missing[e] = current_pack(bank, e, entries)
         if pack is not None:
             packs[e] = pack
+    notes = missing_views_notes(missing)
     if len(packs) < len(embedders):
         absent = sorted(set(embedders) - set(packs))
         raise UsageError(
@@ -231,6 +228,25 @@ def load_packs(
             hint="run `zooctl bank reindex` (or `bank add` assets)",
         )
     return packs, notes
+
+
+def missing_views_notes(missing: dict[str, list[str]]) -> list[str]:
+    """One note for the assets the search leaves out for want of views ({embedder: names}), named
+    with the command that adds them; assets that lack only some embedders' views get one per embedder."""
+    none = sorted(set.intersection(*(set(m) for m in missing.values()))) if missing else []
+    notes = []
+    if none:
+        shown = ", ".join(none[:5]) + (f" and {len(none) - 5} more" if len(none) > 5 else "")
+        notes.append(
+            f"{len(none)} asset{'s' if len(none) > 1 else ''} without retrieval views left out of the search: "
+            f"{shown} (`zooctl bank reindex --missing` renders them)"
+        )
+    for e, m in missing.items():
+        part = sorted(set(m) - set(none))
+        if part:
+            n = f"{len(part)} asset has" if len(part) == 1 else f"{len(part)} assets have"
+            notes.append(f"{e}: {n} no views for it (run `zooctl bank reindex --embedder {e}`)")
+    return notes
 
 
 def score_packs(
