@@ -126,19 +126,27 @@ def test_fuse_terms_add_up_to_the_fused_score():
     assert abs(z["b"].mean()) < 1e-9 and z["b"].std() == pytest.approx(1.0)
 
 
-def test_missing_views_notes_name_the_assets_left_out_once():
+def test_missing_views_notes_name_the_assets_left_out_once(monkeypatch):
     """An asset without any views is one note naming it (not one per embedder); an asset that lacks
     only one embedder's views is that embedder's note."""
     from zooctl.retrieval.search import missing_views_notes
 
+    monkeypatch.delenv("ZOOCTL_EMBEDDERS", raising=False)
     notes = missing_views_notes({"effnet": ["demo-fit", "b"], "silhouette": ["demo-fit"]})
     assert len(notes) == 2
     assert "1 asset without retrieval views" in notes[0] and "demo-fit" in notes[0]
     assert "reindex --missing" in notes[0]
     assert notes[1].startswith("effnet: 1 asset has no views") and "--embedder effnet" in notes[1]
-    many = missing_views_notes({"effnet": [f"a{i}" for i in range(7)]})
+    many = missing_views_notes(
+        {"effnet": [f"a{i}" for i in range(7)], "silhouette": [f"a{i}" for i in range(7)]}
+    )
     assert many == [
         "7 assets without retrieval views left out of the search: a0, a1, a2, a3, a4 and 2 more "
         "(`zooctl bank reindex --missing` renders them)"
     ]
     assert missing_views_notes({"effnet": [], "silhouette": []}) == []
+    # another embedder than the defaults: the command says which, as `reindex` would embed the defaults
+    only = missing_views_notes({"procnet": ["x"]})[0]
+    assert (
+        only.startswith("1 asset without procnet views") and "reindex --missing --embedder procnet`" in only
+    )

@@ -19,7 +19,7 @@ import numpy as np
 from ..embed.base import embedder_identity
 from ..errors import UsageError
 from . import query_cache
-from .index import cached_embedder, current_pack, embed_inputs, needs_masks
+from .index import cached_embedder, current_pack, embed_inputs, enabled_embedders, needs_masks
 from .query import DEFAULT_QUERY_FRAMES, QueryFrames, load_query, stored_query
 from .score import aggregate, best_views, fuse, fuse_terms, sum_terms
 
@@ -237,9 +237,13 @@ def missing_views_notes(missing: dict[str, list[str]]) -> list[str]:
     notes = []
     if none:
         shown = ", ".join(none[:5]) + (f" and {len(none) - 5} more" if len(none) > 5 else "")
+        # `reindex` embeds with the default embedders unless told otherwise
+        default = set(missing) == set(enabled_embedders())
+        flags = "" if default else "".join(f" --embedder {e}" for e in missing)
+        what = "retrieval" if default else ", ".join(missing)
         notes.append(
-            f"{len(none)} asset{'s' if len(none) > 1 else ''} without retrieval views left out of the search: "
-            f"{shown} (`zooctl bank reindex --missing` renders them)"
+            f"{len(none)} asset{'s' if len(none) > 1 else ''} without {what} views left out of the search: "
+            f"{shown} (`zooctl bank reindex --missing{flags}` renders them)"
         )
     for e, m in missing.items():
         part = sorted(set(m) - set(none))
