@@ -96,6 +96,8 @@ def test_the_full_fit_continues_the_winning_trial(tmp_path, store):
     continued = fit_video(video, asset, cfg, resume=state)
     scratch = fit_video(video, asset, FitConfig.from_dict(json.loads(json.dumps(TINY))))
     assert len(trial_steps) == 2 and continued.history["stage2"][:2] == trial_steps
+    view = continued.camera_init.pop("view_trial")  # what the trial tried: its start only here
+    assert view["start"] == "search" and "trial_iou" not in view
     assert continued.history == scratch.history and continued.camera_init == scratch.camera_init
     a, b = continued.scene.state_dict(), scratch.scene.state_dict()
     assert all(torch.equal(a[k], b[k]) for k in a)

@@ -206,6 +206,7 @@ def fit_job(
     worker's private folder; the batch driver commits it, `zooctl.pipelines.batch_fit`)."""
     from ..store.bank import Bank
     from .template import select_template
+    from .view_trial import trial_with_mirror
 
     fits = fits if fits is not None else FitStore(store_root)
     bank = bank if bank is not None else Bank.open(store_root)
@@ -277,7 +278,13 @@ def fit_job(
     def checkpoint(st: dict[str, Any]) -> None:
         fits.save_state(name, st)
 
+    mirror_s = None
     try:
+        if state is None and cfg.camera.mirror_trial and cfg.ablation.optimise:
+            # No template trial ran: the template's own start gets its depth-mirror check here;
+            # the fit goes on from the trial kept (as if never paused when nothing was tried).
+            _, state, view = trial_with_mirror(video, asset, cfg, reporter, checkpoint)
+            mirror_s = view.get("extra_seconds")
         result = fit_video(video, asset, cfg, reporter, checkpoint, state)
     except KeyboardInterrupt:
         record["status"] = "interrupted"
@@ -286,6 +293,8 @@ def fit_job(
     result.timings["retrieval"] = t_ret
     if t_trials is not None:
         result.timings["template_trials"] = t_trials
+    if mirror_s is not None:
+        result.timings["mirror_trial"] = mirror_s
     record.update(write_outputs(result, name, out_dir, fits, outputs, reporter))
     record["timings"]["total_wall"] = time.perf_counter() - t_start
     record["status"] = "done"

@@ -20,6 +20,7 @@ import torch
 from ..asset import RiggedAsset
 from ..errors import InputError, UsageError
 from ..geometry import silhouette_iou
+from ..rig.priors import find_symmetry_plane
 from .camera_init import CameraInit, initialise_camera
 from .config import FitConfig
 from .inputs import FitVideo, crop_box, fit_resolution, resample_flow, resample_masks
@@ -27,6 +28,7 @@ from .losses import MaskTargets
 from .pose_prior import clip_pose_stats, motion_sequence_prior
 from .scene import FitScene
 from .stages import StageRunner, Targets, make_optimizer, mask_iou, stage_config
+from .view_trial import depth_mirror, view_elevation
 
 STATE_VERSION = 1
 
@@ -106,13 +108,17 @@ def fit_video(
     checkpoint: Callable[[dict[str, Any]], None] | None = None,
     resume: dict[str, Any] | None = None,
     pause_at: int | None = None,
+    start: str = "search",
 ) -> FitResult:
     """Fit ``template`` to ``video`` (see the module docstring). Deterministic for a given seed.
 
     ``pause_at``: stop after that many stage-2 iterations (of the configured schedule, so the
     learning rates are those of the full fit) and return with ``result.paused`` set; fitting on
-    from it with ``resume=result.paused`` gives what one uninterrupted fit gives."""
+    from it with ``resume=result.paused`` gives what one uninterrupted fit gives. ``start``:
+    ``search`` (the camera search's start) or ``mirror`` (its depth mirror, `zooctl.fit.view_trial`)."""
     rep = reporter or _Silent()
+    if start not in ("search", "mirror"):
+        raise ValueError(f"start must be search or mirror, not {start!r}")
     cfg.validate()
     check_template(template)
     check_device(cfg.device)
@@ -161,8 +167,9 @@ def fit_video(
     if resume is None:
         rep.message("searching the camera and viewpoint")
         t1 = time.perf_counter()
+        rest = scene.rest_vertices().cpu().numpy()
         init = initialise_camera(
-            scene.rest_vertices().cpu().numpy(),
+            rest,
             template.faces,
             crop,
             cfg.camera,
@@ -172,12 +179,15 @@ def fit_video(
             H,
             video.camera_rotations,
         )
+        elevation = view_elevation(init.root_rotation)
+        if start == "mirror":
+            init = depth_mirror(init, rest, *find_symmetry_plane(rest)[:2])
         with torch.no_grad():
             scene.log_focal.fill_(float(np.log(init.focal)))
             scene.root_rotation.copy_(torch.as_tensor(init.root_rotation, dtype=torch.float32))
             scene.root_translation.copy_(torch.as_tensor(init.root_translation, dtype=torch.float32))
         timings["camera"] = time.perf_counter() - t1
-        cam_info = _camera_info(init, s)
+        cam_info = _camera_info(init, s) | {"elevation_deg": elevation}
         history: dict[str, list[dict[str, float]]] = {"stage1": [], "stage2": []}
         start_stage, start_iter, opt_state = 1, 0, None
     else:

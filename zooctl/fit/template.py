@@ -105,10 +105,11 @@ def try_candidates(
     candidates with ``trial_iou`` added to those tried, the best trial's fit state or None).
 
     A trial is the start of the full fit (camera search, stage 1 and the first ``cfg.trials.iters``
-    stage-2 iterations of the configured schedule), paused; the state returned continues the
+    stage-2 iterations of the configured schedule), paused, from the search's start or its depth
+    mirror (`zooctl.fit.view_trial.trial_with_mirror`); the state returned continues the
     winner's fit exactly where its trial stopped (`fit_video`'s ``resume``). The winner is
     `pick_trial`'s (``cfg.trials.margin``)."""
-    from .run import fit_video
+    from .view_trial import trial_with_mirror
 
     tried = candidates[: cfg.trials.candidates]
     if len(tried) < 2:
@@ -118,11 +119,10 @@ def try_candidates(
         if reporter is not None:
             reporter.message(f"trial fit {i + 1}/{len(tried)}: template {cand['name']}")
         asset = bank.get(cand["name"])
-        result = fit_video(video, asset, cfg, reporter, pause_at=cfg.trials.iters)  # no checkpoints
-        # Frames with an empty mask have no IoU (NaN); a video of empty masks is refused earlier.
-        iou = float(np.nanmean(result.iou)) if np.isfinite(result.iou).any() else 0.0
+        iou, paused, view = trial_with_mirror(video, asset, cfg, reporter)  # no checkpoints
         cand["trial_iou"] = round(iou, 4)
-        trials.append((asset, iou, result.paused))
+        cand["view_trial"] = view
+        trials.append((asset, iou, paused))
     best, best_iou, best_state = trials[pick_trial([t[1] for t in trials], cfg.trials.margin)]
     if reporter is not None:
         reporter.message(f"template {best.name}: trial mask IoU {best_iou:.3f}")

@@ -1,0 +1,114 @@
+"""The depth-mirror trial: a start that sees the animal from below is tried against its mirror."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from zooctl.benchdata.make import make_video
+from zooctl.fit.camera_init import CameraInit, view_rotation
+from zooctl.fit.config import FitConfig
+from zooctl.fit.view_trial import depth_mirror, trial_with_mirror, view_elevation
+from zooctl.geometry import matrix_to_quat, quat_to_matrix
+from zooctl.rig.synthetic import tube_asset
+
+TINY = {
+    "fit_size": 32,
+    "stage1": {"iters": 4, "batch": 4},
+    "stage2": {"iters": 4, "batch": 3},
+    "camera": {"azimuths": 4, "elevations": [-30.0], "search_size": 32},
+    "trials": {"iters": 2},
+}
+
+
+def _config(**camera) -> FitConfig:
+    data = json.loads(json.dumps(TINY))
+    data["camera"].update(camera)
+    return FitConfig.from_dict(data)
+
+
+def test_depth_mirror_reflects_every_frame_through_the_animals_centre():
+    rng = np.random.default_rng(0)
+    half = rng.normal(size=(50, 3)) + [1.0, 0.0, 0.0]
+    plane_x = 0.2  # the template's mirror plane x = 0.2, off the origin
+    rest = np.concatenate([half, half * [-1, 1, 1] + [2 * plane_x, 0, 0]])
+    rots = np.stack([view_rotation(a, e, r) for a, e, r in ((30, 20, 0), (-100, -35, 5), (170, 5, -10))])
+    trans = np.array([[0.1, -0.2, -5.0], [0.3, 0.0, -7.0], [-0.4, 0.2, -6.0]])
+    init = CameraInit(100.0, np.stack([matrix_to_quat(r) for r in rots]), trans, [], 0.5, [0.5])
+    mirror = depth_mirror(init, rest, np.array([1.0, 0.0, 0.0]), plane_x)
+    R2 = quat_to_matrix(mirror.root_rotation)
+    assert np.allclose(np.linalg.det(R2), 1.0)  # a rotation, not a reflection
+    for t in range(3):
+        posed = rest @ rots[t].T + trans[t]
+        centre_z = posed.mean(0)[2]
+        expected = posed * [1, 1, -1] + [0, 0, 2 * centre_z]  # mirrored in depth about its centre
+        got = rest @ R2[t].T + mirror.root_translation[t]
+        assert cKDTree(expected).query(got)[0].max() < 1e-9
+    # The mirror of a view from above is a view from below (a vertical mirror plane).
+    assert view_elevation(init.root_rotation[:1]) == pytest.approx(20.0)
+    assert view_elevation(mirror.root_rotation[:1]) == pytest.approx(-20.0)
+    assert mirror.focal == init.focal and mirror.iou == init.iou
+
+
+def test_a_start_from_below_is_tried_against_its_mirror_and_the_fit_goes_on_from_the_one_kept(tmp_path):
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.run import fit_video
+
+    thin = tube_asset(bones=3, name="thin")
+    video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
+    cfg = _config()
+    iou, state, info = trial_with_mirror(video, thin, cfg)
+    assert info["elevation_deg"] < 0  # the only elevation searched looks up at the animal
+    both = info["trial_iou"]
+    kept = "mirror" if both["mirror"] >= both["search"] - cfg.camera.mirror_margin else "search"
+    assert info["start"] == kept and iou == pytest.approx(both[kept], abs=1e-4)
+    assert info["extra_seconds"] > 0
+    assert state["iteration"] == 2 and state["camera_init"]["view_trial"] == info
+    again = fit_video(video, thin, cfg, resume=state)
+    assert len(again.history["stage2"]) == cfg.stage2.iters
+    assert again.camera_init["view_trial"]["start"] == kept
+    # A margin of 0.99 keeps the mirror whatever its IoU; no mirror trial when it is switched off.
+    _, _, info = trial_with_mirror(video, thin, _config(mirror_margin=0.99))
+    assert info["start"] == "mirror"
+    _, _, info = trial_with_mirror(video, thin, _config(mirror_trial=False))
+    assert info["start"] == "search" and "trial_iou" not in info
+
+
+def test_a_start_from_above_is_not_mirrored_and_pausing_changes_nothing(tmp_path):
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.run import fit_video
+
+    thin = tube_asset(bones=3, name="thin")
+    video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
+    cfg = _config(elevations=[30.0])
+    _, state, info = trial_with_mirror(video, thin, cfg)
+    assert info["start"] == "search" and info["elevation_deg"] > 0 and "trial_iou" not in info
+    resumed = fit_video(video, thin, cfg, resume=state)
+    whole = fit_video(video, thin, cfg)
+    np.testing.assert_allclose(resumed.iou, whole.iou, atol=1e-6)
+
+
+def test_fit_with_a_given_template_records_the_mirror_trial(tmp_path, store, capsys):
+    from cli_helpers import run_inprocess
+    from test_fit_e2e import validate_record
+
+    from zooctl.store.bank import Bank
+
+    thin = tube_asset(bones=3, name="thin")
+    Bank(store).add(thin)
+    folder = make_video(thin, tmp_path / "v", frames=3, size=32, seed=0)
+    cfg = tmp_path / "c.json"
+    cfg.write_text(json.dumps(TINY))
+    r = run_inprocess(
+        capsys, "fit", str(folder), "--template", "thin", "--config", str(cfg), "--name", "vt", "--json"
+    )
+    assert r.code == 0, r.err
+    rec = json.loads((store / "fits" / "vt" / "record.json").read_text())
+    validate_record(rec)
+    view = rec["camera"]["search"]["view_trial"]
+    assert view["start"] in ("search", "mirror") and set(view["trial_iou"]) == {"search", "mirror"}
+    assert rec["timings"]["mirror_trial"] == view["extra_seconds"]
+    assert rec["losses"]["stage2"]["steps"] == TINY["stage2"]["iters"]  # the trial's steps and the rest

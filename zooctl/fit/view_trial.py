@@ -1,0 +1,111 @@
+"""The depth-mirror trial: which of two views with one silhouette the fit starts from.
+
+A view of an animal and its mirror in depth (the animal reflected front to back through its own
+centre: root rotation ``M_z R S``, with ``S`` the template's mirror plane) cast the same
+silhouette, so the camera search cannot tell them apart and picks either. What tells them apart
+in the world is the camera's height: the depth mirror of a view from above is a view from below,
+and people film animals from above or level far more often than from below. So when the
+search's start sees the animal from below, the fit also tries the start's depth mirror (a trial:
+the beginning of the fit, paused) and keeps the mirror unless its trial mask IoU falls more than
+``camera.mirror_margin`` (the trials' own noise) below the search's. Nothing is tried when the
+camera's rotations are known: their motion tells the two views apart (`initialise_camera`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from ..geometry import matrix_to_quat, quat_to_matrix
+from .camera_init import CameraInit
+
+
+def view_elevation(root_rotation: np.ndarray) -> float:
+    """Mean elevation in degrees of the camera over the template's horizon (zooctl's templates
+    are Y up): positive when the camera looks down on the animal. root_rotation (T, 4) wxyz, the
+    fit's camera looking down -Z."""
+    R = quat_to_matrix(np.asarray(root_rotation, np.float64))  # (T, 3, 3)
+    up_towards_camera = float(np.mean(R[:, 2, 1]))
+    return math.degrees(math.asin(min(max(up_towards_camera, -1.0), 1.0)))
+
+
+def depth_mirror(init: CameraInit, rest: np.ndarray, normal: np.ndarray, offset: float) -> CameraInit:
+    """``init`` with every frame's animal mirrored in depth through its own centre.
+
+    rest (V, 3) the template's rest vertices; (normal (3,), offset) its mirror plane
+    ``normal . x = offset``. A frame's vertices ``R x + t`` become ``M_z (R x + t)`` mirrored
+    about the depth of the animal's centre; with ``x = S x' + 2 offset normal`` (the template is
+    its own mirror image) that is root rotation ``M_z R S`` and a new translation."""
+    n = np.asarray(normal, np.float64)
+    S = np.eye(3) - 2.0 * np.outer(n, n)
+    Mz = np.diag([1.0, 1.0, -1.0])
+    R = quat_to_matrix(np.asarray(init.root_rotation, np.float64))  # (T, 3, 3)
+    t = np.asarray(init.root_translation, np.float64)  # (T, 3)
+    centre_z = (R @ np.asarray(rest, np.float64).mean(0) + t)[:, 2]
+    rot = Mz @ R @ S
+    trans = t * np.array([1.0, 1.0, -1.0])
+    trans[:, 2] += 2.0 * centre_z
+    trans += 2.0 * float(offset) * (Mz @ R @ n)
+    return CameraInit(
+        init.focal,
+        np.stack([matrix_to_quat(r) for r in rot]),
+        trans,
+        init.candidates,
+        init.iou,
+        init.keyframe_iou,
+    )
+
+
+def trial_iou(result: Any) -> float:
+    """Mean input-view mask IoU of a (trial) fit; frames with an empty mask have none (NaN)."""
+    return float(np.nanmean(result.iou)) if np.isfinite(result.iou).any() else 0.0
+
+
+def trial_with_mirror(
+    video: Any, template: Any, cfg: Any, reporter: Any = None, checkpoint: Any = None
+) -> tuple[float, dict[str, Any] | None, dict[str, Any]]:
+    """The template's trial (`fit_video` paused after ``cfg.trials.iters`` stage-2 iterations)
+    and, when its start sees the animal from below, its depth mirror's (module docstring).
+
+    Returns (the kept trial's IoU, its paused state to continue from, what was tried: also
+    stored in the state's ``camera_init["view_trial"]`` for fit.json). ``checkpoint``: as
+    `fit_video`'s, for both trials (each is a fit that a resume can finish)."""
+    from .run import fit_video
+
+    t = time.perf_counter()
+    search = fit_video(video, template, cfg, reporter, checkpoint, pause_at=cfg.trials.iters)
+    search_s = time.perf_counter() - t
+    iou = trial_iou(search)
+    elevation = float(search.camera_init["elevation_deg"])
+    info: dict[str, Any] = {"start": "search", "elevation_deg": round(elevation, 1)}
+    kept = search
+    if (
+        cfg.camera.mirror_trial
+        and elevation < 0.0
+        and video.camera_rotations is None
+        and cfg.ablation.optimise
+    ):
+        if reporter is not None:
+            reporter.message(
+                f"the start sees {template.name} from below ({elevation:.0f} deg): trying its depth mirror"
+            )
+        t = time.perf_counter()
+        mirror = fit_video(
+            video, template, cfg, reporter, checkpoint, pause_at=cfg.trials.iters, start="mirror"
+        )
+        mirror_s = time.perf_counter() - t
+        m_iou = trial_iou(mirror)
+        info["trial_iou"] = {"search": round(iou, 4), "mirror": round(m_iou, 4)}
+        # the trial not kept: the time the mirror check added to the fit
+        info["extra_seconds"] = round(mirror_s, 2)
+        if m_iou >= iou - cfg.camera.mirror_margin:
+            info["start"] = "mirror"
+            info["extra_seconds"] = round(search_s, 2)
+            kept, iou = mirror, m_iou
+    state = kept.paused
+    if state is not None:
+        state["camera_init"] = dict(state["camera_init"], view_trial=info)
+    return iou, state, info
