@@ -9,6 +9,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from zooctl.benchdata.make import make_video
+from zooctl.errors import UsageError
 from zooctl.fit.camera_init import CameraInit, view_rotation
 from zooctl.fit.config import FitConfig
 from zooctl.fit.view_trial import depth_mirror, trial_with_mirror, view_elevation
@@ -73,8 +74,10 @@ def test_a_start_from_below_is_tried_against_its_mirror_and_the_fit_goes_on_from
     # A margin of 0.99 keeps the mirror whatever its IoU; no mirror trial when it is switched off.
     _, _, info = trial_with_mirror(video, thin, _config(mirror_margin=0.99))
     assert info["start"] == "mirror"
-    _, _, info = trial_with_mirror(video, thin, _config(mirror_trial=False))
+    _, _, info = trial_with_mirror(video, thin, cfg, mirror=False)
     assert info["start"] == "search" and "trial_iou" not in info
+    with pytest.raises(UsageError, match="mirror_trial"):
+        _config(mirror_trial="sometimes")
 
 
 def test_a_start_from_above_is_not_mirrored_and_pausing_changes_nothing(tmp_path):
@@ -112,3 +115,22 @@ def test_fit_with_a_given_template_records_the_mirror_trial(tmp_path, store, cap
     assert view["start"] in ("search", "mirror") and set(view["trial_iou"]) == {"search", "mirror"}
     assert rec["timings"]["mirror_trial"] == view["extra_seconds"]
     assert rec["losses"]["stage2"]["steps"] == TINY["stage2"]["iters"]  # the trial's steps and the rest
+
+
+def test_retrieved_candidates_are_mirrored_only_when_asked(tmp_path, store):
+    """``camera.mirror_trial``: ``given`` (default) leaves retrieval's candidates alone, ``always``
+    tries each one's depth mirror too."""
+    from test_fit_trials import _bank_with_views
+
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.template import try_candidates
+
+    bank, thin = _bank_with_views(store)
+    video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
+    for mode, tried in (("given", False), ("always", True)):
+        cands = [{"name": "fat", "score": -2.0}, {"name": "thin", "score": -1.0}]
+        cfg = FitConfig.from_dict({**json.loads(json.dumps(TINY)), "trials": {"candidates": 2, "iters": 2}})
+        cfg.camera.mirror_trial = mode
+        _, out, state = try_candidates(bank, video, cands, cfg)
+        assert all(("trial_iou" in c["view_trial"]) == tried for c in out), mode
+        assert state["camera_init"]["view_trial"]["elevation_deg"] < 0

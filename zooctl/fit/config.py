@@ -33,9 +33,10 @@ class CameraConfig:
     search_frames: int = 3  # frames scored per candidate
     track_every: int = 6  # keyframes for the per-frame root rotation tracking
     track_step: float = 15.0  # degrees of the local tracking grid
-    # A start seeing the animal from below is tried against its depth mirror (zooctl.fit.view_trial);
-    # the mirror is kept unless its trial IoU is more than the margin (the trials' noise) lower.
-    mirror_trial: bool = True
+    # A start seeing the animal from below is tried against its depth mirror (zooctl.fit.view_trial),
+    # kept unless its trial IoU is more than the margin (the trials' noise) lower: "given" for a
+    # template named by the user (retrieved ones are other animals, whose trial IoU misled), "always", "never".
+    mirror_trial: str = "given"
     mirror_margin: float = 0.01
 
 
@@ -99,6 +100,7 @@ class PosePrior:
 
 
 POSE_PRIORS = ("none", "rest", "clips", "motion")
+MIRROR_TRIALS = ("given", "always", "never")
 
 
 @dataclass
@@ -177,6 +179,10 @@ class FitConfig:
             raise UsageError(f"--focal {self.camera.focal} must be positive (pixels)")
         if not 0 <= self.camera.mirror_margin < 1:
             raise UsageError(f"camera.mirror_margin {self.camera.mirror_margin} must be in [0, 1)")
+        if self.camera.mirror_trial not in MIRROR_TRIALS:
+            raise UsageError(
+                f"camera.mirror_trial {self.camera.mirror_trial!r} must be one of {', '.join(MIRROR_TRIALS)}"
+            )
         if self.max_frames is not None and self.max_frames < 1:
             raise UsageError("max_frames must be at least 1")
         if self.pose_prior.kind not in POSE_PRIORS or not self.pose_prior.min_std_deg > 0:

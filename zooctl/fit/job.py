@@ -279,8 +279,10 @@ def fit_job(
         fits.save_state(name, st)
 
     mirror_s = None
+    mode = cfg.camera.mirror_trial  # "given": only for a template the user named
+    mirror = mode == "always" or (mode == "given" and template is not None)
     try:
-        if state is None and cfg.camera.mirror_trial and cfg.ablation.optimise:
+        if state is None and mirror and cfg.ablation.optimise:
             # No template trial ran: the template's own start gets its depth-mirror check here;
             # the fit goes on from the trial kept (as if never paused when nothing was tried).
             _, state, view = trial_with_mirror(video, asset, cfg, reporter, checkpoint)

@@ -105,8 +105,8 @@ def try_candidates(
     candidates with ``trial_iou`` added to those tried, the best trial's fit state or None).
 
     A trial is the start of the full fit (camera search, stage 1 and the first ``cfg.trials.iters``
-    stage-2 iterations of the configured schedule), paused, from the search's start or its depth
-    mirror (`zooctl.fit.view_trial.trial_with_mirror`); the state returned continues the
+    stage-2 iterations of the configured schedule), paused, from the search's start (or its depth
+    mirror with ``camera.mirror_trial`` ``always``: `zooctl.fit.view_trial`); the state returned continues the
     winner's fit exactly where its trial stopped (`fit_video`'s ``resume``). The winner is
     `pick_trial`'s (``cfg.trials.margin``)."""
     from .view_trial import trial_with_mirror
@@ -119,7 +119,8 @@ def try_candidates(
         if reporter is not None:
             reporter.message(f"trial fit {i + 1}/{len(tried)}: template {cand['name']}")
         asset = bank.get(cand["name"])
-        iou, paused, view = trial_with_mirror(video, asset, cfg, reporter)  # no checkpoints
+        always = cfg.camera.mirror_trial == "always"
+        iou, paused, view = trial_with_mirror(video, asset, cfg, reporter, mirror=always)  # no checkpoints
         cand["trial_iou"] = round(iou, 4)
         cand["view_trial"] = view
         trials.append((asset, iou, paused))

@@ -9,6 +9,10 @@ search's start sees the animal from below, the fit also tries the start's depth 
 the beginning of the fit, paused) and keeps the mirror unless its trial mask IoU falls more than
 ``camera.mirror_margin`` (the trials' own noise) below the search's. Nothing is tried when the
 camera's rotations are known: their motion tells the two views apart (`initialise_camera`).
+
+``camera.mirror_trial`` says for which templates: ``given`` (default) only for a template the
+user named (``--template``), as a retrieved template is another animal, whose trial IoU does not
+tell the better view (BENCHMARKS.md, Fit); ``always`` for retrieval's candidates too; ``never``.
 """
 
 from __future__ import annotations
@@ -65,10 +69,16 @@ def trial_iou(result: Any) -> float:
 
 
 def trial_with_mirror(
-    video: Any, template: Any, cfg: Any, reporter: Any = None, checkpoint: Any = None
+    video: Any,
+    template: Any,
+    cfg: Any,
+    reporter: Any = None,
+    checkpoint: Any = None,
+    mirror: bool = True,
 ) -> tuple[float, dict[str, Any] | None, dict[str, Any]]:
     """The template's trial (`fit_video` paused after ``cfg.trials.iters`` stage-2 iterations)
-    and, when its start sees the animal from below, its depth mirror's (module docstring).
+    and, when ``mirror`` and its start sees the animal from below, its depth mirror's (module
+    docstring).
 
     Returns (the kept trial's IoU, its paused state to continue from, what was tried: also
     stored in the state's ``camera_init["view_trial"]`` for fit.json). ``checkpoint``: as
@@ -82,12 +92,7 @@ def trial_with_mirror(
     elevation = float(search.camera_init["elevation_deg"])
     info: dict[str, Any] = {"start": "search", "elevation_deg": round(elevation, 1)}
     kept = search
-    if (
-        cfg.camera.mirror_trial
-        and elevation < 0.0
-        and video.camera_rotations is None
-        and cfg.ablation.optimise
-    ):
+    if mirror and elevation < 0.0 and video.camera_rotations is None and cfg.ablation.optimise:
         if reporter is not None:
             reporter.message(
                 f"the start sees {template.name} from below ({elevation:.0f} deg): trying its depth mirror"
