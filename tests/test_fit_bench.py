@@ -161,7 +161,7 @@ def test_bench_folders_without_novel_views_say_n_a(tmp_path, store):
 
 def test_overlay_turns_around_the_fit_at_a_fixed_time(tmp_path):
     from zooctl.fit.export import fitted_asset
-    from zooctl.fit.outputs import overlay_frames
+    from zooctl.fit.outputs import OUTLINE, overlay_frames
 
     res = _fit_tiny(tmp_path)
     asset = fitted_asset(res.scene, res.template, "tube-fit", res.video.fps)
@@ -169,6 +169,8 @@ def test_overlay_turns_around_the_fit_at_a_fixed_time(tmp_path):
     T, W = res.video.num_frames, res.video.frames.shape[2]
     assert out.shape == (T + 4, 32, 64, 3)
     assert all((out[T + k, :, :W] == out[T // 2, :, :W]).all() for k in range(4))  # time stands still
+    outline = (out[:T, :, :W] == OUTLINE).all(-1)  # the fit's silhouette outlined on every frame
+    assert all(outline[t].any() for t in range(T)) and not (out[:T, :, W:] == OUTLINE).all(-1).any()
     assert not (out[T, :, W:] == out[T + 1, :, W:]).all()  # while the camera turns
 
 

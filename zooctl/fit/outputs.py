@@ -88,7 +88,8 @@ def overlay_frames(
     asset: RiggedAsset, camera, frames: np.ndarray, alpha: float = 0.6, turn_frames: int = 60
 ) -> np.ndarray:
     """(T + turn_frames, H, 2W, 3) uint8. First the video: the shaded fitted mesh over each frame,
-    beside the fit playing its motion seen from the side (+90 degrees around the animal from the
+    outlined in `OUTLINE` (a fit shaded like the animal's own colours would not show), beside the
+    fit playing its motion seen from the side (+90 degrees around the animal from the
     input camera, raised 20 degrees), a view the input never shows. Then a turntable: the fit frozen
     at the middle frame (its overlay on the left) while the camera turns once around it, starting
     at the input camera's direction."""
@@ -120,7 +121,7 @@ def overlay_frames(
         mask = rasterize(torch.as_tensor(posed[t][None]), faces, camera).mask[0].numpy()
         img = frames[t].copy()
         img[mask] = (alpha * shaded[mask] + (1 - alpha) * frames[t][mask]).astype(np.uint8)
-        out[t, :, :W] = _label(img, "input + fit")
+        out[t, :, :W] = _label(_outline(img, mask), "input + fit")
         out[t, :, W:] = _label(around(t, 90.0, 20.0), "fit, side view (+90 deg)")
     mid = T // 2
     for k in range(turn_frames):
@@ -128,6 +129,19 @@ def overlay_frames(
         ang = 360.0 * k / turn_frames
         out[T + k, :, W:] = _label(around(mid, ang, 0.0), f"fit at frame {mid}, {ang:.0f} deg from the input")
     return out
+
+
+OUTLINE = (255, 0, 255)  # magenta: rare in footage of animals
+
+
+def _outline(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``img`` with the boundary of ``mask`` (H, W) bool drawn in `OUTLINE`, about 1/240 of the height wide."""
+    import cv2
+
+    contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    img = np.ascontiguousarray(img)
+    cv2.drawContours(img, contours, -1, OUTLINE, max(1, round(img.shape[0] / 240)))
+    return img
 
 
 def _label(img: np.ndarray, text: str) -> np.ndarray:
