@@ -206,7 +206,7 @@ def fit_job(
     worker's private folder; the batch driver commits it, `zooctl.pipelines.batch_fit`)."""
     from ..store.bank import Bank
     from .template import select_template
-    from .view_trial import trial_with_mirror
+    from .view_trial import mirror_wanted, trial_with_mirror
 
     fits = fits if fits is not None else FitStore(store_root)
     bank = bank if bank is not None else Bank.open(store_root)
@@ -279,10 +279,8 @@ def fit_job(
         fits.save_state(name, st)
 
     mirror_s = None
-    mode = cfg.camera.mirror_trial  # "given": only for a template the user named
-    mirror = mode == "always" or (mode == "given" and template is not None)
     try:
-        if state is None and mirror and cfg.ablation.optimise:
+        if state is None and mirror_wanted(cfg, template is not None) and cfg.ablation.optimise:
             # No template trial ran: the template's own start gets its depth-mirror check here;
             # the fit goes on from the trial kept (as if never paused when nothing was tried).
             _, state, view = trial_with_mirror(video, asset, cfg, reporter, checkpoint)

@@ -109,18 +109,18 @@ def try_candidates(
     mirror with ``camera.mirror_trial`` ``always``: `zooctl.fit.view_trial`); the state returned continues the
     winner's fit exactly where its trial stopped (`fit_video`'s ``resume``). The winner is
     `pick_trial`'s (``cfg.trials.margin``)."""
-    from .view_trial import trial_with_mirror
+    from .view_trial import mirror_wanted, trial_with_mirror
 
     tried = candidates[: cfg.trials.candidates]
     if len(tried) < 2:
         return bank.get(candidates[0]["name"]), candidates, None
     trials = []  # (asset, trial IoU, paused state) in retrieval order
+    mirror = mirror_wanted(cfg, template_given=False)
     for i, cand in enumerate(tried):
         if reporter is not None:
             reporter.message(f"trial fit {i + 1}/{len(tried)}: template {cand['name']}")
         asset = bank.get(cand["name"])
-        always = cfg.camera.mirror_trial == "always"
-        iou, paused, view = trial_with_mirror(video, asset, cfg, reporter, mirror=always)  # no checkpoints
+        iou, paused, view = trial_with_mirror(video, asset, cfg, reporter, mirror=mirror)  # no checkpoints
         cand["trial_iou"] = round(iou, 4)
         cand["view_trial"] = view
         trials.append((asset, iou, paused))

@@ -63,6 +63,12 @@ def depth_mirror(init: CameraInit, rest: np.ndarray, normal: np.ndarray, offset:
     )
 
 
+def mirror_wanted(cfg: Any, template_given: bool) -> bool:
+    """Whether ``camera.mirror_trial`` asks for the check on this template (module docstring)."""
+    mode = cfg.camera.mirror_trial
+    return mode == "always" or (mode == "given" and template_given)
+
+
 def trial_iou(result: Any) -> float:
     """Mean input-view mask IoU of a (trial) fit; frames with an empty mask have none (NaN)."""
     return float(np.nanmean(result.iou)) if np.isfinite(result.iou).any() else 0.0
@@ -98,18 +104,18 @@ def trial_with_mirror(
                 f"the start sees {template.name} from below ({elevation:.0f} deg): trying its depth mirror"
             )
         t = time.perf_counter()
-        mirror = fit_video(
+        mirrored = fit_video(
             video, template, cfg, reporter, checkpoint, pause_at=cfg.trials.iters, start="mirror"
         )
         mirror_s = time.perf_counter() - t
-        m_iou = trial_iou(mirror)
+        m_iou = trial_iou(mirrored)
         info["trial_iou"] = {"search": round(iou, 4), "mirror": round(m_iou, 4)}
         # the trial not kept: the time the mirror check added to the fit
         info["extra_seconds"] = round(mirror_s, 2)
         if m_iou >= iou - cfg.camera.mirror_margin:
             info["start"] = "mirror"
             info["extra_seconds"] = round(search_s, 2)
-            kept, iou = mirror, m_iou
+            kept, iou = mirrored, m_iou
     state = kept.paused
     if state is not None:
         state["camera_init"] = dict(state["camera_init"], view_trial=info)
