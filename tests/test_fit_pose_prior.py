@@ -7,12 +7,13 @@ import json
 import numpy as np
 import pytest
 import torch
+from fit_helpers import tiny_overrides
 
 from zooctl.asset import Clip
 from zooctl.errors import UsageError
 from zooctl.fit.config import FitConfig
-from zooctl.fit.losses import clip_pose_loss
-from zooctl.fit.pose_prior import clip_pose_stats
+from zooctl.fit.losses import clip_pose_loss, joint_limit_loss
+from zooctl.fit.pose_prior import clip_joint_limits, clip_pose_stats
 from zooctl.rig.rotations import axis_angle_to_quat, quat_mul
 from zooctl.rig.synthetic import tube_asset
 
@@ -60,15 +61,14 @@ def test_fit_records_and_uses_the_pose_prior(tmp_path):
     from zooctl.fit.inputs import load_fit_video
     from zooctl.fit.run import fit_video
 
-    tiny = {
-        "fit_size": 32,
-        "stage1": {"iters": 2, "batch": 4},
-        "stage2": {"iters": 3, "batch": 3},
-        "camera": {"azimuths": 4, "elevations": [10.0], "search_size": 32},
-        "pose_prior": {"kind": "clips"},
-    }
+    tiny = tiny_overrides(3) | {"pose_prior": {"kind": "clips"}}
     cfg = FitConfig.from_dict(json.loads(json.dumps(tiny)))
-    assert cfg.to_dict()["pose_prior"] == {"kind": "clips", "min_std_deg": 10.0, "motion": None}
+    assert cfg.to_dict()["pose_prior"] == {
+        "kind": "clips",
+        "min_std_deg": 10.0,
+        "motion": None,
+        "limit_margin_deg": 30.0,
+    }
     asset = tube_asset(bones=3, name="tube")
     video = load_fit_video(make_video(asset, tmp_path / "v", frames=4, size=32, seed=0))
     res = fit_video(video, asset, cfg)
@@ -79,3 +79,61 @@ def test_fit_records_and_uses_the_pose_prior(tmp_path):
     assert all("pose" not in s for s in none.history["stage2"])
     with pytest.raises(UsageError, match="pose_prior"):
         FitConfig.from_dict({"pose_prior": {"kind": "vae"}})
+
+
+def test_joint_limits_cost_only_beyond_the_clips_range():
+    """Limits from a clip that bends joint 1 about x from 0.2 to 0.8 rad, widened by 10 degrees:
+    no cost inside (the clips' own poses, the rest pose of a joint the clips never move within
+    the margin), a cost growing with the excess outside, and a gradient that turns back in."""
+    asset = tube_asset(bones=3, name="tube")
+    _, q, _ = asset.rest_trs()
+    rest = torch.as_tensor(q, dtype=torch.float32)
+    J = len(asset.parents)
+    aa = torch.zeros(20, J, 3)
+    aa[:, 1, 0] = torch.linspace(0.2, 0.8, 20)
+    rots = quat_mul(rest[None].expand(20, J, 4), axis_angle_to_quat(aa))
+    limits = clip_joint_limits(_with_clip(asset, rots.numpy()), margin_deg=10.0)
+    m = np.radians(10.0)
+    assert limits.frames == 20
+    assert (
+        abs(float(limits.low[1, 0]) - (0.2 - m)) < 1e-5 and abs(float(limits.high[1, 0]) - (0.8 + m)) < 1e-5
+    )
+    assert abs(float(limits.high[2, 1]) - m) < 1e-6  # a joint the clip never moves: rest +- margin
+
+    def posed(joint, axis, angle):
+        a = torch.zeros(1, J, 3)
+        a[0, joint, axis] = angle
+        return quat_mul(rest[None], axis_angle_to_quat(a))
+
+    assert float(joint_limit_loss(rots, rest, limits)) == 0.0
+    assert float(joint_limit_loss(posed(1, 0, 0.05), rest, limits)) == 0.0  # 0.05 > 0.2 - 10 deg
+    small = float(joint_limit_loss(posed(1, 0, 1.3), rest, limits))
+    large = float(joint_limit_loss(posed(1, 0, 1.6), rest, limits))
+    assert abs(small - (1.3 - 0.8 - m) ** 2) < 1e-4 and large > small > 0
+    assert float(joint_limit_loss(posed(2, 2, 0.5), rest, limits)) > 0  # bent where the clips never bend
+    x = posed(1, 0, 1.3).requires_grad_(True)
+    joint_limit_loss(x, rest, limits).backward()
+    step = x.detach() - 0.1 * x.grad
+    assert float(joint_limit_loss(step, rest, limits)) < small
+    bare = tube_asset(bones=3, name="t2")
+    bare.clips = {}
+    assert clip_joint_limits(bare) is None  # nothing to learn a range from: no limits
+
+
+def test_fit_uses_joint_limits_only_when_weighted(tmp_path):
+    from zooctl.benchdata.make import make_video
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.run import fit_video
+
+    tiny = tiny_overrides(3) | {"weights": {"joint_limits": 1.0}, "pose_prior": {"limit_margin_deg": 5.0}}
+    cfg = FitConfig.from_dict(json.loads(json.dumps(tiny)))
+    assert cfg.to_dict()["weights"]["joint_limits"] == 1.0 and cfg.pose_prior.limit_margin_deg == 5.0
+    asset = tube_asset(bones=3, name="tube")
+    assert asset.clips, "the synthetic tube has clips to learn limits from"
+    video = load_fit_video(make_video(asset, tmp_path / "v", frames=4, size=32, seed=0))
+    res = fit_video(video, asset, cfg)
+    assert res.scene.joint_limits is not None and all("limits" in s for s in res.history["stage2"])
+    off = fit_video(video, asset, FitConfig.from_dict({k: v for k, v in tiny.items() if k != "weights"}))
+    assert off.scene.joint_limits is None and all("limits" not in s for s in off.history["stage2"])
+    with pytest.raises(UsageError, match="limit_margin_deg"):
+        FitConfig.from_dict({"pose_prior": {"limit_margin_deg": -1}})

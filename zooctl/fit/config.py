@@ -66,6 +66,7 @@ class LossWeights:
     skin_prior: float = 0.01  # skinning weights near the template's (KL)
     displacement: float = 1.0  # mean squared displacement (relative to the template size)
     pose_prior: float = 0.01  # joint rotations near the rest pose
+    joint_limits: float = 0.0  # rotations beyond the template clips' joint ranges (0: off)
     scale_prior: float = 0.01  # log global scale near 0 (the template's size)
 
 
@@ -92,11 +93,13 @@ class PosePrior:
     (rotations near the rest pose), ``clips`` (per-joint rotation statistics of the template's
     own clips, deviations floored at ``min_std_deg``) or ``motion`` (a trained motion prior
     scoring windows of the fitted motion: ``motion`` names it in the store, or is its folder;
-    None: the store's latest)."""
+    None: the store's latest). ``limit_margin_deg`` widens the clips' joint ranges on each side
+    for the joint-limit term (``weights.joint_limits``, with any kind)."""
 
     kind: str = "rest"
     min_std_deg: float = 10.0
     motion: str | None = None
+    limit_margin_deg: float = 30.0
 
 
 POSE_PRIORS = ("none", "rest", "clips", "motion")
@@ -189,6 +192,10 @@ class FitConfig:
             raise UsageError(
                 f"pose_prior: kind {self.pose_prior.kind!r} must be one of {', '.join(POSE_PRIORS)} "
                 "and min_std_deg positive"
+            )
+        if not 0 <= self.pose_prior.limit_margin_deg <= 180:
+            raise UsageError(
+                f"pose_prior.limit_margin_deg {self.pose_prior.limit_margin_deg} must be in [0, 180]"
             )
         if self.trials.candidates < 1 or self.trials.iters < 0 or not 0 <= self.trials.margin < 1:
             raise UsageError(

@@ -10,6 +10,7 @@
 | skin | `skin_prior` | ``skin_prior`` |
 | displacement | `displacement_prior` | ``displacement`` |
 | pose | `pose_prior` (``pose_prior.kind`` rest), `clip_pose_loss` (clips) or the motion prior's ``loss`` (motion; `zooctl.motion.fit_prior`) | ``pose_prior`` |
+| limits | `joint_limit_loss` (the template clips' joint ranges, `zooctl.fit.pose_prior.clip_joint_limits`) | ``joint_limits`` |
 | smooth, symmetry, bone_length | the articulation model's ``smoothness_loss``, ``symmetry_loss``, ``bone_length_loss`` (CASA eq. 6, 7; `zooctl.rig.priors`, since they belong to the model) | ``smooth`` (lambda2), ``symmetry`` (lambda3), ``bone_length`` |
 
 `zooctl.fit.stages.StageRunner.loss` weights and sums them; change a weight's default in
@@ -32,7 +33,7 @@ import torch.nn.functional as F
 from ..rig.rotations import quat_conjugate, quat_mul, quat_normalize, quat_to_axis_angle
 
 if TYPE_CHECKING:
-    from .pose_prior import ClipPoseStats
+    from .pose_prior import ClipPoseStats, JointLimits
 
 Tensor = torch.Tensor
 
@@ -177,3 +178,12 @@ def clip_pose_loss(rotations: Tensor, rest: Tensor, stats: ClipPoseStats) -> Ten
     q = quat_mul(quat_conjugate(rest)[None], quat_normalize(rotations))
     d = quat_to_axis_angle(q) - stats.mean  # (T, J, 3)
     return torch.einsum("tja,jab,tjb->tj", d, stats.precision, d).mean() / 3.0
+
+
+def joint_limit_loss(rotations: Tensor, rest: Tensor, limits: JointLimits) -> Tensor:
+    """Squared excess (radians^2) of rest^-1 q's rotation vector beyond each joint's range, summed
+    over joints and axes, mean over frames; rotations (T, J, 4), rest (J, 4). Zero inside."""
+    q = quat_mul(quat_conjugate(rest)[None], quat_normalize(rotations))
+    v = quat_to_axis_angle(q)  # (T, J, 3)
+    excess = torch.relu(limits.low - v) + torch.relu(v - limits.high)
+    return (excess**2).sum((1, 2)).mean()

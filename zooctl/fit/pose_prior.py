@@ -8,6 +8,12 @@ moves still may move a little, and a template's clips are not the video animal's
 Without clips the prior falls back to ``rest`` statistics: mean 0, the floor as the deviation.
 ``motion``: a trained motion prior scores windows of the fitted motion (`motion_sequence_prior`;
 for ``ponymation`` priors its VAE's negative ELBO, `zooctl.motion.fit_prior`).
+
+Joint limits (``weights.joint_limits``, with any kind): each joint's range per axis of the same
+rotation vector over the template's clips, widened by ``pose_prior.limit_margin_deg`` on both
+sides (`clip_joint_limits`); the fit pays only for rotations outside it. Unlike the clips
+Gaussian it does not pull towards the clips' mean pose, so another animal's clips hold the fit
+only where it would bend a joint further than that skeleton ever does.
 """
 
 from __future__ import annotations
@@ -38,18 +44,15 @@ class ClipPoseStats:
 
 def clip_pose_stats(asset: RiggedAsset, min_std_deg: float = 10.0, device: str = "cpu") -> ClipPoseStats:
     """The template's clip statistics (module docstring)."""
-    _, rest_q, _ = asset.rest_trs()
-    rest = torch.as_tensor(np.asarray(rest_q), dtype=torch.float64)
     J = len(asset.parents)
-    rots = [np.asarray(c.rotations) for c in asset.clips.values() if c.rotations.shape[1:] == (J, 4)]
+    vectors = clip_rotation_vectors(asset)
     floor = math.radians(min_std_deg) ** 2 * torch.eye(3, dtype=torch.float64)
-    if not rots:
+    if vectors is None:
         mean = torch.zeros(J, 3, dtype=torch.float64)
         cov = floor.expand(J, 3, 3)
         n = 0
     else:
-        q = torch.as_tensor(np.concatenate(rots), dtype=torch.float64)  # (N, J, 4)
-        aa = quat_to_axis_angle(quat_normalize(quat_mul(quat_conjugate(rest)[None], q)))  # (N, J, 3)
+        aa = torch.as_tensor(vectors)  # (N, J, 3)
         mean = aa.mean(0)
         d = aa - mean
         cov = torch.einsum("nja,njb->jab", d, d) / max(len(aa) - 1, 1)
@@ -60,6 +63,44 @@ def clip_pose_stats(asset: RiggedAsset, min_std_deg: float = 10.0, device: str =
         n = len(aa)
     prec = torch.linalg.inv(cov)
     return ClipPoseStats(mean.float().to(device), prec.float().to(device), n)
+
+
+@dataclass
+class JointLimits:
+    """Per joint and axis: the lowest and highest (J, 3) rotation-vector component of rest^-1 q
+    (radians) the fit may use without cost; frames: how many clip frames they come from. Their
+    loss is `zooctl.fit.losses.joint_limit_loss`."""
+
+    low: Tensor
+    high: Tensor
+    frames: int
+
+
+def clip_rotation_vectors(asset: RiggedAsset) -> np.ndarray | None:
+    """(N, J, 3) rest^-1 q as rotation vectors over every frame of the template's clips (None
+    without clips of this skeleton)."""
+    _, rest_q, _ = asset.rest_trs()
+    J = len(asset.parents)
+    rots = [np.asarray(c.rotations) for c in asset.clips.values() if c.rotations.shape[1:] == (J, 4)]
+    if not rots:
+        return None
+    rest = torch.as_tensor(np.asarray(rest_q), dtype=torch.float64)
+    q = torch.as_tensor(np.concatenate(rots), dtype=torch.float64)
+    return quat_to_axis_angle(quat_normalize(quat_mul(quat_conjugate(rest)[None], q))).numpy()
+
+
+def clip_joint_limits(
+    asset: RiggedAsset, margin_deg: float = 30.0, device: str = "cpu"
+) -> JointLimits | None:
+    """The template's joint limits (module docstring); None without clips (nothing to learn a
+    range from, so no limits rather than invented ones)."""
+    aa = clip_rotation_vectors(asset)
+    if aa is None:
+        return None
+    m = math.radians(margin_deg)
+    low = torch.as_tensor(aa.min(0) - m, dtype=torch.float32, device=device)
+    high = torch.as_tensor(aa.max(0) + m, dtype=torch.float32, device=device)
+    return JointLimits(low, high, len(aa))
 
 
 def motion_sequence_prior(folder: str | None, asset: RiggedAsset, video_fps: float, device: str = "cpu"):

@@ -25,7 +25,7 @@ from .camera_init import CameraInit, initialise_camera
 from .config import FitConfig
 from .inputs import FitVideo, crop_box, fit_resolution, resample_flow, resample_masks
 from .losses import MaskTargets
-from .pose_prior import clip_pose_stats, motion_sequence_prior
+from .pose_prior import clip_joint_limits, clip_pose_stats, motion_sequence_prior
 from .scene import FitScene
 from .stages import StageRunner, Targets, make_optimizer, mask_iou, stage_config
 from .view_trial import depth_mirror, view_elevation
@@ -164,6 +164,8 @@ def fit_video(
         scene.clip_stats = clip_pose_stats(template, cfg.pose_prior.min_std_deg, dev)
     elif cfg.pose_prior.kind == "motion":
         scene.sequence_prior = motion_sequence_prior(cfg.pose_prior.motion, template, video.fps, dev)
+    if cfg.weights.joint_limits > 0:
+        scene.joint_limits = clip_joint_limits(template, cfg.pose_prior.limit_margin_deg, dev)
     if resume is None:
         rep.message("searching the camera and viewpoint")
         t1 = time.perf_counter()

@@ -68,6 +68,7 @@ class FitScene(nn.Module):
         self.size = float(asset.size())
         self.num_joints = J
         self.clip_stats = None  # `zooctl.fit.pose_prior.ClipPoseStats` for the clips pose prior
+        self.joint_limits = None  # `zooctl.fit.pose_prior.JointLimits` for ``weights.joint_limits``
         self.sequence_prior = None  # the motion pose prior (`zooctl.fit.pose_prior.motion_sequence_prior`)
 
     @property

@@ -34,6 +34,7 @@ from .losses import (
     contour_loss,
     displacement_prior,
     flow_loss,
+    joint_limit_loss,
     pose_prior,
     root_smoothness,
     scale_prior,
@@ -163,6 +164,11 @@ class StageRunner:
                 terms["pose"] = w.pose_prior * clip_pose_loss(q, scene.model.rest_rotation, scene.clip_stats)
             elif kind == "motion":
                 terms["pose"] = w.pose_prior * scene.sequence_prior.loss(scene.rotations, frames)
+            if scene.joint_limits is not None and w.joint_limits > 0:
+                q = scene.rotations[frames]
+                terms["limits"] = w.joint_limits * joint_limit_loss(
+                    q, scene.model.rest_rotation, scene.joint_limits
+                )
         total = sum(terms.values())
         return total, {k: float(v.detach()) for k, v in terms.items()}
 
