@@ -137,3 +137,34 @@ def test_fit_uses_joint_limits_only_when_weighted(tmp_path):
     assert off.scene.joint_limits is None and all("limits" not in s for s in off.history["stage2"])
     with pytest.raises(UsageError, match="limit_margin_deg"):
         FitConfig.from_dict({"pose_prior": {"limit_margin_deg": -1}})
+    for bad in (-1.0, float("nan")):
+        with pytest.raises(UsageError, match="weights.joint_limits"):
+            FitConfig.from_dict({"weights": {"joint_limits": bad}})
+
+
+def test_joint_limits_without_clips_say_so(tmp_path):
+    from zooctl.benchdata.make import make_video
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.run import fit_video
+
+    class Said:
+        def __init__(self):
+            self.lines = []
+
+        def stage(self, name, total, done=0):
+            pass
+
+        def step(self, terms):
+            pass
+
+        def message(self, text):
+            self.lines.append(text)
+
+    asset = tube_asset(bones=3, name="bare")
+    asset.clips = {}
+    video = load_fit_video(make_video(asset, tmp_path / "v", frames=4, size=32, seed=0))
+    said = Said()
+    cfg = FitConfig.from_dict(tiny_overrides(2) | {"weights": {"joint_limits": 1.0}})
+    res = fit_video(video, asset, cfg, said)
+    assert res.scene.joint_limits is None and all("limits" not in s for s in res.history["stage2"])
+    assert any("no clips to learn joint limits from" in line for line in said.lines), said.lines

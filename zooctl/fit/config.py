@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -193,6 +194,12 @@ class FitConfig:
                 f"pose_prior: kind {self.pose_prior.kind!r} must be one of {', '.join(POSE_PRIORS)} "
                 "and min_std_deg positive"
             )
+        for f in dataclasses.fields(self.weights):
+            v = getattr(self.weights, f.name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v < math.inf:
+                raise UsageError(
+                    f"weights.{f.name} {v!r} must be a non-negative number", hint="0 turns a term off"
+                )
         if not 0 <= self.pose_prior.limit_margin_deg <= 180:
             raise UsageError(
                 f"pose_prior.limit_margin_deg {self.pose_prior.limit_margin_deg} must be in [0, 180]"

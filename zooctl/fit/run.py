@@ -166,6 +166,10 @@ def fit_video(
         scene.sequence_prior = motion_sequence_prior(cfg.pose_prior.motion, template, video.fps, dev)
     if cfg.weights.joint_limits > 0:
         scene.joint_limits = clip_joint_limits(template, cfg.pose_prior.limit_margin_deg, dev)
+        if scene.joint_limits is None:
+            rep.message(
+                f"{template.name} has no clips to learn joint limits from: weights.joint_limits does nothing"
+            )
     if resume is None:
         rep.message("searching the camera and viewpoint")
         t1 = time.perf_counter()
