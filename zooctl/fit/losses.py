@@ -172,18 +172,22 @@ def pose_prior(rotations: Tensor, rest: Tensor) -> Tensor:
     return (1.0 - (q * rest).sum(-1) ** 2).mean()
 
 
+def rest_relative_vectors(rotations: Tensor, rest: Tensor) -> Tensor:
+    """(T, J, 3) rotation vectors of rest^-1 q for rotations (T, J, 4) (normalised here), rest (J, 4):
+    what the clip statistics and the joint limits are learned on."""
+    return quat_to_axis_angle(quat_mul(quat_conjugate(rest)[None], quat_normalize(rotations)))
+
+
 def clip_pose_loss(rotations: Tensor, rest: Tensor, stats: ClipPoseStats) -> Tensor:
     """Mean squared Mahalanobis distance per degree of freedom of rotations (T, J, 4) from the
     clips' per-joint Gaussian (rest (J, 4) the rest rotations)."""
-    q = quat_mul(quat_conjugate(rest)[None], quat_normalize(rotations))
-    d = quat_to_axis_angle(q) - stats.mean  # (T, J, 3)
+    d = rest_relative_vectors(rotations, rest) - stats.mean  # (T, J, 3)
     return torch.einsum("tja,jab,tjb->tj", d, stats.precision, d).mean() / 3.0
 
 
 def joint_limit_loss(rotations: Tensor, rest: Tensor, limits: JointLimits) -> Tensor:
     """Squared excess (radians^2) of rest^-1 q's rotation vector beyond each joint's range, summed
     over joints and axes, mean over frames; rotations (T, J, 4), rest (J, 4). Zero inside."""
-    q = quat_mul(quat_conjugate(rest)[None], quat_normalize(rotations))
-    v = quat_to_axis_angle(q)  # (T, J, 3)
+    v = rest_relative_vectors(rotations, rest)
     excess = torch.relu(limits.low - v) + torch.relu(v - limits.high)
     return (excess**2).sum((1, 2)).mean()
