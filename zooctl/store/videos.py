@@ -325,7 +325,7 @@ class VideoStore(IndexedStore):
                     _, h, w, _ = f["frames"].shape
                     return idx, np.zeros((0, h, w, 3), np.uint8), np.zeros((0, h, w), bool)
                 # One read per frame: h5py's point selection over chunked, compressed data is
-                # 15-30x slower than K plain reads of whole chunks.
+                # much slower than plain reads of whole chunks (BENCHMARKS.md, Retrieval).
                 frames = np.stack([f["frames"][int(i)] for i in idx])
                 masks = np.stack([f["masks"][int(i)] for i in idx]).astype(bool)
                 return idx, frames, masks
