@@ -145,17 +145,11 @@ def test_fit_uses_joint_limits_only_when_weighted(tmp_path):
 def test_joint_limits_without_clips_say_so(tmp_path):
     from zooctl.benchdata.make import make_video
     from zooctl.fit.inputs import load_fit_video
-    from zooctl.fit.run import fit_video
+    from zooctl.fit.run import _Silent, fit_video
 
-    class Said:
+    class Said(_Silent):
         def __init__(self):
             self.lines = []
-
-        def stage(self, name, total, done=0):
-            pass
-
-        def step(self, terms):
-            pass
 
         def message(self, text):
             self.lines.append(text)

@@ -326,9 +326,8 @@ class VideoStore(IndexedStore):
                     return idx, np.zeros((0, h, w, 3), np.uint8), np.zeros((0, h, w), bool)
                 # One read per frame: h5py's point selection over chunked, compressed data is
                 # much slower than plain reads of whole chunks (BENCHMARKS.md, Retrieval).
-                frames = np.stack([f["frames"][int(i)] for i in idx])
-                masks = np.stack([f["masks"][int(i)] for i in idx]).astype(bool)
-                return idx, frames, masks
+                fd, md = f["frames"], f["masks"]
+                return idx, np.stack([fd[int(i)] for i in idx]), np.stack([md[int(i)] for i in idx]).astype(bool)
         except (OSError, KeyError, ValueError, TypeError) as exc:
             raise StoreError(
                 f"the video file {self.path(name)} is unreadable: {exc}",
