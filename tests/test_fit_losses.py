@@ -1,4 +1,5 @@
-"""The fit's loss terms and step schedule: contour term beyond the crop, epoch windows, lr decay."""
+"""The fit's loss terms and step schedule: contour term beyond the crop, epoch windows, lr decay,
+the smoothness weight's decay."""
 
 import numpy as np
 import pytest
@@ -58,3 +59,24 @@ def test_lr_factor_decays_from_one_to_final(final):
     assert f[0] == pytest.approx(1.0) and f[-1] == pytest.approx(final)
     assert all(a >= b for a, b in zip(f, f[1:]))
     assert lr_factor(3, 50, 1.0) == 1.0
+
+
+def test_smooth_weight_decays_from_start_to_smooth():
+    from zooctl.fit.config import LossWeights
+    from zooctl.fit.stages import smooth_weight
+
+    w = LossWeights(smooth=10.0, smooth_start=1000.0, smooth_until=0.5)
+    f = [smooth_weight(w, i, 100) for i in range(100)]
+    assert f[0] == pytest.approx(1000.0) and f[25] == pytest.approx(100.0)
+    assert all(v == pytest.approx(10.0) for v in f[50:])
+    assert all(a > b for a, b in zip(f[:50], f[1:51]))
+    assert smooth_weight(LossWeights(smooth=10.0), 0, 100) == 10.0  # the default: constant
+    assert smooth_weight(LossWeights(smooth=0.0, smooth_start=1000.0), 3, 100) == 0.0  # term off
+
+
+def test_smooth_until_is_checked():
+    from zooctl.errors import UsageError
+    from zooctl.fit.config import FitConfig
+
+    with pytest.raises(UsageError, match="smooth_until"):
+        FitConfig.from_dict({"weights": {"smooth_start": 100.0, "smooth_until": 0}})

@@ -95,7 +95,8 @@ def test_cli_errors_are_one_line(tube_video, store, capsys, tmp_path):
 
 
 def test_interrupt_then_resume(tube_video, store, tmp_path):
-    """Ctrl-C mid stage 2 keeps the store intact and --resume finishes the same fit."""
+    """Ctrl-C mid stage 2 keeps the store intact and --resume finishes the same fit (the
+    smoothness weight's decay, too, goes on from where it stopped)."""
     from zooctl.fit.job import fit_job
     from zooctl.store.bank import Bank
     from zooctl.store.fits import FitStore
@@ -105,6 +106,7 @@ def test_interrupt_then_resume(tube_video, store, tmp_path):
     cfg = tiny()
     cfg.stage2.iters = 6
     cfg.checkpoint_every = 2
+    cfg.weights.smooth_start, cfg.weights.smooth_until = 1000.0, 1.0
 
     class StopAt:
         n = 0
@@ -129,5 +131,8 @@ def test_interrupt_then_resume(tube_video, store, tmp_path):
     rec = fit_job(str(folder), store, name="t", resume=True, outputs=("loss",))
     assert rec["status"] == "done"
     assert rec["losses"]["stage2"]["steps"] == 6 and rec["losses"]["stage1"]["steps"] == 3
+    whole = fit_job(str(folder), store, cfg, name="u", template="tube", outputs=("loss",))
+    last, whole_last = rec["losses"]["stage2"]["last"], whole["losses"]["stage2"]["last"]
+    assert last["smooth"] == pytest.approx(whole_last["smooth"], rel=1e-3)
     with pytest.raises(NotFoundError):
         fit_job(str(folder), store, name="never", resume=True)

@@ -61,6 +61,13 @@ class LossWeights:
     contour: float = 0.5  # `contour_loss`: vertices outside the mask, mask far from vertices (was ``dt``)
     flow: float = 0.05  # beta: mean |rendered flow - observed flow| in pixels of the fit image
     smooth: float = 10.0  # lambda2: CASA eq. 6 on joint rotations
+    # Stage 2 may start with a stronger smoothness that decays geometrically to ``smooth`` by the
+    # fraction ``smooth_until`` of its iterations (`zooctl.fit.stages.smooth_weight`): early, while
+    # the limbs find their depth, views of a pose held over frames tie it; then the silhouettes
+    # have their say. Off by default: measured in BENCHMARKS.md (Fit), it helps a video's own rig
+    # in 3D but costs retrieved templates their input view.
+    smooth_start: float = 0.0  # 0: ``smooth`` throughout
+    smooth_until: float = 0.5
     root_smooth: float = 10.0  # smoothness of the per-frame root transform
     symmetry: float = 1.0  # lambda3: CASA eq. 7 (relative to the template size squared)
     bone_length: float = 0.1  # bone scales near 1 and left/right equal
@@ -203,6 +210,11 @@ class FitConfig:
         if not 0 <= self.pose_prior.limit_margin_deg <= 180:
             raise UsageError(
                 f"pose_prior.limit_margin_deg {self.pose_prior.limit_margin_deg} must be in [0, 180]"
+            )
+        if not 0 < self.weights.smooth_until <= 1:
+            raise UsageError(
+                f"weights.smooth_until {self.weights.smooth_until} must be in (0, 1]",
+                hint="a fraction of stage 2's iterations",
             )
         if self.trials.candidates < 1 or self.trials.iters < 0 or not 0 <= self.trials.margin < 1:
             raise UsageError(

@@ -281,6 +281,7 @@ def _run_stage(
         # Skip the runner's random windows already drawn before an interruption (resume = same run).
         for _ in range(first):
             runner.window()
+        runner.iteration = first
         for it in range(first, last):
             factor = lr_factor(it, st.iters, st.lr_final)
             for g, lr in zip(opt.param_groups, base_lr, strict=True):

@@ -27,7 +27,7 @@ import torch
 
 from ..geometry import silhouette_iou
 from ..render.base import check_silhouette, get_renderer
-from .config import FitConfig, StageConfig
+from .config import FitConfig, LossWeights, StageConfig
 from .losses import (
     MaskTargets,
     clip_pose_loss,
@@ -79,6 +79,16 @@ def make_optimizer(scene: FitScene, cfg: FitConfig, stage: int, learn_focal: boo
     return torch.optim.Adam(groups, betas=(0.9, 0.999))
 
 
+def smooth_weight(w: LossWeights, it: int, iters: int) -> float:
+    """Stage 2's smoothness weight at iteration ``it`` of ``iters``: ``smooth_start`` decaying
+    geometrically to ``smooth`` by ``smooth_until`` x ``iters``, then ``smooth``; ``smooth``
+    throughout when ``smooth_start`` is 0 (or ``smooth`` is 0, which a geometric path cannot reach)."""
+    if w.smooth_start <= 0 or w.smooth <= 0:
+        return w.smooth
+    a = min(1.0, it / max(w.smooth_until * iters, 1.0))
+    return w.smooth_start ** (1.0 - a) * w.smooth**a
+
+
 class StageRunner:
     """Runs one stage's steps; ``step(it)`` returns that step's loss terms."""
 
@@ -94,6 +104,7 @@ class StageRunner:
         present = targets.masks.present.cpu().numpy()
         self.present_idx = np.nonzero(present)[0]
         self._queue: list[int] = []
+        self.iteration = 0  # the stage's step about to run (`step` counts; the run loop sets it on resume)
 
     def window(self) -> Tensor:
         """Stage 1: up to ``batch`` frames spread over the video (random offset). Stage 2: the next
@@ -144,9 +155,10 @@ class StageRunner:
                 both = weight[:-1] * weight[1:]
                 valid = tg.flow_valid[pairs] & (tg.masks.coverage[pairs] > 0.5) & (both[:, None, None] > 0)
                 terms["flow"] = w.flow * flow_loss(out["flow"], out["mask"], tg.flow[pairs], valid)
-            if ab.smoothness and w.smooth > 0:
+            smooth = smooth_weight(w, self.iteration, self.st.iters)
+            if ab.smoothness and smooth > 0:
                 q_all = scene.rotations / scene.rotations.norm(dim=-1, keepdim=True)
-                terms["smooth"] = w.smooth * scene.model.smoothness_loss(q_all)
+                terms["smooth"] = smooth * scene.model.smoothness_loss(q_all)
             if ab.symmetry and w.symmetry > 0:
                 terms["symmetry"] = w.symmetry * scene.model.symmetry_loss(sample=400) / scene.size**2
             if ab.stretch:
@@ -187,6 +199,7 @@ class StageRunner:
             for p, old in zip(self.scene.per_frame_parameters(), saved, strict=True):
                 p[keep] = old
         terms["total"] = float(total.detach())
+        self.iteration += 1
         return terms
 
 
