@@ -222,3 +222,50 @@ def test_bench_run_config_file(tmp_path):
         "bench", "run", str(tmp_path), "--config", str(tmp_path / "preset.json"), store=tmp_path / "store"
     )
     assert r.code == 2 and "--preset" in r.err, r.err
+
+
+def test_clip_motion_plays_the_assets_clip_in_place_without_jumps():
+    """`bench make --motion clips`: the clip's own poses at its own frame rate, forwards then
+    backwards (no jump where a loop would restart), the roots held at their rest translation."""
+    from zooctl.benchdata.make import clip_motion
+    from zooctl.geometry import decompose_trs
+    from zooctl.procedural import build_animal
+
+    asset = build_animal("quadruped", name="q")
+    clip = asset.clips[sorted(asset.clips)[0]]
+    asset.clips = {clip.name: clip}
+    frames = 3 * clip.num_frames  # long enough to turn back twice
+    local, name = clip_motion(asset, frames, np.random.default_rng(0), fps=clip.fps)
+    assert name == clip.name and local.shape == (frames, asset.num_joints, 4, 4)
+    t, q, _ = decompose_trs(local)
+    roots = asset.parents < 0
+    np.testing.assert_allclose(
+        t[:, roots], np.broadcast_to(asset.rest_trs()[0][roots], t[:, roots].shape), atol=1e-6
+    )
+    # Every frame is (close to) one of the clip's: at the clip's rate the steps fall between its frames.
+    dots = np.abs(np.einsum("tjc,kjc->tkj", q, clip.rotations)).min(-1).max(-1)
+    assert (dots > 0.99).all()
+
+    # No step moves a joint further than the clip's own largest step between two frames.
+    def steps(r):
+        return np.degrees(2 * np.arccos(np.clip(np.abs((r[1:] * r[:-1]).sum(-1)), 0, 1))).max()
+
+    assert steps(q) <= steps(clip.rotations) + 1e-3
+
+
+def test_bench_make_clips_motion_is_recorded_and_falls_back_without_clips(tmp_path):
+    from zooctl.procedural import build_animal
+
+    folder = make_video(
+        build_animal("quadruped", name="q"), tmp_path, frames=4, size=32, seed=0, motion="clips"
+    )
+    meta = json.loads((folder / "meta.json").read_text())
+    assert meta["motion"] == "clips" and meta["clip"]
+    tube = tube_asset(bones=3, name="tube")
+    tube.clips = {}
+    meta = json.loads(
+        (make_video(tube, tmp_path, frames=3, size=32, motion="clips") / "meta.json").read_text()
+    )
+    assert meta["motion"] == "random" and meta["clip"] is None
+    with pytest.raises(UsageError, match="motion"):
+        make_video(tube, tmp_path, frames=3, size=32, motion="walk")

@@ -1,20 +1,26 @@
 """PlanetZoo-style test videos rendered from bank assets, with ground truth (CASA section 4).
 
-For each asset: every 12 frames 8 random bones get a new random rotation (slerped between those
-keyframes); the camera orbits the animal, its azimuth moving by 15 to 22.5 degrees every 12 frames;
-the light direction, ambient level and background are random. Saved per video, in ``DIR/<name>/``:
+For each asset, the motion (``motion``): ``random`` (the default), every 12 frames 8 random bones
+get a new random rotation (slerped between those keyframes) and the others hold still; or
+``clips``, one of the asset's own clips (`clip_motion`: drawn by the seed, resampled to the
+video's frame rate, played forwards and backwards, the root joints at their rest translation), an
+artist's motion in which the bones move as the animal does (an asset without clips gets
+``random``). The camera orbits the animal, its azimuth moving by 15 to 22.5 degrees every 12
+frames; the light direction, ambient level and background are random. Saved per video, in
+``DIR/<name>/``:
 
 - ``video.npz``: frames (T, H, W, 3) uint8, masks (T, H, W) bool, flow (T-1, H, W, 2) float16
   (exact forward flow of the rendered surface), flow_valid (T-1, H, W) bool, intrinsics (4,)
   fx, fy, cx, cy; ground truth ``gt_vertices`` (T, V, 3) world, ``gt_faces`` (F, 3),
   ``gt_joints`` (T, J, 3) world joint origins, ``gt_parents`` (J,), ``gt_skin_joints`` and
   ``gt_skin_weights`` (V, K), ``gt_cam_rotation`` (T, 3, 3) and ``gt_cam_translation`` (T, 3)
-  world-to-camera, ``gt_novel_vertices`` (V, 3) a held-out pose (8 more bones re-rotated after the
-  last frame, for re-animation) seen by the last frame's camera (OpenCV convention, `zooctl.render.camera`);
+  world-to-camera, ``gt_novel_vertices`` (V, 3) a held-out pose (12 frames after the last one of
+  the motion, for re-animation) seen by the last frame's camera (OpenCV convention, `zooctl.render.camera`);
   ``gt_view_masks`` (C, T, H, W) bool, ``gt_view_rotation`` (C, T, 3, 3) and ``gt_view_translation``
   (C, T, 3): the same frames seen by C = 2 cameras the fit never sees (`NOVEL_VIEWS`: the input
   camera turned +90 degrees in azimuth, and raised 35 degrees in elevation), masks only;
-- ``meta.json``: asset name, frames, size, fps, seed; ``video.mp4``: the frames as H.264.
+- ``meta.json``: asset name, frames, size, fps, seed, motion (and the clip); ``video.mp4``: the
+  frames as H.264.
 """
 
 from __future__ import annotations
@@ -89,6 +95,34 @@ def random_motion(
     )
 
 
+def clip_motion(
+    asset: RiggedAsset, frames: int, rng: np.random.Generator, fps: float = 30.0
+) -> tuple[np.ndarray, str] | None:
+    """((T, J, 4, 4) local transforms, clip name): one of the asset's clips drawn by ``rng``,
+    resampled to ``fps`` (rotations slerped, the rest linear), played forwards and backwards (a
+    loop of a clip that is not a cycle would jump) from a random time for ``frames``, the root
+    joints at their rest translation (so the animal stays where the camera orbits); None without a
+    clip of two or more frames."""
+    names = sorted(n for n, c in asset.clips.items() if c.num_frames > 1)
+    if not names:
+        return None
+    clip = asset.clips[names[int(rng.integers(len(names)))]]
+    period = 2.0 * clip.duration
+    t = (float(rng.uniform(0, clip.duration)) + np.arange(frames) / fps) % period
+    x = np.where(t > clip.duration, period - t, t) * clip.fps
+    i0 = np.minimum(np.floor(x).astype(int), clip.num_frames - 2)
+    a = (x - i0)[:, None]  # (T, 1)
+    rot = quat_slerp(clip.rotations[i0], clip.rotations[i0 + 1], a)
+    trans = clip.translations[i0] * (1 - a[..., None]) + clip.translations[i0 + 1] * a[..., None]
+    scale = clip.scales[i0] * (1 - a[..., None]) + clip.scales[i0 + 1] * a[..., None]
+    roots = np.asarray(asset.parents) < 0
+    trans[:, roots] = asset.rest_trs()[0][roots]
+    return compose_trs(trans, quat_normalize(rot), scale), clip.name
+
+
+MOTIONS = ("random", "clips")
+
+
 def camera_path(frames: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Azimuth and elevation (T,) in degrees: the azimuth moves 15-22.5 degrees every 12 frames."""
     az0 = rng.uniform(0, 360)
@@ -160,7 +194,13 @@ def shade_frames(
 
 
 def make_video(
-    asset: RiggedAsset, out_dir: Path, frames: int = 60, size: int = 320, seed: int = 0, fps: float = 30.0
+    asset: RiggedAsset,
+    out_dir: Path,
+    frames: int = 60,
+    size: int = 320,
+    seed: int = 0,
+    fps: float = 30.0,
+    motion: str = "random",
 ) -> Path:
     """Render one test video of ``asset`` into ``out_dir/<asset.name>/`` (module docstring)."""
     from ..io.video import write_mp4
@@ -170,9 +210,12 @@ def make_video(
 
     if frames < 1 or size < 16:
         raise UsageError("--frames must be >= 1 and --size >= 16")
+    if motion not in MOTIONS:
+        raise UsageError(f"--motion {motion!r} is not one of {', '.join(MOTIONS)}")
     rng = np.random.default_rng([seed, sum(asset.name.encode())])
     # 12 more frames than shown: the last one is a held-out novel pose for the re-animation metric.
-    local = random_motion(asset, frames + KEY_EVERY, rng)
+    clip = clip_motion(asset, frames + KEY_EVERY, rng, fps) if motion == "clips" else None
+    local, clip_name = clip if clip is not None else (random_motion(asset, frames + KEY_EVERY, rng), None)
     mats = asset.skinning_matrices(local)  # (T + 12, J, 4, 4)
     from ..asset import lbs
 
@@ -265,7 +308,16 @@ def make_video(
     write_bytes_atomic(dest / "video.npz", buf.getvalue())
     write_json_atomic(
         dest / "meta.json",
-        {"name": asset.name, "frames": frames, "size": size, "fps": fps, "seed": seed, "asset": asset.name},
+        {
+            "name": asset.name,
+            "frames": frames,
+            "size": size,
+            "fps": fps,
+            "seed": seed,
+            "asset": asset.name,
+            "motion": "clips" if clip_name else "random",
+            "clip": clip_name,
+        },
     )
     write_mp4(dest / "video.mp4", rgb, fps)
     return dest

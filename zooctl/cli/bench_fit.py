@@ -42,12 +42,18 @@ def make(
     frames: int = typer.Option(60, "--frames", help="Frames per video."),
     size: int = typer.Option(320, "--size", help="Image size in pixels (square)."),
     seed: int = typer.Option(0, "--seed", help="Random seed."),
+    motion: str = typer.Option(
+        "random",
+        "--motion",
+        help="random: 8 random bones re-posed every 12 frames, the rest held; clips: one of the "
+        "asset's own clips, in place (random for an asset without clips).",
+    ),
 ) -> None:
     """Render PlanetZoo-style test videos with ground truth (motion, camera, masks, flow)."""
     from ..benchdata.make import make_video
 
     for _name, load in _assets(bank, asset):
-        dest = make_video(load(), out, frames=frames, size=size, seed=seed)
+        dest = make_video(load(), out, frames=frames, size=size, seed=seed, motion=motion)
         console.print(f"made {dest}", highlight=False, markup=False)
 
 
