@@ -64,8 +64,8 @@ class LossWeights:
     # Stage 2 may start with a stronger smoothness that decays geometrically to ``smooth`` by the
     # fraction ``smooth_until`` of its iterations (`zooctl.fit.stages.smooth_weight`): early, while
     # the limbs find their depth, views of a pose held over frames tie it; then the silhouettes
-    # have their say. Off by default: measured in BENCHMARKS.md (Fit), it helps a video's own rig
-    # in 3D but costs retrieved templates their input view.
+    # have their say. Off by default (BENCHMARKS.md, Fit): it helps a video's own rig in 3D, but
+    # retrieved templates and real videos fitted with a starter template lose input IoU.
     smooth_start: float = 0.0  # 0: ``smooth`` throughout
     smooth_until: float = 0.5
     root_smooth: float = 10.0  # smoothness of the per-frame root transform
