@@ -113,8 +113,7 @@ def clip_motion(
     i0 = np.minimum(np.floor(x).astype(int), clip.num_frames - 2)
     a = (x - i0)[:, None]  # (T, 1)
     rot = quat_slerp(clip.rotations[i0], clip.rotations[i0 + 1], a)
-    trans = clip.translations[i0] * (1 - a[..., None]) + clip.translations[i0 + 1] * a[..., None]
-    scale = clip.scales[i0] * (1 - a[..., None]) + clip.scales[i0 + 1] * a[..., None]
+    trans, scale = (v[i0] + (v[i0 + 1] - v[i0]) * a[..., None] for v in (clip.translations, clip.scales))
     roots = np.asarray(asset.parents) < 0
     trans[:, roots] = asset.rest_trs()[0][roots]
     return compose_trs(trans, quat_normalize(rot), scale), clip.name

@@ -281,12 +281,11 @@ def _run_stage(
         # Skip the runner's random windows already drawn before an interruption (resume = same run).
         for _ in range(first):
             runner.window()
-        runner.iteration = first
         for it in range(first, last):
             factor = lr_factor(it, st.iters, st.lr_final)
             for g, lr in zip(opt.param_groups, base_lr, strict=True):
                 g["lr"] = lr * factor
-            terms = runner.step(opt)
+            terms = runner.step(opt, it)
             result.history[key].append(terms)
             rep.step(terms)
             if checkpoint is not None and cfg.checkpoint_every and (it + 1) % cfg.checkpoint_every == 0:

@@ -104,7 +104,6 @@ class StageRunner:
         present = targets.masks.present.cpu().numpy()
         self.present_idx = np.nonzero(present)[0]
         self._queue: list[int] = []
-        self.iteration = 0  # the stage's step about to run (`step` counts; the run loop sets it on resume)
 
     def window(self) -> Tensor:
         """Stage 1: up to ``batch`` frames spread over the video (random offset). Stage 2: the next
@@ -131,7 +130,8 @@ class StageRunner:
         starts = [s for s in starts if present[s : s + B].any()] or [0]
         return [starts[i] for i in self.gen.permutation(len(starts))]
 
-    def loss(self, frames: Tensor) -> tuple[Tensor, dict[str, float]]:
+    def loss(self, frames: Tensor, it: int = 0) -> tuple[Tensor, dict[str, float]]:
+        """The stage's loss on ``frames`` at its iteration ``it`` (the smoothness schedule's)."""
         scene, w, ab = self.scene, self.cfg.weights, self.cfg.ablation
         tg = self.targets
         verts = scene.pose_rigid(frames) if self.stage == 1 else scene.pose(frames).vertices
@@ -155,7 +155,7 @@ class StageRunner:
                 both = weight[:-1] * weight[1:]
                 valid = tg.flow_valid[pairs] & (tg.masks.coverage[pairs] > 0.5) & (both[:, None, None] > 0)
                 terms["flow"] = w.flow * flow_loss(out["flow"], out["mask"], tg.flow[pairs], valid)
-            smooth = smooth_weight(w, self.iteration, self.st.iters)
+            smooth = smooth_weight(w, it, self.st.iters)
             if ab.smoothness and smooth > 0:
                 q_all = scene.rotations / scene.rotations.norm(dim=-1, keepdim=True)
                 terms["smooth"] = smooth * scene.model.smoothness_loss(q_all)
@@ -184,10 +184,10 @@ class StageRunner:
         total = sum(terms.values())
         return total, {k: float(v.detach()) for k, v in terms.items()}
 
-    def step(self, opt: torch.optim.Optimizer) -> dict[str, float]:
+    def step(self, opt: torch.optim.Optimizer, it: int) -> dict[str, float]:
         frames = self.window()
         opt.zero_grad(set_to_none=True)
-        total, terms = self.loss(frames)
+        total, terms = self.loss(frames, it)
         total.backward()
         # Lazy Adam for per-frame parameters: frames outside the batch keep their values (their
         # stale momentum would otherwise move them without any evidence).
@@ -199,7 +199,6 @@ class StageRunner:
             for p, old in zip(self.scene.per_frame_parameters(), saved, strict=True):
                 p[keep] = old
         terms["total"] = float(total.detach())
-        self.iteration += 1
         return terms
 
 
