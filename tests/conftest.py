@@ -9,6 +9,9 @@ import pytest
 # torch thread was also faster than two for our small kernels.
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+# Rich fixes a console's width when it is built if COLUMNS is set then (CI may set 80); set ours
+# before any test module imports the CLI, so assertions never meet a line wrapped mid-phrase.
+os.environ["COLUMNS"] = "200"
 try:
     import torch
 

@@ -145,7 +145,7 @@ def train(
 
         def log(line: str) -> None:
             if not json_out:
-                err_console.print(line, highlight=False)
+                err_console.print(line, highlight=False, soft_wrap=True)
 
         t = time.perf_counter()
         cfg = train_motion_prior(store_root(), name, opts, loaded, fit_seqs, replace, on_step, log)
