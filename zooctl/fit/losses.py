@@ -116,8 +116,9 @@ def contour_loss(
     # The nearest vertex of each sample without autograd (the backward of a full cdist costs
     # more than the rest of a fit step), then the distance to it with autograd.
     with torch.no_grad():
-        # |x|^2 - 2 p.x ranks vertices like the distance (|p|^2 is constant per sample), faster than cdist
-        nearest = (xy.square().sum(-1)[:, None] - 2.0 * torch.bmm(pts, xy.transpose(1, 2))).argmin(-1)
+        # |x|^2 - 2 p.x ranks vertices like the distance (|p|^2 is constant per sample), faster than
+        # cdist; min(-1).indices gives argmin's first minimum, faster on the CPU (BENCHMARKS.md)
+        nearest = (xy.square().sum(-1)[:, None] - 2.0 * torch.bmm(pts, xy.transpose(1, 2))).min(-1).indices
     closest = xy.gather(1, nearest[..., None].expand(-1, -1, 2))  # (B, S, 2)
     near = (pts - closest).square().sum(-1).add(1e-12).sqrt() / max(h, w)  # (B, S)
     ok = targets.sample_ok[frames].to(near.dtype)
