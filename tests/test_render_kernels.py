@@ -282,3 +282,13 @@ def test_prune_deletes_only_stale_other_builds(tmp_path):
     os.utime(tmp_path / "other.txt", (month_ago, month_ago))
     assert _kernels.prune(tmp_path, keep=keep) == [old]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["other.txt", "render-keep.so", "render-recent.so"]
+
+
+def test_soft_backward_leaves_the_callers_denormals_alone():
+    """The backward flushes denormals on its own threads only: afterwards this thread's float
+    arithmetic still keeps them (a leaked flush mode would change every later computation)."""
+    verts, faces, cam = _scene(torch.float32, batch=1)
+    tiny = torch.tensor([1e-39])  # below float's normal range
+    assert tiny.item() != 0.0
+    SoftSilhouette((40, 48), sigma=0.05)(verts, faces, cam).sum().backward()
+    assert (tiny * 1.0).item() != 0.0 and (tiny / 2).item() != 0.0

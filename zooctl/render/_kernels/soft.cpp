@@ -8,7 +8,8 @@
 // The PyTorch path sums logsigmoid terms and exponentiates; the product is the same number
 // (to float rounding) without a log per pair. Values of e below 1e-30 are flushed to 0 (the
 // silhouette is 1 to float precision either way; this keeps denormals out of the loop).
-// The backward pass takes e and grad_sil and forms d loss / d acc = -grad_sil e itself.
+// The backward pass takes e and grad_sil and forms d loss / d acc = -grad_sil e itself; it runs
+// with denormals flushed to zero (zk::FlushDenormals: each pair's term changes by < 1.2e-38).
 // Each face's window is flattened into one vectorised loop (windows are ~8 px wide, too short
 // to vectorise row by row). Layouts: tri (N, 3, 2) with N = B * F, windows (N, 4) int32 =
 // x0, y0, x1, y1 inclusive (empty when x1 < x0), e and grad_sil (B, H, W), grad_tri (N, 3, 2).
@@ -155,7 +156,8 @@ void soft_backward(const T* tri, const int32_t* win, const T* e, const T* grad_s
   const T inv_s = T(1) / T(sigma);
   const int64_t N = B * F, chunk = 64;
   zk::parallel_for((N + chunk - 1) / chunk, threads, [&](int64_t task) {
-    std::vector<T> px, py, go;
+    const zk::FlushDenormals ftz;  // per worker thread: see fastmath.h
+    std::vector<T> px, py, go, kx, ky, tt, edge;
     for (int64_t n = task * chunk; n < std::min(N, (task + 1) * chunk); ++n) {
       T* out = grad_tri + 6 * n;
       for (int i = 0; i < 6; ++i) out[i] = T(0);
@@ -163,30 +165,38 @@ void soft_backward(const T* tri, const int32_t* win, const T* e, const T* grad_s
       if (w.empty()) continue;
       const FaceConsts<T> tr(Tri<T>(tri + 6 * n));
       const int64_t m = fill_centres<T>(w.x0, w.x1, w.y0, w.y1, px, py);
-      if (int64_t(go.size()) < m) go.resize(m);
+      if (int64_t(go.size()) < m) go.resize(m), kx.resize(m), ky.resize(m), tt.resize(m), edge.resize(m);
       const int64_t off = (n / F) * H * W;
       for (int64_t y = w.y0, i = 0; y <= w.y1; ++y)
         for (int64_t x = w.x0; x <= w.x1; ++x, ++i) go[i] = -grad_sil[off + y * W + x] * e[off + y * W + x];
       const T* __restrict PX = px.data();
       const T* __restrict PY = py.data();
       const T* __restrict GO = go.data();
-      T g0x = 0, g0y = 0, g1x = 0, g1y = 0, g2x = 0, g2y = 0;
-#pragma omp simd reduction(+ : g0x, g0y, g1x, g1y, g2x, g2y)
+      T* __restrict KX = kx.data();
+      T* __restrict KY = ky.data();
+      T* __restrict TT = tt.data();
+      T* __restrict EDGE = edge.data();
+      // Two passes: the per-pixel terms in a plain vector loop, then the sums over the window; one
+      // loop with six reductions ran 1.7x slower on windows of ~12 pixels.
+#pragma omp simd
       for (int64_t i = 0; i < m; ++i) {
         const Terms<T> e = edge_terms(tr, PX[i], PY[i]);
         const T z = e.sign * e.d2 * inv_s;
         // d logsigmoid(z) / d d2 = sigmoid(-z) (-delta) / sigma; d d2 / d a = -2 (1 - t) r, d b = -2 t r.
         const T k = GO[i] * zk::sigmoid_neg(z) * e.sign * inv_s * T(-2);
-        const T kx = k * e.rx, ky = k * e.ry;
+        KX[i] = k * e.rx, KY[i] = k * e.ry, TT[i] = e.t, EDGE[i] = e.edge;
+      }
+      T g0x = 0, g0y = 0, g1x = 0, g1y = 0, g2x = 0, g2y = 0;
+      for (int64_t i = 0; i < m; ++i) {
         // Edge j runs from vertex j (weight 1 - t) to vertex j + 1 mod 3 (weight t).
-        const T u = T(1) - e.t;
-        const bool e0 = e.edge == T(0), e1 = e.edge == T(1), e2 = e.edge == T(2);
-        const T w0 = e0 ? u : (e2 ? e.t : T(0));
-        const T w1 = e1 ? u : (e0 ? e.t : T(0));
-        const T w2 = e2 ? u : (e1 ? e.t : T(0));
-        g0x += w0 * kx, g0y += w0 * ky;
-        g1x += w1 * kx, g1y += w1 * ky;
-        g2x += w2 * kx, g2y += w2 * ky;
+        const T t = TT[i], u = T(1) - t;
+        const bool e0 = EDGE[i] == T(0), e1 = EDGE[i] == T(1), e2 = EDGE[i] == T(2);
+        const T w0 = e0 ? u : (e2 ? t : T(0));
+        const T w1 = e1 ? u : (e0 ? t : T(0));
+        const T w2 = e2 ? u : (e1 ? t : T(0));
+        g0x += w0 * KX[i], g0y += w0 * KY[i];
+        g1x += w1 * KX[i], g1y += w1 * KY[i];
+        g2x += w2 * KX[i], g2y += w2 * KY[i];
       }
       out[0] = g0x, out[1] = g0y, out[2] = g1x, out[3] = g1y, out[4] = g2x, out[5] = g2y;
     }
