@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 import torch
 
-from zooctl.fit.losses import MaskTargets, contour_loss
+from zooctl.fit.losses import MaskTargets, contour_loss, nearest_points
 from zooctl.fit.run import lr_factor
+from zooctl.render import _kernels
 
 
 def _square_targets(T: int = 1, h: int = 32, w: int = 32) -> MaskTargets:
@@ -32,6 +33,30 @@ def test_contour_pulls_vertices_back_from_beyond_the_image():
         assert xy.grad[0, 0, 0] > 0  # descending the gradient moves it left, back into the image
         losses.append(loss.item())
     assert losses[1] > losses[0]
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_nearest_points_is_the_first_nearest(dtype):
+    """Kernel (CPU) and PyTorch path (CUDA's) against float64 brute force: sizes off the kernel's
+    16-lane and 64-query blocks, exact ties (the first index wins), a NaN point (never nearest)."""
+    g = torch.Generator().manual_seed(3)
+    pts = (torch.rand(3, 37, 2, generator=g, dtype=torch.float64) * 40).to(dtype)
+    pts[:, 20] = pts[:, 5]  # a duplicate of an earlier point: the tie goes to index 5
+    pts[1, 7] = float("nan")
+    q = (torch.rand(3, 70, 2, generator=g, dtype=torch.float64) * 40).to(dtype)
+    q[:, 0] = pts[:, 20]  # exactly on the duplicated point
+    d = torch.cdist(q.double(), torch.nan_to_num(pts.double(), nan=1e9))
+    truth = d.argmin(-1)
+    got = nearest_points(q, pts)
+    assert got.dtype == torch.long and got.shape == (3, 70)
+    assert torch.equal(got, truth) and (got[:, 0] == 5).all()
+    if _kernels.available():
+        clean = [0, 2]  # the PyTorch path's min() would return the NaN
+        with _kernels.disabled():
+            fallback = nearest_points(q[clean], pts[clean])
+        # The expansion |x|^2 - 2 q.x rounds: it may pick another point only in a near-tie.
+        picked = d[clean].gather(-1, fallback[..., None])[..., 0]
+        assert (picked - d[clean].min(-1).values).max() <= 1e-3
 
 
 def test_stage2_windows_cover_every_frame_each_epoch():

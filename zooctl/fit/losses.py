@@ -30,6 +30,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from ..render import _kernels
 from ..rig.rotations import quat_conjugate, quat_mul, quat_normalize, quat_to_axis_angle
 
 if TYPE_CHECKING:
@@ -86,6 +87,22 @@ def soft_iou_loss(sil: Tensor, target: Tensor, weight: Tensor) -> Tensor:
     return (per * weight).sum() / weight.sum().clamp_min(1.0)
 
 
+@torch.no_grad()
+def nearest_points(queries: Tensor, points: Tensor) -> Tensor:
+    """(B, S) long: the index of the point of points (B, V, 2) nearest to each of queries (B, S, 2),
+    the first on ties. CPU float tensors use a C++ kernel (`zooctl.render._kernels`) that ranks by
+    the squared distance itself; elsewhere (CUDA, no compiler) |x|^2 - 2 q.x, which ranks the
+    same up to float rounding in near-ties."""
+    q, p = queries.contiguous(), points.contiguous()
+    kernel = _kernels.kernel_for("nearest_points", q, p)
+    if kernel is not None:
+        idx = torch.empty(q.shape[:2], dtype=torch.long)
+        kernel(q, p, q.shape[0], q.shape[1], p.shape[1], idx)
+        return idx
+    # min(-1).indices gives argmin's first minimum, and is faster than argmin on the CPU.
+    return (p.square().sum(-1)[:, None] - 2.0 * torch.bmm(q, p.transpose(1, 2))).min(-1).indices
+
+
 def contour_loss(
     xy: Tensor, frames: Tensor, targets: MaskTargets, weight: Tensor, max_points: int = 1500
 ) -> Tensor:
@@ -115,10 +132,7 @@ def contour_loss(
     pts = targets.samples[frames]  # (B, S, 2)
     # The nearest vertex of each sample without autograd (the backward of a full cdist costs
     # more than the rest of a fit step), then the distance to it with autograd.
-    with torch.no_grad():
-        # |x|^2 - 2 p.x ranks vertices like the distance (|p|^2 is constant per sample), faster than
-        # cdist; min(-1).indices gives argmin's first minimum, faster on the CPU (BENCHMARKS.md)
-        nearest = (xy.square().sum(-1)[:, None] - 2.0 * torch.bmm(pts, xy.transpose(1, 2))).min(-1).indices
+    nearest = nearest_points(pts, xy.detach())
     closest = xy.gather(1, nearest[..., None].expand(-1, -1, 2))  # (B, S, 2)
     near = (pts - closest).square().sum(-1).add(1e-12).sqrt() / max(h, w)  # (B, S)
     ok = targets.sample_ok[frames].to(near.dtype)

@@ -1,4 +1,5 @@
-"""CPU kernels of the renderers: plain C++ compiled with the system compiler on first use.
+"""CPU kernels of the renderers (and of the contour loss's nearest-vertex search): plain C++
+compiled with the system compiler on first use.
 
 Why not ``torch.utils.cpp_extension.load_inline``: building against the PyTorch headers took
 128 s on the 2-core CI box for a one-line extension (and needs ninja); these sources include no
@@ -79,6 +80,7 @@ _SIGNATURES = {
     "splat_backward": [_P, _P, _P, _P, _I, _I, _I, _I, _I, _P, _I],
     "splat_finish_forward": [_P, _P, _I, _D, _I, _I, _I, _P, _I],
     "splat_finish_backward": [_P, _P, _P, _I, _D, _I, _I, _I, _P, _I],
+    "nearest_points": [_P, _P, _I, _I, _I, _P, _I],
 }
 
 
