@@ -132,3 +132,41 @@ def test_plugin_registry_builds_models():
     assert casa.stretch and casa.displacement is not None
     assert not lbs.stretch and lbs.displacement is None
     assert lbs(axis_angle_to_quat(torch.zeros(4, 2, 3))).vertices.shape == (4, asset.num_vertices, 3)
+
+
+def test_shared_displacement_runs_the_field_once_with_the_same_gradients():
+    """One loss that poses the model, takes the symmetry term and the displacement prior: inside
+    `shared_displacement` the field runs once, and every parameter's gradient is what three
+    separate evaluations give (to float rounding)."""
+    asset = tube_asset(bones=2)
+    model = ArticulatedModel(asset, hidden=16, dtype=torch.float64)
+    with torch.no_grad():
+        for p in model.displacement.parameters():
+            p.normal_(0.0, 0.3, generator=torch.Generator().manual_seed(0))
+    rot = axis_angle_to_quat(torch.tensor([[0.0, 0.0, 0.0], [0.0, 0.3, 0.5]], dtype=torch.float64)).expand(
+        3, 2, 4
+    )
+    calls = []
+    model.displacement.register_forward_hook(lambda *_: calls.append(1))
+
+    def loss():
+        d = model.displacement_offsets()
+        return model(rot).vertices.square().mean() + model.symmetry_loss() + d.square().mean()
+
+    grads = []
+    for shared in (False, True):
+        model.zero_grad()
+        calls.clear()
+        if shared:
+            with model.shared_displacement():
+                with model.shared_displacement():  # nested: still the outer block's evaluation
+                    value = loss()
+        else:
+            value = loss()
+        value.backward()
+        grads.append((value.detach(), [p.grad.clone() for p in model.parameters() if p.grad is not None]))
+        assert len(calls) == (1 if shared else 3)
+    (a, ga), (b, gb) = grads
+    assert torch.allclose(a, b, rtol=1e-12) and len(ga) == len(gb) > 3
+    assert all(torch.allclose(x, y, rtol=1e-9, atol=1e-12) for x, y in zip(ga, gb))
+    assert model.displacement_offsets() is not model.displacement_offsets()  # off after the block

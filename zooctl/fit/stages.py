@@ -19,6 +19,7 @@ frame pairs); smoothness always covers the whole sequence (it is cheap: no rende
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -132,6 +133,11 @@ class StageRunner:
 
     def loss(self, frames: Tensor, it: int = 0) -> tuple[Tensor, dict[str, float]]:
         """The stage's loss on ``frames`` at its iteration ``it`` (the smoothness schedule's)."""
+        share = getattr(self.scene.model, "shared_displacement", None)  # optional (`zooctl.rig.base`)
+        with share() if share is not None else contextlib.nullcontext():
+            return self._loss(frames, it)
+
+    def _loss(self, frames: Tensor, it: int) -> tuple[Tensor, dict[str, float]]:
         scene, w, ab = self.scene, self.cfg.weights, self.cfg.ablation
         tg = self.targets
         verts = scene.pose_rigid(frames) if self.stage == 1 else scene.pose(frames).vertices

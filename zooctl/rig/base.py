@@ -13,7 +13,10 @@ which a model may ignore. The object is a ``torch.nn.Module`` with:
 - learnable shape: ``log_scale`` () (``global_scale()`` = its exp), ``log_bone_scales`` (J,),
   ``skin.logits`` (V, K) and ``displacement`` (an ``nn.Module`` of (V, 3) points, or None);
 - the priors the fit weights: ``symmetry_loss(sample)``, ``bone_length_loss()``,
-  ``smoothness_loss(rotations)`` (scalars), and ``canonical_vertices()`` (V, 3).
+  ``smoothness_loss(rotations)`` (scalars), and ``canonical_vertices()`` (V, 3);
+- optionally ``shared_displacement()``, a context manager within which the displacement field is
+  evaluated once (the fit enters it around each loss evaluation, which poses the model and takes
+  the symmetry and displacement terms with the same parameters).
 
 `zooctl.rig.model.ArticulatedModel` implements all of it; a new model usually subclasses it and
 replaces ``skinning`` (a function with `zooctl.rig.skinning.linear_blend_skinning`'s signature),

@@ -15,6 +15,8 @@ Pipeline for frame t (see `zooctl.rig.skinning` for the stretch rule):
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -223,8 +225,29 @@ class ArticulatedModel(nn.Module):
 
     def displacement_offsets(self) -> Tensor | None:
         """(V, 3) the displacement field's offsets ``V(u p)`` (CASA eq. 3, added after skinning);
-        None without a field."""
-        return None if self.displacement is None else self.displacement(self.global_scale() * self.points)
+        None without a field. Inside `shared_displacement` the field runs once."""
+        if self.displacement is None:
+            return None
+        cached = getattr(self, "_shared_disp", None)
+        if cached is not None:
+            if cached[0] is None:
+                cached[0] = self.displacement(self.global_scale() * self.points)
+            return cached[0]
+        return self.displacement(self.global_scale() * self.points)
+
+    @contextlib.contextmanager
+    def shared_displacement(self) -> Iterator[None]:
+        """Within this block `displacement_offsets` evaluates the field once and hands every caller
+        (posing, the symmetry term, the displacement prior) the same tensor: one loss evaluation
+        uses it several times while the parameters stay put. Do not step an optimiser inside."""
+        if getattr(self, "_shared_disp", None) is not None:  # nested: the outer block's tensor
+            yield
+            return
+        self._shared_disp: list[Tensor | None] | None = [None]
+        try:
+            yield
+        finally:
+            self._shared_disp = None
 
     def canonical_vertices(self) -> Tensor:
         """(V, 3) the rest-shape template after global scale and displacement: ``u p + V(u p)``."""
