@@ -95,7 +95,7 @@ def nearest_points(queries: Tensor, points: Tensor) -> Tensor:
     same up to float rounding in near-ties."""
     q, p = queries.contiguous(), points.contiguous()
     kernel = _kernels.kernel_for("nearest_points", q, p)
-    if kernel is not None:
+    if kernel is not None and p.shape[1] < 2**24:  # the kernel carries indices as floats
         idx = torch.empty(q.shape[:2], dtype=torch.long)
         kernel(q, p, q.shape[0], q.shape[1], p.shape[1], idx)
         return idx

@@ -5,6 +5,7 @@
 // x and y arrays padded to whole vectors with infinitely far points; each lane keeps its own first
 // minimum, then the lanes are merged by (distance, index). NaN points never win. Tasks are blocks
 // of queries; each writes only its own outputs (deterministic).
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <limits>
