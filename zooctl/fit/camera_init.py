@@ -91,6 +91,21 @@ def _projected_box(p: np.ndarray, focal: float, cx: float, cy: float) -> tuple[n
     return uv.min(0), uv.max(0)
 
 
+def hull_points(points: np.ndarray) -> np.ndarray:
+    """The vertices of the convex hull of points (N, 3) (all of them when it is flat or tiny).
+
+    A projected bounding box depends on these alone: x / z on a convex polytope in front of the
+    camera is extreme at a vertex."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    if len(points) < 5:
+        return points
+    try:
+        return points[ConvexHull(points).vertices]
+    except QhullError:
+        return points
+
+
 class SilhouetteScorer:
     """Hard-silhouette IoU of rotated, box-aligned templates against masks at a small size."""
 
@@ -115,6 +130,7 @@ class SilhouetteScorer:
         )
         self.boxes = [mask_box(m) for m in self.masks]
         self.rest = rest - 0.5 * (rest.max(0) + rest.min(0))
+        self.hull = hull_points(self.rest)
         self.faces = np.asarray(faces, dtype=np.int64)
         self.scale = self.h / H  # search pixels per input pixel
         cx, cy = principal if principal is not None else (W / 2, H / 2)
@@ -125,7 +141,7 @@ class SilhouetteScorer:
         box = self.boxes[frame]
         if box is None:
             return None
-        return align_translation(self.rest @ rotation.T, box, focal * self.scale, self.cx, self.cy)
+        return align_translation(self.hull @ rotation.T, box, focal * self.scale, self.cx, self.cy)
 
     def silhouette(self, verts: np.ndarray, focal: float) -> np.ndarray:
         """(h, w) bool hard silhouette of world vertices (V, 3): every face filled by OpenCV at once."""
@@ -311,7 +327,8 @@ def _box_translations(
     T, H, W = masks.shape
     trans = np.full((T, 3), np.nan)
     full = SilhouetteScorer.__new__(SilhouetteScorer)
-    full.rest, full.boxes, full.scale, full.w, full.h = scorer.rest, [mask_box(m) for m in masks], 1.0, W, H
+    full.rest, full.hull, full.boxes = scorer.rest, scorer.hull, [mask_box(m) for m in masks]
+    full.scale, full.w, full.h = 1.0, W, H
     full.cx, full.cy = principal
     centre = 0.5 * (rest.max(0) + rest.min(0))
     for t in present:

@@ -1,0 +1,54 @@
+"""The camera search's box alignment reads only the template's convex hull
+(`zooctl.fit.camera_init.hull_points`): the same translations and boxes as from every vertex."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from zooctl.fit.camera_init import (
+    SilhouetteScorer,
+    _projected_box,
+    align_translation,
+    hull_points,
+    view_rotation,
+)
+from zooctl.fit.scene import CAMERA_ROTATION
+
+
+def test_hull_points_give_the_same_projected_box():
+    rng = np.random.default_rng(0)
+    pts = rng.normal(size=(500, 3)) * [0.6, 0.2, 0.1]
+    hull = hull_points(pts)
+    assert len(hull) < len(pts)
+    box = np.array([20.0, 30.0, 70.0, 50.0])
+    for _ in range(10):
+        R = view_rotation(*rng.uniform(-180, 180, 3))
+        t = align_translation(pts @ R.T, box, 80.0, 48.0, 40.0)
+        np.testing.assert_allclose(t, align_translation(hull @ R.T, box, 80.0, 48.0, 40.0), atol=1e-9)
+        cam = (pts @ R.T + t) @ CAMERA_ROTATION.T
+        hcam = (hull @ R.T + t) @ CAMERA_ROTATION.T
+        for a, b in zip(
+            _projected_box(cam, 80.0, 48.0, 40.0), _projected_box(hcam, 80.0, 48.0, 40.0), strict=True
+        ):
+            np.testing.assert_allclose(a, b, atol=1e-9)
+    flat = np.c_[rng.normal(size=(50, 2)), np.zeros(50)]  # no volume: every point is kept
+    assert len(hull_points(flat)) == 50
+    assert len(hull_points(pts[:4])) == 4
+
+
+def test_the_scorer_places_a_mesh_by_its_hull():
+    import trimesh
+
+    # A long body with a head: the head's far side and the body's inner corners are off the hull.
+    body = trimesh.creation.box(extents=(1.0, 0.3, 0.3))
+    head = trimesh.creation.icosphere(subdivisions=2, radius=0.25)
+    head.apply_translation((0.55, 0.2, 0.0))
+    mesh = trimesh.util.concatenate([body, head])
+    masks = np.zeros((1, 40, 60), bool)
+    masks[0, 12:28, 8:52] = True
+    sc = SilhouetteScorer(np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces), masks, 32)
+    assert len(sc.hull) < len(sc.rest)
+    for az in (0.0, 40.0, 90.0):
+        R = view_rotation(az, 15.0, 0.0)
+        full = align_translation(sc.rest @ R.T, sc.boxes[0], 50.0 * sc.scale, sc.cx, sc.cy)
+        np.testing.assert_allclose(sc.place(R, 0, 50.0), full, atol=1e-9)
