@@ -228,12 +228,13 @@ class ArticulatedModel(nn.Module):
         None without a field. Inside `shared_displacement` the field runs once."""
         if self.displacement is None:
             return None
-        cached = getattr(self, "_shared_disp", None)
-        if cached is not None:
-            if cached[0] is None:
-                cached[0] = self.displacement(self.global_scale() * self.points)
-            return cached[0]
-        return self.displacement(self.global_scale() * self.points)
+        cache = getattr(self, "_shared_disp", None)  # [tensor or None] inside the block
+        if cache is not None and cache[0] is not None:
+            return cache[0]
+        out = self.displacement(self.global_scale() * self.points)
+        if cache is not None:
+            cache[0] = out
+        return out
 
     @contextlib.contextmanager
     def shared_displacement(self) -> Iterator[None]:
