@@ -78,8 +78,28 @@ def test_config_errors(tmp_path):
         load_config(bad)
     with pytest.raises(UsageError):
         FitConfig.from_dict({"fit_size": 4})
+    with pytest.raises(UsageError, match="learning rates"):
+        FitConfig.from_dict({"stage2": {"lr_joints": 0}})
     cfg = FitConfig.from_dict(json.loads(preset("quality").to_json()))
     assert cfg.to_dict() == preset("quality").to_dict()
+
+
+def test_joint_rotations_have_their_own_learning_rate(tube_video):
+    from zooctl.fit.scene import FitScene
+    from zooctl.fit.stages import make_optimizer
+
+    asset = tube_video[0]
+    scene = FitScene(asset, 4, 32, 32, focal=40.0)
+    cfg = tiny_fit_config()
+    cfg.stage2.lr, cfg.stage2.lr_joints = 0.03, 0.01
+
+    def rates() -> dict[int, float]:
+        opt = make_optimizer(scene, cfg, 2, learn_focal=False)
+        return {id(p): g["lr"] for g in opt.param_groups for p in g["params"]}
+
+    assert rates()[id(scene.rotations)] == 0.01 and rates()[id(scene.root_rotation)] == 0.03
+    cfg.stage2.lr_joints = None
+    assert rates()[id(scene.rotations)] == 0.03
 
 
 def test_cli_errors_are_one_line(tube_video, store, capsys, tmp_path):

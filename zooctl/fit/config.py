@@ -46,8 +46,13 @@ class StageConfig:
     """One optimisation stage (Adam, betas 0.9/0.999)."""
 
     iters: int = 60
-    lr: float = 5e-2  # rotations, root transforms, skinning logits
+    lr: float = 5e-2  # root transforms, skinning logits (and joint rotations unless lr_joints)
     lr_shape: float = 1e-3  # global scale, bone scales and the displacement field
+    # Joint rotations (stage 2); None: ``lr``. Adam moves every joint about as far per step however
+    # weakly the silhouettes constrain it: a lower rate keeps a good pose (a template of the animal
+    # itself), a higher one lets another animal's template deform (BENCHMARKS.md, "The joints'
+    # learning rate").
+    lr_joints: float | None = None
     batch: int = 8  # frames per step (stage 2: a contiguous window, so flow sees frame pairs)
     renderer: str = "soft"  # a registered silhouette renderer: soft (SoftRas), fast (splatting), plugins
     lr_final: float = 1.0  # learning rates decay (cosine) to this fraction of theirs by the last step
@@ -180,7 +185,8 @@ class FitConfig:
             raise UsageError(f"fit_size {self.fit_size} is out of range", hint="use 16 to 1024 pixels")
         for name in ("stage1", "stage2"):
             st: StageConfig = getattr(self, name)
-            if st.iters < 0 or st.batch < 1 or st.lr <= 0 or st.lr_shape <= 0:
+            rates = (st.lr, st.lr_shape) + (() if st.lr_joints is None else (st.lr_joints,))
+            if st.iters < 0 or st.batch < 1 or min(rates) <= 0:
                 raise UsageError(f"{name}: iters >= 0, batch >= 1 and positive learning rates are required")
             if not 0 < st.lr_final <= 1:
                 raise UsageError(f"{name}: lr_final must be in (0, 1]")

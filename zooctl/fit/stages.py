@@ -73,7 +73,7 @@ def make_optimizer(scene: FitScene, cfg: FitConfig, stage: int, learn_focal: boo
         if learn_focal:
             groups.append({"params": [scene.log_focal], "lr": st.lr_shape * 0.2})
     else:
-        groups.append({"params": [scene.rotations], "lr": st.lr})
+        groups.append({"params": [scene.rotations], "lr": st.lr if st.lr_joints is None else st.lr_joints})
         if cfg.ablation.learn_skinning:
             groups.append({"params": [scene.model.skin.logits], "lr": st.lr * 5})
         groups.append({"params": scene.shape_parameters(), "lr": st.lr_shape})
