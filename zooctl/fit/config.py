@@ -146,15 +146,17 @@ class FitConfig:
     checkpoint_every: int = 25  # steps between saved states (for --resume)
     hidden: int = 64  # displacement MLP width
     camera: CameraConfig = field(default_factory=CameraConfig)
-    # Learning rates above CASA's with a cosine decay, and 1,000 stage-2 iterations: why and what
-    # they were measured to give is in BENCHMARKS.md ("Fit schedule").
+    # Learning rates above CASA's with a cosine decay (the joints' lower), and 1,000 stage-2
+    # iterations: why and what they were measured to give is in BENCHMARKS.md ("Fit schedule").
     stage1: StageConfig = field(
         default_factory=lambda: StageConfig(
             iters=60, lr=5e-2, lr_shape=5e-2, batch=16, renderer="soft", lr_final=0.1
         )
     )
     stage2: StageConfig = field(
-        default_factory=lambda: StageConfig(iters=1000, lr=3e-2, lr_shape=1e-3, batch=12, lr_final=0.05)
+        default_factory=lambda: StageConfig(
+            iters=1000, lr=3e-2, lr_shape=1e-3, batch=12, lr_final=0.05, lr_joints=2e-2
+        )
     )
     weights: LossWeights = field(default_factory=LossWeights)
     ablation: Ablation = field(default_factory=Ablation)
