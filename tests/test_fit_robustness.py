@@ -102,6 +102,24 @@ def test_joint_rotations_have_their_own_learning_rate(tube_video):
     assert rates()[id(scene.rotations)] == 0.03
 
 
+def test_a_named_template_steps_its_joints_at_the_given_rate(tube_video, store):
+    from zooctl.fit.job import fit_job
+    from zooctl.store.bank import Bank
+
+    asset, _, folder = tube_video
+    Bank(store).add(asset)
+    cfg = tiny_fit_config()
+    assert (cfg.stage2.lr_joints, cfg.stage2.lr_joints_given) == (0.02, 0.01)  # --preset fast
+    named = cfg.for_named_template()
+    assert named.stage2.lr_joints == 0.01 and cfg.stage2.lr_joints == 0.02  # a copy
+    rec = fit_job(str(folder), store, cfg, name="t", template="tube", outputs=("loss",))
+    assert rec["config"]["stage2"]["lr_joints"] == 0.01  # the record keeps the rate used
+    cfg.stage2.lr_joints_given = None
+    assert cfg.for_named_template().stage2.lr_joints == 0.02
+    with pytest.raises(UsageError, match="learning rates"):
+        FitConfig.from_dict({"stage2": {"lr_joints_given": -0.01}})
+
+
 def test_cli_errors_are_one_line(tube_video, store, capsys, tmp_path):
     _, _, folder = tube_video
     r = run_inprocess(capsys, "fit", str(folder), "--template", "nope")

@@ -129,6 +129,7 @@ def test_fit_job_records_the_trials(tmp_path, store, monkeypatch):
     assert len(tried) == 2
     assert rec["template"] == max(tried, key=lambda c: c["trial_iou"])["name"]
     assert rec["timings"]["template_trials"] > 0
+    assert rec["config"]["stage2"]["lr_joints"] == cfg.stage2.lr_joints  # retrieved: not lr_joints_given
     validate_record(json.loads(open(rec["outputs"]["fit_json"]).read()))  # the file the fit writes
     assert np.isfinite(rec["metrics"]["mask_iou"])
 

@@ -56,7 +56,11 @@ def fit(
         help="Video file, image or DAVIS folder (added to the video store first), `bench make` folder, or a stored video name. "
         "Several (or a quoted glob): a batch, one task per video (see --executor).",
     ),
-    template: str = typer.Option(None, "--template", help="Bank asset to fit (default: template retrieval)."),
+    template: str = typer.Option(
+        None,
+        "--template",
+        help="Bank asset to fit, as a rule the animal's own rig (its joints step at stage2.lr_joints_given; default: template retrieval).",
+    ),
     masks: str = typer.Option(
         None, "--masks", help="Folder of mask images (one per frame), or 'auto' (GrabCut)."
     ),

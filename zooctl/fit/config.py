@@ -53,6 +53,10 @@ class StageConfig:
     # itself), a higher one lets another animal's template deform (BENCHMARKS.md, "The joints'
     # learning rate").
     lr_joints: float | None = None
+    # Joint rotations when the user named the template (``--template``: as a rule a rig of the
+    # animal itself, which needs the lower rate) instead of retrieval choosing another animal's
+    # (which must bend further); None: ``lr_joints``. `FitConfig.for_named_template` applies it.
+    lr_joints_given: float | None = None
     batch: int = 8  # frames per step (stage 2: a contiguous window, so flow sees frame pairs)
     renderer: str = "soft"  # a registered silhouette renderer: soft (SoftRas), fast (splatting), plugins
     lr_final: float = 1.0  # learning rates decay (cosine) to this fraction of theirs by the last step
@@ -155,7 +159,7 @@ class FitConfig:
     )
     stage2: StageConfig = field(
         default_factory=lambda: StageConfig(
-            iters=1000, lr=3e-2, lr_shape=1e-3, batch=12, lr_final=0.05, lr_joints=2e-2
+            iters=1000, lr=3e-2, lr_shape=1e-3, batch=12, lr_final=0.05, lr_joints=2e-2, lr_joints_given=1e-2
         )
     )
     weights: LossWeights = field(default_factory=LossWeights)
@@ -178,6 +182,14 @@ class FitConfig:
         _merge(cfg, data, "config")
         return cfg.validate()
 
+    def for_named_template(self) -> FitConfig:
+        """This config for a template the user named: stage 2's joints at ``lr_joints_given``
+        (when set) instead of ``lr_joints``. A copy; the fit's record keeps the rate it used."""
+        st = self.stage2
+        if st.lr_joints_given is None:
+            return self
+        return dataclasses.replace(self, stage2=dataclasses.replace(st, lr_joints=st.lr_joints_given))
+
     def validate(self) -> FitConfig:
         if self.preset not in PRESETS:
             raise UsageError(f"unknown preset {self.preset!r}", hint=f"use one of {', '.join(PRESETS)}")
@@ -187,7 +199,9 @@ class FitConfig:
             raise UsageError(f"fit_size {self.fit_size} is out of range", hint="use 16 to 1024 pixels")
         for name in ("stage1", "stage2"):
             st: StageConfig = getattr(self, name)
-            rates = (st.lr, st.lr_shape) + (() if st.lr_joints is None else (st.lr_joints,))
+            rates = (st.lr, st.lr_shape) + tuple(
+                r for r in (st.lr_joints, st.lr_joints_given) if r is not None
+            )
             if st.iters < 0 or st.batch < 1 or min(rates) <= 0:
                 raise UsageError(f"{name}: iters >= 0, batch >= 1 and positive learning rates are required")
             if not 0 < st.lr_final <= 1:

@@ -224,6 +224,8 @@ def fit_job(
         exclude = set(old.get("excluded", [])) or exclude
         cameras = old.get("cameras")
     cfg = (cfg or preset("fast")).validate()
+    if template is not None and not resume:  # a resumed fit's config has the rate it started with
+        cfg = cfg.for_named_template()
     if cfg.pose_prior.kind == "motion":  # the prior's folder, so the record says which one
         from ..store.motion_store import MotionStore
 
