@@ -74,3 +74,19 @@ def test_the_summary_line_says_what_the_mask_iou_is_measured_against():
     assert "not ground truth" in masks_measured_against("grabcut")
     assert "not ground truth" in masks_measured_against("auto")
     assert "ground truth" not in masks_measured_against("given")
+
+
+def test_a_video_stored_by_another_fit_meanwhile_is_reused(davis_folder, store):
+    """Two fits of one new file started together both plan to add it under the same name; the one
+    that finishes preprocessing second reuses what the first stored instead of failing."""
+    from pathlib import Path
+
+    from zooctl.fit.job import add_planned_video, plan_stored_video, store_video
+
+    _, folder, masks = davis_folder
+    name, reused, opts = plan_stored_video(Path(folder), store, None)
+    assert (name, reused) == ("tubecam", False)
+    assert store_video(Path(folder), store, None) == "tubecam"  # the other fit, faster
+    assert add_planned_video(Path(folder), store, None, None, opts) == "tubecam"
+    videos = VideoStore(store)
+    assert videos.names() == ["tubecam"] and np.array_equal(videos.get("tubecam").masks, masks)

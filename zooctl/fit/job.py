@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError, MissingDependencyError, NotFoundError, UsageError
+from ..errors import AlreadyExistsError, InputError, MissingDependencyError, NotFoundError, UsageError
 from ..names import check_name, sanitize_name
 from ..store.fits import FitStore
 from .config import FitConfig, preset
@@ -98,9 +98,6 @@ def store_video(
     file with the same masks is reused (no second decode, flow and segmentation); one of the same
     name from another source or with other masks is kept, and this one gets a free name beside it.
     """
-    from ..store.videos import VideoStore
-    from ..video.ingest import add_video
-
     name, reused, opts = plan_stored_video(path, store_root, masks, box)
     if reused:
         if reporter is not None:
@@ -108,8 +105,26 @@ def store_video(
         return name
     if reporter is not None:
         reporter.message(f"adding {path.name} to the video store as {name!r} (decode, flow, masks)")
-    add_video(VideoStore.open(store_root), path, opts)
-    return name
+    return add_planned_video(path, store_root, masks, box, opts)
+
+
+def add_planned_video(
+    path: Path, store_root: Path, masks: str | None, box: tuple[float, float, float, float] | None, opts: Any
+) -> str:
+    """Add the video at ``path`` as `plan_stored_video` planned (``opts``); returns its stored name.
+    Another fit may have stored a video under that name since the plan (two fits of one file
+    started together): the same video is then reused, another one gets a free name."""
+    from ..store.videos import VideoStore
+    from ..video.ingest import add_video
+
+    try:
+        add_video(VideoStore.open(store_root), path, opts)
+        return opts.name
+    except AlreadyExistsError:
+        name, reused, opts = plan_stored_video(path, store_root, masks, box)
+        if not reused:
+            add_video(VideoStore.open(store_root), path, opts)
+        return name
 
 
 def plan_stored_video(
