@@ -116,6 +116,11 @@ def test_a_named_template_steps_its_joints_at_the_given_rate(tube_video, store):
     assert rec["config"]["stage2"]["lr_joints"] == 0.01  # the record keeps the rate used
     cfg.stage2.lr_joints_given = None
     assert cfg.for_named_template().stage2.lr_joints == 0.02
+    # A config that sets the joints' rate alone sets it for named templates too.
+    own = FitConfig.from_dict({"stage2": {"lr_joints": 0.005}}).for_named_template()
+    assert own.stage2.lr_joints == 0.005
+    both = FitConfig.from_dict({"stage2": {"lr_joints": 0.005, "lr_joints_given": 0.002}})
+    assert both.for_named_template().stage2.lr_joints == 0.002
     with pytest.raises(UsageError, match="learning rates"):
         FitConfig.from_dict({"stage2": {"lr_joints_given": -0.01}})
 

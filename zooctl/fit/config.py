@@ -177,9 +177,14 @@ class FitConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], base: FitConfig | None = None) -> FitConfig:
-        """Apply ``data`` (any subset of the fields) on top of ``base`` (default: the fast preset)."""
+        """Apply ``data`` (any subset of the fields) on top of ``base`` (default: the fast preset).
+        ``data`` setting stage 2's ``lr_joints`` without ``lr_joints_given`` sets the joints' rate
+        for every template, named ones too."""
         cfg = base if base is not None else preset("fast")
         _merge(cfg, data, "config")
+        stage2 = data.get("stage2") if isinstance(data, dict) else None
+        if isinstance(stage2, dict) and "lr_joints" in stage2 and "lr_joints_given" not in stage2:
+            cfg.stage2.lr_joints_given = None
         return cfg.validate()
 
     def for_named_template(self) -> FitConfig:
