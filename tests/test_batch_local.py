@@ -154,6 +154,43 @@ def test_a_video_folder_is_decoded_in_the_worker_and_stored_once_by_the_driver(t
     assert again[0].payload.ingest is None and again[0].payload.source == "tubecam"  # reused
 
 
+def test_a_video_stored_by_another_fit_during_the_batch_is_reused_or_kept(tmp_path, store):
+    """While a batch's worker decodes a folder, `zooctl fit` of the same folder stores it: the
+    driver reuses it. Had a different video taken the planned name, it stays, and the batch's
+    video is stored beside it with its fit naming it."""
+    from fit_helpers import write_davis_folder
+
+    from zooctl.fit.inputs import load_bench_video
+    from zooctl.fit.job import store_video
+    from zooctl.store.videos import VideoStore
+
+    videos = fit_inputs(tmp_path, store, 1)
+    bench = load_bench_video(Path(videos[0]))
+    folder = write_davis_folder(tmp_path / "a" / "tubecam", bench.frames, bench.masks)
+    other = write_davis_folder(tmp_path / "b" / "tubecam", bench.frames[::-1], bench.masks[::-1])
+    vs = VideoStore(store)
+
+    items = plan_fits([str(folder)], store, tiny_config(), template="a0", out_root=tmp_path / "out")
+    assert items[0].payload.ingest is not None and items[0].payload.ingest.name == "tubecam"
+    assert store_video(Path(folder), store, None) == "tubecam"  # the other fit, faster
+    report = run_batch(get_executor("local"), fit_task, items, commit_fit)
+    assert report.count("done") == 1, report.to_json()
+    assert vs.names() == ["tubecam"] and fit_records(store)["tubecam"]["stored_video"] == "tubecam"
+
+    vs.remove("tubecam")
+    items = plan_fits([str(folder)], store, tiny_config(), template="a0", out_root=tmp_path / "out2")
+    assert store_video(Path(other), store, None) == "tubecam"  # another file of the same name
+    report = run_batch(get_executor("local"), fit_task, items, commit_fit)
+    assert report.count("done") == 1, report.to_json()
+    assert vs.names() == ["tubecam", "tubecam-2"]
+    assert vs.get("tubecam").source["path"] == str(Path(other).resolve())  # untouched
+    assert vs.get("tubecam-2").source["path"] == str(Path(folder).resolve())
+    rec = fit_records(store)["tubecam"]
+    assert rec["stored_video"] == rec["video"] == rec["source"] == "tubecam-2"
+    fit_json = json.loads((tmp_path / "out2" / "tubecam" / "fit.json").read_text())
+    assert fit_json["stored_video"] == "tubecam-2"
+
+
 def test_bench_run_on_an_executor_keeps_the_row_order_and_resumes(tmp_path, store):
     from fit_helpers import tiny_overrides
 

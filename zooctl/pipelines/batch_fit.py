@@ -205,21 +205,24 @@ def commit_fit(item: BatchItem, value: dict[str, Any]) -> dict[str, Any]:
     task: FitTask = item.payload
     store = Path(task.store)
     fits = FitStore(store)
-    video = value["video"]
+    video, planned = value["video"], None
     if video is not None:
-        from ..store.videos import VideoStore
+        from ..fit.job import store_preprocessed_video
 
-        vs = VideoStore.open(store)
-        if not vs.exists(video.name):  # a resumed batch may have stored it before it stopped
-            vs.add(video)
+        # A resumed batch may have stored it before it stopped, or another fit meanwhile: reused.
+        planned = video.name
+        stored = store_preprocessed_video(store, video)
     out = Path(task.out) if task.out is not None else fits.path(task.name).resolve()
     record = _rebase(value["record"], value["scratch_out"], str(out))
+    if planned is not None and stored != planned:
+        record = _renamed_video(record, planned, stored)
     with store_lock(store):  # the outputs may be in the store (the fit's folder): all under the lock
         for rel, data in value["out_files"].items():
             if rel == "fit.json":
-                data = json.dumps(
-                    _rebase(json.loads(data), value["scratch_out"], str(out)), indent=2
-                ).encode()
+                doc = _rebase(json.loads(data), value["scratch_out"], str(out))
+                if planned is not None and stored != planned:
+                    doc = _renamed_video(doc, planned, stored)
+                data = json.dumps(doc, indent=2).encode()
             write_bytes_atomic(out / rel, data)
         for rel, data in value["fit_files"].items():
             if rel != "record.json":
@@ -255,6 +258,11 @@ def skip_finished(item: BatchItem) -> dict[str, Any] | None:
     except ZooctlError:
         return None
     return fit_summary(rec) if rec.get("status") == "done" else None
+
+
+def _renamed_video(record: dict[str, Any], old: str, new: str) -> dict[str, Any]:
+    """``record`` naming the stored video ``new`` where the worker fitted it as ``old``."""
+    return record | {k: new for k in ("source", "video", "stored_video") if record.get(k) == old}
 
 
 def _rebase(obj: Any, old: str, new: str) -> Any:
