@@ -9,6 +9,7 @@ from test_fit_e2e import validate_record
 
 from zooctl.benchdata.make import make_video
 from zooctl.fit.config import FitConfig
+from zooctl.fit.template import TRIAL_NOISE, close_trials_note
 from zooctl.rig.synthetic import tube_asset
 
 TINY = {
@@ -130,8 +131,45 @@ def test_fit_job_records_the_trials(tmp_path, store, monkeypatch):
     assert rec["template"] == max(tried, key=lambda c: c["trial_iou"])["name"]
     assert rec["timings"]["template_trials"] > 0
     assert rec["config"]["stage2"]["lr_joints"] == cfg.stage2.lr_joints  # retrieved: not lr_joints_given
+    close = abs(tried[0]["trial_iou"] - tried[1]["trial_iou"]) <= TRIAL_NOISE
+    assert any("could not tell" in n for n in rec["notes"]) == close
     validate_record(json.loads(open(rec["outputs"]["fit_json"]).read()))  # the file the fit writes
     assert np.isfinite(rec["metrics"]["mask_iou"])
+
+
+def test_fit_job_notes_templates_the_trials_cannot_tell_apart(tmp_path, store, monkeypatch):
+    from zooctl.fit.job import fit_job
+    from zooctl.retrieval.index import index_asset
+
+    monkeypatch.setenv("ZOOCTL_EMBEDDERS", "silhouette")
+    bank, thin = _bank_with_views(store)
+    twin = tube_asset(bones=3, name="twin")  # thin's shape under another name: the same trial
+    bank.add(twin)
+    index_asset(bank, twin, ["silhouette"], n_views=3, size=48)
+    folder = make_video(thin, tmp_path / "v", frames=3, size=32, seed=0)
+    rec = fit_job(str(folder), store, FitConfig.from_dict(json.loads(json.dumps(TINY))), name="t", bank=bank)
+    other = ({"thin", "twin"} - {rec["template"]}).pop()
+    assert [c["name"] for c in rec["retrieval"] if "trial_iou" in c] in (["thin", "twin"], ["twin", "thin"])
+    assert (
+        f"could not tell {rec['template']}" in rec["notes"][0] and f"--template {other}`" in rec["notes"][0]
+    )
+
+
+def test_a_close_call_between_trials_is_noted_for_the_user():
+    cands = [
+        {"name": "Wolf", "trial_iou": 0.80},
+        {"name": "Trex", "trial_iou": 0.795},
+        {"name": "Fox", "trial_iou": 0.70},
+        {"name": "Cow"},  # not tried
+    ]
+    note = close_trials_note(cands, "Wolf", "'my dog.mp4'")
+    assert "could not tell Wolf (trial IoU 0.800) from Trex (0.795)" in note and "Fox" not in note
+    assert "`zooctl fit 'my dog.mp4' --template Trex`" in note
+    assert close_trials_note(cands, "Fox", "v") is None  # the others fitted clearly better
+    assert "could not tell Trex (trial IoU 0.795) from Wolf (0.800)" in close_trials_note(cands, "Trex", "v")
+    cands[1]["trial_iou"] = 0.78
+    assert close_trials_note(cands, "Wolf", "v") is None  # 0.02 apart: the trials told them apart
+    assert close_trials_note([{"name": "Wolf"}], "Wolf", "v") is None  # no trials ran
 
 
 def test_fit_cli_prints_the_trial_ious(tmp_path, store, capsys, monkeypatch):

@@ -85,7 +85,7 @@ def fit(
     candidates: int = typer.Option(
         None,
         "--candidates",
-        help="Retrieved templates to try with a short fit each; the best one's fit goes on in full (default 3; 1: the top result).",
+        help="Retrieved templates to try with a short fit each; the best one's fit goes on in full (default 3; 1: the top result). Trials within 0.01 of each other get a note naming the other template.",
     ),
     device: str = typer.Option(None, "--device", help="cpu or cuda."),
     renderer: str = RendererOpt,

@@ -8,6 +8,7 @@ record marked ``interrupted`` and its last state in ``state.pt`` for ``--resume`
 from __future__ import annotations
 
 import dataclasses
+import shlex
 import time
 from pathlib import Path
 from typing import Any
@@ -345,6 +346,11 @@ def fit_job(
     if mirror_s is not None:
         result.timings["mirror_trial"] = mirror_s
     record.update(write_outputs(result, name, out_dir, fits, outputs, reporter))
+    if template is None:
+        from .template import close_trials_note
+
+        note = close_trials_note(candidates, asset.name, shlex.quote(str(source)))
+        record["notes"] = ([note] if note else []) + record["notes"]
     record["timings"]["total_wall"] = time.perf_counter() - t_start
     record["status"] = "done"
     from .outputs import write_fit_json

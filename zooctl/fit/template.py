@@ -132,6 +132,27 @@ def try_candidates(
     return best, candidates, best_state
 
 
+TRIAL_NOISE = 0.01  # a trial's IoU moves by a median 0.0055 (up to 0.02) between seeds
+
+
+def close_trials_note(candidates: list[dict[str, Any]], chosen: str, source: str) -> str | None:
+    """A note for the user when another tried template's trial IoU is within `TRIAL_NOISE` of the
+    chosen one's: the trials could not tell them apart, and the other may be the better animal
+    (an input-view IoU says little about the sides the camera does not see)."""
+    tried = {c["name"]: c["trial_iou"] for c in candidates if "trial_iou" in c}
+    if chosen not in tried:
+        return None
+    close = [n for n, iou in tried.items() if n != chosen and abs(iou - tried[chosen]) <= TRIAL_NOISE]
+    if not close:
+        return None
+    others = ", ".join(f"{n} ({tried[n]:.3f})" for n in close)
+    return (
+        f"the template trials could not tell {chosen} (trial IoU {tried[chosen]:.3f}) from {others}: "
+        f"within {TRIAL_NOISE}, the trials' own noise. Look at overlay.mp4's side view, and fit "
+        f"the other with `zooctl fit {source} --template {close[0]}` if it is the better animal"
+    )
+
+
 def pick_trial(ious: list[float], margin: float = 0.0) -> int:
     """Index of the winning trial: the first in retrieval order whose trial IoU is within
     ``margin`` of the best (``margin`` 0: the best, ties keeping the retrieval order)."""
