@@ -110,6 +110,8 @@ def test_a_named_template_steps_its_joints_at_the_given_rate(tube_video, store):
     Bank(store).add(asset)
     cfg = tiny_fit_config()
     assert (cfg.stage2.lr_joints, cfg.stage2.lr_joints_given) == (0.02, 0.01)  # --preset fast
+    quality = preset("quality").for_named_template().stage2
+    assert quality.lr_joints == 0.01 and preset("quality").stage2.lr_joints is None  # retrieved: 3e-2
     named = cfg.for_named_template()
     assert named.stage2.lr_joints == 0.01 and cfg.stage2.lr_joints == 0.02  # a copy
     rec = fit_job(str(folder), store, cfg, name="t", template="tube", outputs=("loss",))

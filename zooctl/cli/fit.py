@@ -76,7 +76,11 @@ def fit(
         help="Output folder (default: fits/NAME in the current folder; a batch: OUT/NAME per video).",
     ),
     name: str = typer.Option(None, "--name", help="Fit name (default: the video's name)."),
-    preset_name: str = typer.Option("fast", "--preset", help="fast or quality."),
+    preset_name: str = typer.Option(
+        "fast",
+        "--preset",
+        help="fast or quality (2.4x the iterations at a higher resolution: a closer input view, not a truer 3D; BENCHMARKS.md).",
+    ),
     iters: int = typer.Option(
         None,
         "--iters",

@@ -306,7 +306,7 @@ def _quality() -> FitConfig:
         hidden=128,
         camera=CameraConfig(azimuths=16, elevations=[-20.0, 0.0, 20.0, 40.0], search_frames=4),
         stage1=StageConfig(iters=100, lr=5e-2, lr_shape=5e-2, batch=32, renderer="soft", lr_final=0.1),
-        stage2=StageConfig(iters=2400, lr=3e-2, lr_shape=1e-3, batch=12, lr_final=0.05),
+        stage2=StageConfig(iters=2400, lr=3e-2, lr_shape=1e-3, batch=12, lr_final=0.05, lr_joints_given=1e-2),
     )
 
 
