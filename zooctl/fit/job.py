@@ -128,36 +128,28 @@ def add_planned_video(
         return name
 
 
-def store_preprocessed_video(store_root: Path, video: Any) -> str:
-    """Store ``video`` (a `VideoRecord` preprocessed elsewhere, e.g. by a batch worker, under the
-    name planned for it); returns the name it is stored under. A video stored meanwhile from the
-    same source with the same masks is reused; a different one keeps its name and this one gets
-    the next free ``NAME-k`` (the caller renames its references)."""
+def store_preprocessed_video(store_root: Path, video: Any, path: Path, masks: str | None) -> str:
+    """Store ``video``, preprocessed elsewhere (a batch worker) from ``path`` as `plan_stored_video`
+    planned it with ``masks``; returns the name it is stored under. A video stored under that name
+    meanwhile is reused when `plan_stored_video` finds it the same (same file, same masks); else
+    this one takes the next free name (the caller renames its references)."""
     from ..store.videos import VideoStore
-    from ..video.ingest import default_name
-
-    def key(rec: Any) -> tuple:
-        seg = rec.segmenter or {}
-        masks = seg.get("options", {}).get("path") if seg.get("name") == "masks" else None
-        return str(rec.source.get("path", "")), seg.get("name"), masks, seg.get("box")
 
     vs = VideoStore.open(store_root)
-    path = str(video.source.get("path", ""))
-    base = default_name(Path(path)) if path else video.name
-    names = [video.name] + [n for n in [base] + [f"{base}-{k}" for k in range(2, 100)] if n != video.name]
-    for name in names:
-        for _ in range(2):  # once more if another process stored this name between the check and the add
-            if vs.exists(name):
-                if key(vs.get(name, what=())) == key(video):
-                    return name
-                break
+    for _ in range(3):  # again if another process takes the free name before this add
+        if not vs.exists(video.name):
             try:
-                video.name = name
                 vs.add(video)
-                return name
+                return video.name
             except AlreadyExistsError:
-                continue
-    raise UsageError(f"too many stored videos named {base}-N", hint="remove some with `zooctl video rm`")
+                pass
+        name, reused, _ = plan_stored_video(path, store_root, masks)
+        if reused:
+            return name
+        video.name = name
+    raise UsageError(
+        f"other zooctl processes keep storing videos named {video.name}", hint="run the batch again"
+    )
 
 
 def plan_stored_video(

@@ -211,7 +211,8 @@ def commit_fit(item: BatchItem, value: dict[str, Any]) -> dict[str, Any]:
 
         # A resumed batch may have stored it before it stopped, or another fit meanwhile: reused.
         planned = video.name
-        stored = store_preprocessed_video(store, video)
+        masks = "auto" if task.ingest.segmenter == "grabcut" else None  # as `plan_fits` planned it
+        stored = store_preprocessed_video(store, video, Path(task.source), masks)
     out = Path(task.out) if task.out is not None else fits.path(task.name).resolve()
     record = _rebase(value["record"], value["scratch_out"], str(out))
     if planned is not None and stored != planned:
