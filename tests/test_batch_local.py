@@ -191,6 +191,22 @@ def test_a_video_stored_by_another_fit_during_the_batch_is_reused_or_kept(tmp_pa
     assert fit_json["stored_video"] == "tubecam-2"
 
 
+def test_a_renamed_video_is_renamed_in_the_notes_commands_too():
+    """The close-trials note tells the user `zooctl fit NAME --template X`: after the driver
+    stored the batch's video as NAME-2, the command must name NAME-2 (NAME is another video)."""
+    from zooctl.fit.template import close_trials_note
+    from zooctl.pipelines.batch_fit import _renamed_video
+
+    tried = [{"name": "wolf", "trial_iou": 0.80}, {"name": "fox", "trial_iou": 0.795}]
+    note = close_trials_note(tried, "wolf", "tubecam")
+    rec = {"source": "tubecam", "video": "tubecam", "stored_video": "tubecam", "notes": [note, "tubecam x"]}
+    out = _renamed_video(rec, "tubecam", "tubecam-2")
+    assert "`zooctl fit tubecam-2 --template fox`" in out["notes"][0]
+    assert "zooctl fit tubecam " not in out["notes"][0] and out["notes"][1] == "tubecam x"
+    assert out["source"] == out["video"] == out["stored_video"] == "tubecam-2"
+    assert rec["notes"][0] == note  # the worker's record is not changed in place
+
+
 def test_bench_run_on_an_executor_keeps_the_row_order_and_resumes(tmp_path, store):
     from fit_helpers import tiny_overrides
 

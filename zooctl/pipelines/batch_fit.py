@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import glob
 import json
+import shlex
 import shutil
 import tempfile
 from dataclasses import dataclass
@@ -262,8 +263,13 @@ def skip_finished(item: BatchItem) -> dict[str, Any] | None:
 
 
 def _renamed_video(record: dict[str, Any], old: str, new: str) -> dict[str, Any]:
-    """``record`` naming the stored video ``new`` where the worker fitted it as ``old``."""
-    return record | {k: new for k in ("source", "video", "stored_video") if record.get(k) == old}
+    """``record`` naming the stored video ``new`` where the worker fitted it as ``old``, in its
+    fields and in the commands its notes give (`close_trials_note`'s ``zooctl fit NAME ...``)."""
+    said, says = f"`zooctl fit {shlex.quote(old)} ", f"`zooctl fit {shlex.quote(new)} "
+    renamed = {k: new for k in ("source", "video", "stored_video") if record.get(k) == old}
+    if isinstance(record.get("notes"), list):
+        renamed["notes"] = [n.replace(said, says) if isinstance(n, str) else n for n in record["notes"]]
+    return record | renamed
 
 
 def _rebase(obj: Any, old: str, new: str) -> Any:
