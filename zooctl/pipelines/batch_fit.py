@@ -40,6 +40,7 @@ class FitTask:
     template: str | None = None
     exclude: tuple[str, ...] | None = None
     ingest: Any = None  # AddOptions: the worker decodes ``source`` and computes flow and masks
+    masks: str | None = None  # --masks as `plan_stored_video` planned ``ingest`` with it (None, "auto")
     outputs: tuple[str, ...] = ("usd", "glb", "overlay", "loss")
     cameras: str | None = None
     out: str | None = None  # final output folder (None: the fit's store folder)
@@ -83,7 +84,7 @@ def plan_fits(
     videos: set[str] = set()  # stored-video names this batch will add
     for src in sources:
         p = Path(src).expanduser()
-        task = FitTask(str(store_root), src, "", config, template=template, cameras=cameras)
+        task = FitTask(str(store_root), src, "", config, template=template, cameras=cameras, masks=masks)
         try:
             if p.exists() and ((p.is_dir() and (p / "video.npz").is_file()) or _single_image(p)):
                 task.source, base = str(p.resolve()), _bench_name(p)
@@ -206,25 +207,24 @@ def commit_fit(item: BatchItem, value: dict[str, Any]) -> dict[str, Any]:
     task: FitTask = item.payload
     store = Path(task.store)
     fits = FitStore(store)
-    video, planned = value["video"], None
+    video, planned, stored = value["video"], None, None
     if video is not None:
         from ..fit.job import store_preprocessed_video
 
         # A resumed batch may have stored it before it stopped, or another fit meanwhile: reused.
         planned = video.name
-        masks = "auto" if task.ingest.segmenter == "grabcut" else None  # as `plan_fits` planned it
-        stored = store_preprocessed_video(store, video, Path(task.source), masks)
+        stored = store_preprocessed_video(store, video, Path(task.source), task.masks)
     out = Path(task.out) if task.out is not None else fits.path(task.name).resolve()
-    record = _rebase(value["record"], value["scratch_out"], str(out))
-    if planned is not None and stored != planned:
-        record = _renamed_video(record, planned, stored)
+
+    def as_stored(doc: dict[str, Any]) -> dict[str, Any]:  # the worker's paths and video name, as stored
+        doc = _rebase(doc, value["scratch_out"], str(out))
+        return _renamed_video(doc, planned, stored) if stored != planned else doc
+
+    record = as_stored(value["record"])
     with store_lock(store):  # the outputs may be in the store (the fit's folder): all under the lock
         for rel, data in value["out_files"].items():
             if rel == "fit.json":
-                doc = _rebase(json.loads(data), value["scratch_out"], str(out))
-                if planned is not None and stored != planned:
-                    doc = _renamed_video(doc, planned, stored)
-                data = json.dumps(doc, indent=2).encode()
+                data = json.dumps(as_stored(json.loads(data)), indent=2).encode()
             write_bytes_atomic(out / rel, data)
         for rel, data in value["fit_files"].items():
             if rel != "record.json":
