@@ -12,7 +12,8 @@ from zooctl.benchdata.make import make_video
 from zooctl.errors import UsageError
 from zooctl.fit.camera_init import CameraInit, view_rotation
 from zooctl.fit.config import FitConfig
-from zooctl.fit.view_trial import depth_mirror, trial_with_mirror, view_elevation
+from zooctl.fit.depth_mirror import depth_mirror, view_elevation
+from zooctl.fit.view_trial import trial_with_mirror
 from zooctl.geometry import matrix_to_quat, quat_to_matrix
 from zooctl.rig.synthetic import tube_asset
 

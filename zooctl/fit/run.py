@@ -23,12 +23,12 @@ from ..geometry import silhouette_iou
 from ..rig.priors import find_symmetry_plane
 from .camera_init import CameraInit, initialise_camera
 from .config import FitConfig
+from .depth_mirror import depth_mirror, view_elevation
 from .inputs import FitVideo, crop_box, fit_resolution, resample_flow, resample_masks
 from .losses import MaskTargets
 from .pose_prior import clip_joint_limits, clip_pose_stats, motion_sequence_prior
 from .scene import FitScene
 from .stages import StageRunner, Targets, make_optimizer, mask_iou, stage_config
-from .view_trial import depth_mirror, view_elevation
 
 STATE_VERSION = 1
 

@@ -9,6 +9,8 @@ search's start sees the animal from below, the fit also tries the start's depth 
 the beginning of the fit, paused) and keeps the mirror unless its trial mask IoU falls more than
 ``camera.mirror_margin`` (the trials' own noise) below the search's. Nothing is tried when the
 camera's rotations are known: their motion tells the two views apart (`initialise_camera`).
+The mirror itself, and the camera's elevation, are `zooctl.fit.depth_mirror`'s (`fit_video`
+applies them at its start).
 
 ``camera.mirror_trial`` says for which templates: ``given`` (default) only for a template the
 user named (``--template``), as a retrieved template is another animal, whose trial IoU does not
@@ -17,50 +19,12 @@ tell the better view (BENCHMARKS.md, Fit); ``always`` for retrieval's candidates
 
 from __future__ import annotations
 
-import math
 import time
 from typing import Any
 
 import numpy as np
 
-from ..geometry import matrix_to_quat, quat_to_matrix
-from .camera_init import CameraInit
-
-
-def view_elevation(root_rotation: np.ndarray) -> float:
-    """Mean elevation in degrees of the camera over the template's horizon (zooctl's templates
-    are Y up): positive when the camera looks down on the animal. root_rotation (T, 4) wxyz, the
-    fit's camera looking down -Z."""
-    R = quat_to_matrix(np.asarray(root_rotation, np.float64))  # (T, 3, 3)
-    up_towards_camera = float(np.mean(R[:, 2, 1]))
-    return math.degrees(math.asin(min(max(up_towards_camera, -1.0), 1.0)))
-
-
-def depth_mirror(init: CameraInit, rest: np.ndarray, normal: np.ndarray, offset: float) -> CameraInit:
-    """``init`` with every frame's animal mirrored in depth through its own centre.
-
-    rest (V, 3) the template's rest vertices; (normal (3,), offset) its mirror plane
-    ``normal . x = offset``. A frame's vertices ``R x + t`` become ``M_z (R x + t)`` mirrored
-    about the depth of the animal's centre; with ``x = S x' + 2 offset normal`` (the template is
-    its own mirror image) that is root rotation ``M_z R S`` and a new translation."""
-    n = np.asarray(normal, np.float64)
-    S = np.eye(3) - 2.0 * np.outer(n, n)
-    Mz = np.diag([1.0, 1.0, -1.0])
-    R = quat_to_matrix(np.asarray(init.root_rotation, np.float64))  # (T, 3, 3)
-    t = np.asarray(init.root_translation, np.float64)  # (T, 3)
-    centre_z = (R @ np.asarray(rest, np.float64).mean(0) + t)[:, 2]
-    rot = Mz @ R @ S
-    trans = t * np.array([1.0, 1.0, -1.0])
-    trans[:, 2] += 2.0 * centre_z
-    trans += 2.0 * float(offset) * (Mz @ R @ n)
-    return CameraInit(
-        init.focal,
-        np.stack([matrix_to_quat(r) for r in rot]),
-        trans,
-        init.candidates,
-        init.iou,
-        init.keyframe_iou,
-    )
+from .run import fit_video
 
 
 def mirror_wanted(cfg: Any, template_given: bool) -> bool:
@@ -89,8 +53,6 @@ def trial_with_mirror(
     Returns (the kept trial's IoU, its paused state to continue from, what was tried: also
     stored in the state's ``camera_init["view_trial"]`` for fit.json). ``checkpoint``: as
     `fit_video`'s, for both trials (each is a fit that a resume can finish)."""
-    from .run import fit_video
-
     t = time.perf_counter()
     search = fit_video(video, template, cfg, reporter, checkpoint, pause_at=cfg.trials.iters)
     search_s = time.perf_counter() - t

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError, UsageError, ZooctlError
+from ..files import regular_size
 from ..names import check_name, sanitize_name
 from ..plugins import get_registry
 from ..store.bank import Bank
@@ -38,6 +39,7 @@ def import_file(path: Path, name: str) -> Any:
         )
     if path.is_dir():
         raise InputError(f"{path} is a directory", hint="give the model file(s) inside it")
+    regular_size(path, "the model file", "max_file_mb")  # a FIFO or /dev/zero would never end
     return spec.load(path, name)
 
 
@@ -101,9 +103,11 @@ def seed_starter(
     render their retrieval views, so `bank search` and `fit` retrieval work on a seeded bank.
     Returns the names added."""
     from ..procedural import seed_bank
+    from ..procedural.random import random_assets
 
     views = _views_default() if views is None else views
-    added = seed_bank(bank, seed=seed, plans=plans, variants=variants, replace=replace, random=random)
+    assets = random_assets(random, seed=seed, labels=plans) if random > 0 else None
+    added = seed_bank(bank, seed=seed, plans=plans, variants=variants, replace=replace, assets=assets)
     for i, n in enumerate(added if views else []):
         _index_views(bank, bank.get(n))
         if progress is not None:

@@ -181,20 +181,16 @@ def seed_bank(
     plans: list[str] | None = None,
     variants: bool = True,
     replace: bool = False,
-    random: int = 0,
+    assets: list[RiggedAsset] | None = None,
 ) -> list[str]:
     """Add the starter animals to ``bank`` (anything with ``add(asset, replace=...)`` and
-    ``exists(name)``, such as `zooctl.store.bank.Bank`), or with ``random`` > 0 that many random
-    animals (`zooctl.procedural.random.random_assets`; ``plans`` then names body-plan labels).
-    Existing names are kept unless ``replace``.
+    ``exists(name)``, such as `zooctl.store.bank.Bank`), or ``assets`` instead when given (e.g.
+    random animals, `zooctl.procedural.random.random_assets`). Existing names are kept unless
+    ``replace``.
 
     Returns the names added.
     """
-    if random > 0:
-        from .random import random_assets
-
-        assets = random_assets(random, seed=seed, labels=plans)
-    else:
+    if assets is None:
         assets = starter_assets(seed, plans, variants)
     added = []
     for asset in assets:
