@@ -1,0 +1,108 @@
+"""`zooctl view`: build the site (a fit or the bank gallery), then export it or serve it."""
+
+from __future__ import annotations
+
+import tempfile
+import webbrowser
+from contextlib import contextmanager
+from pathlib import Path
+
+from zooctl.errors import UsageError
+
+
+def run_view(
+    fit: str | None,
+    bank: bool,
+    tags: list[str],
+    export: Path | None,
+    host: str,
+    port: int,
+    no_browser: bool,
+) -> None:
+    from zooctl.cli._common import console, store_root
+
+    if bank == (fit is not None):
+        raise UsageError(
+            "give a FIT to view, or --bank for the bank gallery", hint="`zooctl fits list` names the fits"
+        )
+    if tags and not bank:
+        raise UsageError("--tag filters the bank gallery: use it with --bank")
+    store = store_root()
+    if export is not None:
+        index = _build(store, fit, tags, Path(export))
+        console.print(f"wrote {index} (open it in a browser; it works from disk)", highlight=False)
+        return
+    with tempfile.TemporaryDirectory(prefix="zooctl-view-") as d:
+        _build(store, fit, tags, Path(d))
+        _serve(Path(d), host, port, no_browser, f"fit {fit}" if fit else "the bank gallery")
+
+
+def _build(store: Path, fit: str | None, tags: list[str], out: Path) -> Path:
+    from .site import check_out_dir
+
+    check_out_dir(out)
+    if fit is not None:
+        from .fit_data import load_fit_view
+        from .site import write_fit_site
+
+        with _progress() as bar:
+            view = load_fit_view(store, fit, progress=bar("reprojecting the fitted character"))
+            return write_fit_site(view, out, progress=bar("writing frames"))
+    from .gallery import load_gallery, write_bank_site
+
+    with _progress() as bar:
+        entries = load_gallery(store, tags, progress=bar("rendering turntables"))
+        return write_bank_site(entries, out, tags, progress=bar("writing the gallery"))
+
+
+@contextmanager
+def _progress():
+    """``bar(description)`` gives a ``progress(done, total)`` callback for one rich task."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from zooctl.cli._common import err_console
+
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=err_console,
+        transient=True,
+    ) as p:
+
+        def bar(description: str):
+            task = p.add_task(description, total=None)
+
+            def update(done: int, total: int) -> None:
+                p.update(task, completed=done, total=total)
+
+            return update
+
+        yield bar
+
+
+def _serve(site: Path, host: str, port: int, no_browser: bool, what: str) -> None:
+    from zooctl.cli._common import console, err_console
+
+    from .serve import is_loopback, make_server, url_of
+
+    server = make_server(site, host, port)
+    url = url_of(server, host)
+    if not is_loopback(host):
+        err_console.print(
+            f"[bold yellow]warning:[/] serving on {host}: anyone who can reach this machine on port "
+            f"{server.server_address[1]} can open {what} (there is no login). Use the default "
+            "--host 127.0.0.1 to keep it to this machine.",
+            highlight=False,
+        )
+    console.print(f"serving {what} at {url}  (Ctrl-C to stop)", highlight=False)
+    console.file.flush()
+    if not no_browser:
+        webbrowser.open(url)
+    try:
+        server.serve_forever()
+    except KeyboardInterrupt:
+        console.print("stopped")
+    finally:
+        server.server_close()
