@@ -136,10 +136,12 @@ def print_repair(report: dict[str, Any], items: str) -> None:
         console.print(f"  {note}", highlight=False, markup=False)
     print_skipped(report["skipped"], "not a valid file, left in place")
     if report["dropped"]:
+        from rich.markup import escape
+
         err_console.print(
-            f"[yellow]dropped from the index[/] (no valid file): {', '.join(report['dropped'])}",
+            f"[yellow]dropped from the index[/] (no valid file): {escape(', '.join(report['dropped']))}",
             highlight=False,
-            markup=False,
+            soft_wrap=True,
         )
 
 
