@@ -40,6 +40,8 @@ def resolve_export(
     from ..plugins import get_registry
 
     path = None if path is None else Path(path)
+    if path is not None:
+        check_not_special(path)  # before a suffix is added: `-o /dev/full` is not /dev/full.usdz
     is_dir = path is not None and path.is_dir()
     if fmt is None and path is not None and path.suffix and not is_dir:
         found = _exporter_for_suffix(path.suffix)
@@ -75,8 +77,26 @@ def resolve_export(
     return spec, fmt, path
 
 
+def check_not_special(path: Path) -> None:
+    """A `UsageError` when ``path`` exists but is neither a regular file nor a folder: writing to a
+    device or a FIFO would vanish, fail late or block (after symlinks: a link to one counts too)."""
+    import stat
+
+    try:
+        mode = path.stat().st_mode
+    except OSError:  # absent (or unreachable): the writer says what is wrong with it
+        return
+    if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+        raise UsageError(
+            f"{path} is not a regular file or a folder (a device, FIFO or socket)",
+            hint="give a file name in a folder, or an existing folder",
+        )
+
+
 def check_writable(path: Path) -> None:
-    """A clear `UsageError` when ``path``'s folder is missing or cannot be written."""
+    """A clear `UsageError` when ``path``'s folder is missing or cannot be written, or ``path`` is
+    something a file cannot be written to."""
+    check_not_special(path)
     parent = path.parent
     if not parent.is_dir():
         raise UsageError(f"the folder {parent} does not exist", hint="create it first")

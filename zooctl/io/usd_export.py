@@ -133,14 +133,20 @@ def save_usd(
 
 
 def _publish_usdz(layer: Path, path: Path) -> None:
-    from pxr import UsdUtils
+    import errno
+
+    from pxr import Tf, UsdUtils
 
     tmp = temp_path(path)
     tmp_usdz = tmp.with_name(tmp.name + ".usdz")
     tmp.unlink(missing_ok=True)
     try:
-        if not UsdUtils.CreateNewUsdzPackage(str(layer), str(tmp_usdz)):
-            raise InputError(f"could not package {path.name} as USDZ")
+        try:
+            packaged = UsdUtils.CreateNewUsdzPackage(str(layer), str(tmp_usdz))
+        except Tf.ErrorException:
+            packaged = False
+        if not packaged:  # its inputs were just written by us: the output is what failed
+            raise OSError(errno.EIO, "USD could not write the package (is the disk full?)", str(path))
         publish(tmp_usdz, path)
     except BaseException:
         tmp_usdz.unlink(missing_ok=True)
@@ -223,7 +229,25 @@ def _write_stage(
 
     if camera is not None:
         _write_camera(stage, camera, camera_index)
-    layer.Save()
+    _save_layer(layer, path)
+
+
+def _save_layer(layer, path: Path) -> None:
+    """``layer.Save()``, its failure (a full disk: USD raises its own error, not an OSError) an
+    OSError the exporters' caller reports as one line."""
+    import errno
+    import re
+
+    from pxr import Tf
+
+    why = "USD could not write the file"
+    try:
+        saved = layer.Save()
+    except Tf.ErrorException as exc:
+        found = re.findall(r": '([^']+)'", str(exc))
+        saved, why = False, f"{why}: {found[0]}" if found else why
+    if not saved:
+        raise OSError(errno.EIO, f"{why} (is the disk full?)", str(path))
 
 
 def _unique_child(stage, parent, name: str) -> str:
