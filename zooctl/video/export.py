@@ -2,13 +2,49 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import UsageError
+from ..errors import UsageError, ZooctlError
 
 WHAT = ("frames", "masks", "flow")
+
+
+def _out_folder(out: Path) -> None:
+    """Create the folder ``out``, or say in one line why it cannot be one."""
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"-o {out} is not a folder", hint="give a new or existing folder to write into")
+    with _writing(out):
+        out.mkdir(parents=True, exist_ok=True)
+
+
+@contextlib.contextmanager
+def _writing(where: Path) -> Iterator[None]:
+    """OSErrors of the export's writes (`temp_path` reports them as store errors) as one clear
+    error that names the folder, a full disk above all."""
+    import errno
+
+    from ..errors import NoSpaceError, ReadOnlyStoreError
+
+    try:
+        yield
+    except NoSpaceError as exc:
+        hint = "free disk space (or raise the file-size limit) and export again"
+        raise ZooctlError(exc.message, hint=hint) from None
+    except ReadOnlyStoreError:
+        raise UsageError(f"cannot write into {where}: permission denied", hint="choose another -o") from None
+    except OSError as exc:
+        why = exc.strerror or str(exc)
+        if exc.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
+            raise ZooctlError(
+                f"no space left on device / file too large while exporting into {where}: {why}",
+                hint="free disk space (or raise the file-size limit) and export again",
+            ) from None
+        raise ZooctlError(f"cannot write into {where}: {why}", hint="choose another -o") from None
 
 
 def export_video(store, name: str, what: str, out: str | Path) -> int:
@@ -27,16 +63,17 @@ def export_video(store, name: str, what: str, out: str | Path) -> int:
     parts = {"frames": ("frames",), "masks": ("masks",), "flow": ("flow",)}[what]
     rec = store.get(name, what=parts)
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    _out_folder(out)
     n = 0
 
     def save_image(arr: np.ndarray, final: Path, fmt: str) -> None:
-        tmp = temp_path(final)
-        try:
-            Image.fromarray(arr).save(tmp, format=fmt, **({"quality": 95} if fmt == "JPEG" else {}))
-            publish(tmp, final)
-        finally:
-            tmp.unlink(missing_ok=True)
+        with _writing(out):
+            tmp = temp_path(final)
+            try:
+                Image.fromarray(arr).save(tmp, format=fmt, **({"quality": 95} if fmt == "JPEG" else {}))
+                publish(tmp, final)
+            finally:
+                tmp.unlink(missing_ok=True)
 
     if what == "frames":
         for i, f in enumerate(rec.frames):
@@ -49,19 +86,22 @@ def export_video(store, name: str, what: str, out: str | Path) -> int:
     else:
         for key, arr in (("forward", rec.flow_forward), ("backward", rec.flow_backward)):
             final = out / f"{key}.npy"
-            tmp = temp_path(final)
-            try:
-                with open(tmp, "wb") as fh:
-                    np.save(fh, arr.astype(np.float32))
-                publish(tmp, final)
-            finally:
-                tmp.unlink(missing_ok=True)
+            buf = io.BytesIO()  # np.save into a real file fails without an errno on a full disk
+            np.save(buf, arr.astype(np.float32))
+            with _writing(out):
+                tmp = temp_path(final)
+                try:
+                    tmp.write_bytes(buf.getvalue())
+                    publish(tmp, final)
+                finally:
+                    tmp.unlink(missing_ok=True)
             n += 1
         for key, arr in (
             ("occlusion_forward", rec.occlusion_forward),
             ("occlusion_backward", rec.occlusion_backward),
         ):
-            (out / key).mkdir(exist_ok=True)
+            with _writing(out):
+                (out / key).mkdir(exist_ok=True)
             for i, m in enumerate(arr):
                 save_image(m.astype(np.uint8) * 255, out / key / f"{i:05d}.png", "PNG")
                 n += 1
