@@ -46,7 +46,7 @@ def load_fit_view(store: Path, name: str, progress: Any = None) -> FitView:
     T = min(int(record["frames"]), len(frames))
     frames, masks = frames[:T], masks[:T].astype(bool)
     H, W = frames.shape[1:3]
-    camera = _camera(record, H, W)
+    camera = input_camera(record, H, W)
     silhouettes = _silhouettes(asset, camera["torch"], T, progress)
     camera.pop("torch")
     return FitView(
@@ -86,7 +86,7 @@ def _video(store: Path, record: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]
     return video.frames, video.masks
 
 
-def _camera(record: dict[str, Any], H: int, W: int) -> dict[str, Any]:
+def input_camera(record: dict[str, Any], H: int, W: int) -> dict[str, Any]:
     """The input-view camera as intrinsics at (H, W) plus its camera-to-world matrix."""
     import torch
 

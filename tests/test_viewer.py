@@ -1,0 +1,291 @@
+"""`zooctl view` (plugins/zooctl-viewer) in a real browser: headless Chromium loads the page of a
+small fit, from disk (``--export``) and from the server, and its screenshots are checked: the
+character is drawn where its silhouette is, moving the slider changes the pose, the skeleton and
+the free view draw, and the page reports no errors. Bad input gets one line and a non-zero exit."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from cli_helpers import REPO, zooctl
+
+pytest.importorskip(
+    "zooctl_viewer",
+    reason="the zooctl-viewer plugin is not installed (pip install plugins/zooctl-viewer; make test does)",
+)
+
+from zooctl_viewer.browser import Chromium, find_chromium  # noqa: E402
+
+needs_chromium = pytest.mark.skipif(
+    find_chromium() is None,
+    reason="no chromium to test the page in (apt-get install chromium; .ci/run does)",
+)
+FRAMES = 8
+BACKGROUND = (0x2A, 0x2F, 0x36)  # the 3D view's clear colour (fit.js)
+
+
+@pytest.fixture(scope="module")
+def fit(tmp_path_factory):
+    """(store, fit record) of a few-second fit of a procedural quadruped's video, given as a DAVIS
+    folder so the fit stores it (the path a user's video takes)."""
+    from fit_helpers import tiny_fit_config, write_davis_folder
+
+    from zooctl.benchdata.make import make_video
+    from zooctl.fit.inputs import load_bench_video
+    from zooctl.fit.job import fit_job
+    from zooctl.procedural import build_animal
+    from zooctl.store.bank import Bank
+
+    root = tmp_path_factory.mktemp("viewer")
+    store = root / "store"
+    asset = build_animal("quadruped", name="quadruped")
+    Bank(store).add(asset)
+    bench = load_bench_video(make_video(asset, root / "bench", frames=FRAMES, size=96, seed=5))
+    folder = write_davis_folder(root / "walk", bench.frames, bench.masks)
+    rec = fit_job(
+        str(folder), store, tiny_fit_config(3), name="walk", template="quadruped", outputs=("usd", "glb")
+    )
+    assert rec["stored_video"] and rec["outputs"]["glb"].endswith(".glb")
+    return store, rec
+
+
+@pytest.fixture(scope="module")
+def site(fit, tmp_path_factory):
+    store, _ = fit
+    out = tmp_path_factory.mktemp("site") / "walk-view"
+    r = zooctl("view", "walk", "--export", str(out), store=store)
+    assert r.code == 0, r.err
+    assert f"wrote {out / 'index.html'}" in " ".join(r.out.split())
+    return out
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if find_chromium() is None:
+        pytest.skip("no chromium to test the page in (apt-get install chromium; .ci/run does)")
+    with Chromium(width=1400, height=1000) as b:
+        yield b
+
+
+def test_export_writes_a_self_contained_site(site, fit):
+    _, rec = fit
+    data = (site / "data.js").read_text()
+    assert data.startswith("window.ZOOCTL_VIEW = ")
+    d = json.loads(data[len("window.ZOOCTL_VIEW = ") :].rstrip().rstrip(";"))
+    assert d["frames"] == FRAMES and len(d["frame_files"]) == FRAMES
+    assert all((site / f).is_file() for f in d["frame_files"] + d["overlay_files"])
+    assert d["record"]["metrics"]["mask_iou"] == rec["metrics"]["mask_iou"]
+    assert d["camera"]["source"] == "walk.usd /World/Camera"
+    # The page's own reprojection agrees with the fit's measurement of the same exported mesh.
+    shown = np.nanmean([x for x in d["silhouette_iou"] if x is not None])
+    assert shown == pytest.approx(rec["metrics"]["mask_iou"], abs=0.02)
+    html = (site / "index.html").read_text()
+    assert "https://" not in html and "http://" not in html  # nothing from a CDN
+    assert (site / "vendor" / "three.LICENSE").read_text().startswith("The MIT License")
+    assert "0.187.0" in (site / "vendor" / "VERSION").read_text()
+
+
+def _drawn(img: np.ndarray) -> np.ndarray:
+    """(H, W) bool: pixels of the 3D view that are not its background."""
+    return np.abs(img.astype(int) - BACKGROUND).max(-1) > 12
+
+
+def _silhouette_at(store, rec, frame: int, H: int, W: int, name: str = "walk") -> np.ndarray:
+    """The fitted character of ``frame`` rasterised by zooctl through the fit's camera at (H, W)."""
+    import torch
+    from zooctl_viewer.fit_data import input_camera
+
+    from zooctl.render.camera import Camera
+    from zooctl.render.raster import rasterize
+    from zooctl.store.fits import FitStore
+
+    h, w = rec["image_size"]
+    cam = input_camera(rec, h, w)["torch"]
+    s = W / w
+    k = cam.intrinsics * torch.tensor([s, H / h, s, H / h])
+    cam = Camera(k, cam.rotation, cam.translation, H, W)
+    asset = FitStore(store).character(name)
+    v = torch.as_tensor(asset.pose("fit", np.array([frame])).astype(np.float32))
+    return rasterize(v, torch.as_tensor(asset.faces, dtype=torch.long), cam).mask[0].numpy()
+
+
+def _iou(a: np.ndarray, b: np.ndarray) -> float:
+    return float((a & b).sum() / max((a | b).sum(), 1))
+
+
+def _open(browser, url: str) -> None:
+    browser.events.clear()
+    browser.goto(url)
+    browser.wait_for("document.body && document.body.dataset.ready === '1'", timeout=60)
+
+
+def _show(browser, frame: int, view: str = "input") -> np.ndarray:
+    browser.evaluate(f"zooctlShow({frame}, '{view}')")
+    browser.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))", True)
+    return browser.screenshot("#canvas3d")
+
+
+@needs_chromium
+def test_the_character_is_drawn_where_its_silhouette_is(site, fit, browser, tmp_path):
+    store, rec = fit
+    _open(browser, (site / "index.html").as_uri())
+    for frame in (0, FRAMES - 1):
+        img = _show(browser, frame)
+        drawn = _drawn(img)
+        sil = _silhouette_at(store, rec, frame, *drawn.shape)
+        iou = _iou(drawn, sil)
+        if iou < 0.85:
+            from PIL import Image
+
+            Image.fromarray(img).save(tmp_path / f"frame{frame}.png")
+        assert iou > 0.85, f"frame {frame}: the page's character covers its silhouette with IoU {iou:.3f}"
+        assert drawn.mean() > 0.01  # something, not the background alone
+    assert browser.errors() == []
+
+
+@needs_chromium
+def test_the_slider_moves_the_pose(site, fit, browser):
+    _open(browser, (site / "index.html").as_uri())
+    first = _show(browser, 0)
+    # Drag the real slider (mouse events at its right end): the last frame.
+    x, y, w, h = browser.evaluate(
+        "(() => { const r = document.getElementById('slider').getBoundingClientRect();"
+        " return [r.left, r.top, r.width, r.height]; })()"
+    )
+    for kind in ("mousePressed", "mouseReleased"):
+        browser.call(
+            "Input.dispatchMouseEvent",
+            {"type": kind, "x": x + w - 2, "y": y + h / 2, "button": "left", "clickCount": 1},
+        )
+    assert browser.evaluate("document.getElementById('slider').value") == str(FRAMES - 1)
+    assert (
+        browser.evaluate("document.getElementById('frame').getAttribute('src')")
+        == f"frames/{FRAMES - 1:05d}.jpg"
+    )
+    browser.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))", True)
+    last = browser.screenshot("#canvas3d")
+    changed = _drawn(first) != _drawn(last)
+    assert changed.mean() > 0.002, "moving the slider left the character where it was"
+    assert browser.errors() == []
+
+
+@needs_chromium
+def test_skeleton_and_free_view(site, browser):
+    _open(browser, (site / "index.html").as_uri())
+    plain = _show(browser, 0)
+    browser.evaluate("document.getElementById('skeleton').click()")
+    with_bones = _show(browser, 0)
+    assert (np.abs(plain.astype(int) - with_bones).max(-1) > 40).mean() > 0.0005
+    browser.evaluate("document.getElementById('skeleton').click()")
+    # A drag on the canvas orbits: the view switches to free and shows the character from elsewhere.
+    x, y, w, h = browser.evaluate(
+        "(() => { const r = document.getElementById('canvas3d').getBoundingClientRect();"
+        " return [r.left, r.top, r.width, r.height]; })()"
+    )
+    cx, cy = x + w / 2, y + h / 2
+    browser.call(
+        "Input.dispatchMouseEvent",
+        {"type": "mousePressed", "x": cx, "y": cy, "button": "left", "clickCount": 1},
+    )
+    for k in range(1, 11):
+        browser.call(
+            "Input.dispatchMouseEvent",
+            {"type": "mouseMoved", "x": cx + 25 * k, "y": cy, "button": "left", "buttons": 1},
+        )
+    browser.call(
+        "Input.dispatchMouseEvent",
+        {"type": "mouseReleased", "x": cx + 250, "y": cy, "button": "left", "clickCount": 1},
+    )
+    assert browser.evaluate("document.getElementById('view-free').classList.contains('on')")
+    browser.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))", True)
+    orbited = browser.screenshot("#canvas3d")
+    assert _iou(_drawn(orbited), _drawn(plain)) < 0.8 and _drawn(orbited).mean() > 0.005
+    # The input-view preset brings the fitted camera back exactly.
+    back = _show(browser, 0, "input")
+    assert _iou(_drawn(back), _drawn(plain)) > 0.98
+    assert browser.errors() == []
+
+
+@needs_chromium
+def test_the_page_reports_what_it_was_measured_against(site, fit, browser):
+    _, rec = fit
+    _open(browser, (site / "index.html").as_uri())
+    text = browser.evaluate("document.getElementById('metrics').innerText")
+    assert "mask IoU" in text and f"{rec['metrics']['mask_iou']:.3f}" in text
+    assert "against the video's stored masks" in text
+    assert "was given (--template)" in browser.evaluate("document.getElementById('template').innerText")
+
+
+@needs_chromium
+def test_served_on_localhost_and_stops_on_ctrl_c(fit, browser):
+    store, _ = fit
+    env = dict(os.environ, ZOOCTL_STORE=str(store), COLUMNS="200", NO_COLOR="1")
+    p = subprocess.Popen(
+        [sys.executable, "-m", "zooctl", "view", "walk", "--no-browser", "--port", "0"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        cwd=REPO,
+    )
+    try:
+        line = p.stdout.readline()
+        assert "serving fit walk at http://127.0.0.1:" in line, line + p.stderr.read()
+        url = line.split(" at ", 1)[1].split()[0]
+        _open(browser, url)
+        assert browser.evaluate("window.ZOOCTL_VIEW.name") == "walk"
+        assert browser.errors() == []
+    finally:
+        p.send_signal(signal.SIGINT)
+        out, err = p.communicate(timeout=30)
+    assert p.returncode == 0, err
+    assert "Traceback" not in err
+
+
+def test_exposing_the_server_says_so(fit):
+    store, _ = fit
+    env = dict(os.environ, ZOOCTL_STORE=str(store), COLUMNS="200", NO_COLOR="1")
+    p = subprocess.Popen(
+        [sys.executable, "-m", "zooctl", "view", "walk", "--no-browser", "--port", "0", "--host", "0.0.0.0"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        cwd=REPO,
+    )
+    try:
+        assert "serving fit walk at http://127.0.0.1:" in p.stdout.readline()
+    finally:
+        p.send_signal(signal.SIGINT)
+        _, err = p.communicate(timeout=30)
+    assert "warning: serving on 0.0.0.0" in " ".join(err.split())
+    assert "anyone who can reach this machine" in " ".join(err.split())
+
+
+def test_bad_input_gets_one_line(fit, tmp_path):
+    store, _ = fit
+    r = zooctl("view", "nosuch", "--export", str(tmp_path / "x"), store=store)
+    assert r.code != 0 and "Traceback" not in r.err and "nosuch" in r.err
+    r = zooctl("view", store=store)
+    assert r.code != 0 and "give a FIT to view, or --bank" in r.err
+    busy = tmp_path / "busy"
+    busy.mkdir()
+    (busy / "notes.txt").write_text("mine")
+    r = zooctl("view", "walk", "--export", str(busy), store=store)
+    assert r.code != 0 and "not empty" in r.err and (busy / "notes.txt").read_text() == "mine"
+    assert not (tmp_path / "x").exists()
+
+
+def test_export_again_replaces_the_earlier_export(fit, site):
+    store, _ = fit
+    t = time.time()
+    r = zooctl("view", "walk", "--export", str(site), store=store)
+    assert r.code == 0, r.err
+    assert (site / "index.html").stat().st_mtime >= t - 1
