@@ -4,6 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.zooctl-installed
 TEST_STAMP := $(VENV)/.zooctl-test-extras
+VIEWER_STAMP := $(VENV)/.zooctl-viewer
 # torch first: 2.13.0 (CPU) is on this machine's disk; any other spec may pull a CUDA build.
 TORCH_SPEC ?= torch==2.13.0
 
@@ -19,16 +20,21 @@ $(STAMP): pyproject.toml Makefile
 	$(BIN)/pip install -q --disable-pip-version-check -e '.[test]' --config-settings editable_mode=compat
 	touch $(STAMP)
 
+# The viewer plugin (`zooctl view`): nothing beyond zooctl (its three.js is vendored in it).
+$(VIEWER_STAMP): $(STAMP) plugins/zooctl-viewer/pyproject.toml
+	$(BIN)/pip install -q --disable-pip-version-check --no-deps -e plugins/zooctl-viewer --config-settings editable_mode=compat
+	touch $(VIEWER_STAMP)
+
 # Blender as a Python module, only for the tests that open our exports in Blender (~350 MB).
 # The ray executor plugin (pulls ray, ~200 MB installed) after torch, so torch's pin stands.
-$(TEST_STAMP): $(STAMP) plugins/zooctl-ray/pyproject.toml
+$(TEST_STAMP): $(STAMP) $(VIEWER_STAMP) plugins/zooctl-ray/pyproject.toml
 	$(BIN)/pip install -q --disable-pip-version-check bpy==4.2.0 || echo "bpy unavailable: Blender tests will skip"
 	$(BIN)/pip install -q --disable-pip-version-check -e plugins/zooctl-ray || echo "ray unavailable: Ray tests will skip"
 	touch $(TEST_STAMP)
 
 install: $(STAMP)
 
-demo: $(STAMP)
+demo: $(STAMP) $(VIEWER_STAMP)
 	$(BIN)/python -m zooctl.demo
 
 test: $(TEST_STAMP)
