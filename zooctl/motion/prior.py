@@ -16,6 +16,7 @@ the kept frames.
 
 from __future__ import annotations
 
+import io
 import json
 import pickle
 from collections.abc import Callable, Sequence
@@ -134,7 +135,10 @@ class PonymationPrior:
         """Write ``weights.pt`` and ``config.json`` into ``directory`` (the caller publishes it)."""
         d = Path(directory)
         d.mkdir(parents=True, exist_ok=True)
-        torch.save({k: v.detach().cpu() for k, v in self.model.state_dict().items()}, d / WEIGHTS)
+        # Into memory first: torch.save to a file on a full disk raises a RuntimeError, not an OSError.
+        buf = io.BytesIO()
+        torch.save({k: v.detach().cpu() for k, v in self.model.state_dict().items()}, buf)
+        (d / WEIGHTS).write_bytes(buf.getvalue())
         cfg = self.config_json(name or d.name, extra)
         if self.latents is not None:
             self.latents.save(d / LATENTS)
