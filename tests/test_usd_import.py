@@ -50,7 +50,7 @@ def test_cyclic_and_missing_sublayers_are_one_line_without_usd_noise(tiny_usda, 
     assert "\n" not in err.value.message
     c = path.parent / "c.usda"  # a new name: USD keeps layers it opened in this process
     c.write_text("#usda 1.0\n(\n    subLayers = [@tiny.usda@, @missing.usda@]\n)\n")
-    with pytest.raises(InputError, match="Could not load sublayer @missing.usda@"):
+    with pytest.raises(InputError, match="its sublayer 'missing.usda' is missing"):
         load_usd(c, "missing")
     assert capfd.readouterr().err == ""
     # the same through the CLI: the error and its hint, nothing else
@@ -104,3 +104,58 @@ def test_texture_outside_the_folder_is_not_read(tmp_path):
     assert text2 != text
     (tmp_path / "m" / "t.usda").write_text(text2)
     assert load_usd(tmp_path / "m" / "t.usda", "t").texture_png is None
+
+
+@pytest.mark.parametrize(
+    "arc",
+    [
+        "sublayer-abs",
+        "sublayer-up",
+        "reference-abs",
+        "reference-up",
+        "payload-up",
+        "variant-payload",
+        "symlink-out",
+    ],
+)
+def test_composition_arcs_stay_in_the_files_folder(tiny_usda, tmp_path, arc):
+    """Every layer a stage composes must lie in the file's folder (after symlinks): the outside
+    layer here holds the whole skinned animal, so importing it would succeed if it were opened."""
+    path, _ = tiny_usda
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    path.rename(outside / "tiny.usda")
+    folder = tmp_path / "m"
+    folder.mkdir()
+    far, up = outside / "tiny.usda", "../outside/tiny.usda"
+    body = {
+        "sublayer-abs": f"(\n    subLayers = [@{far}@]\n)\n",
+        "sublayer-up": f"(\n    subLayers = [@{up}@]\n)\n",
+        "reference-abs": f'def "A" (\n    prepend references = @{far}@\n)\n{{\n}}\n',
+        "reference-up": f'def "A" (\n    references = @{up}@\n)\n{{\n}}\n',
+        "payload-up": f'def "A" (\n    payload = @{up}@\n)\n{{\n}}\n',
+        "variant-payload": (
+            'def "A" (\n    variants = {\n        string v = "x"\n    }\n    prepend variantSets = "v"\n)\n'
+            f'{{\n    variantSet "v" = {{\n        "x" (\n            payload = @{up}@\n        ) {{\n        }}\n    }}\n}}\n'
+        ),
+        "symlink-out": "(\n    subLayers = [@./inside.usda@]\n)\n",
+    }[arc]
+    if arc == "symlink-out":
+        (folder / "inside.usda").symlink_to(far)
+    main = folder / f"main_{arc.replace('-', '_')}.usda"
+    main.write_text("#usda 1.0\n" + body)
+    with pytest.raises(InputError, match="outside the file's folder"):
+        load_usd(main, "m")
+    from cli_helpers import zooctl
+
+    r = zooctl("bank", "add", str(main), store=tmp_path / "store")
+    assert r.code == 2 and "outside the file's folder" in r.err and "Traceback" not in r.err, r.err
+
+
+def test_arcs_inside_the_folder_still_compose(tiny_usda):
+    path, _ = tiny_usda
+    (path.parent / "sub").mkdir()
+    path.rename(path.parent / "sub" / "tiny.usda")
+    main = path.parent / "main_in.usda"
+    main.write_text("#usda 1.0\n(\n    subLayers = [@./sub/tiny.usda@]\n)\n")
+    assert load_usd(main, "ok").vertices.shape[0] > 0

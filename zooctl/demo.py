@@ -56,7 +56,14 @@ def main(argv: list[str] | None = None) -> int:
         cfg = preset("fast")
         with RichReporter() as rep:
             rec = fit_job(
-                str(video_dir), store, cfg, name="demo", template=args.animal, out=args.out, reporter=rep
+                str(video_dir),
+                store,
+                cfg,
+                name="demo",
+                template=args.animal,
+                out=args.out,
+                reporter=rep,
+                replace=True,
             )
     except ZooctlError as exc:
         con.print(f"[bold red]error:[/] {exc.message}" + (f"\n  hint: {exc.hint}" if exc.hint else ""))

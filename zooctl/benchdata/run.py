@@ -142,6 +142,7 @@ def _run_inline(
                     bank=bank,
                     outputs=("loss",),
                     cameras="gt" if known_camera else None,
+                    replace=True,
                 )
                 m = rec["metrics"]
                 row = {

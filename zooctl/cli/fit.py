@@ -112,6 +112,12 @@ def fit(
         "--resume",
         help="Continue the interrupted fit --name from its saved state; in a batch: skip the videos whose fit finished.",
     ),
+    replace: bool = typer.Option(
+        False,
+        "--replace",
+        help="Fit again under a name already in the store; the old fit stays whole until the new one "
+        "finishes (without it, a name in use is refused).",
+    ),
     json_out: bool = typer.Option(
         False, "--json", help="Print the fit record (a batch: its report) as JSON."
     ),
@@ -144,7 +150,9 @@ def fit(
     cfg.validate()
     if fit_batch.wants_batch(videos, batch.executor):
         opts = dict(template=template, masks=masks, box=box, out=out, name=name, cameras=cameras)
-        return fit_batch.fit_many(videos, cfg, resume=resume, json_out=json_out, batch=batch, **opts)
+        return fit_batch.fit_many(
+            videos, cfg, resume=resume, replace=replace, json_out=json_out, batch=batch, **opts
+        )
     video = videos[0]
     with RichReporter() as rep:
         rec = fit_job(
@@ -157,6 +165,7 @@ def fit(
             out=out,
             reporter=rep,
             resume=resume,
+            replace=replace,
             box=parse_box(box) if box else None,
             out_root=Path("fits"),
             cameras=cameras,

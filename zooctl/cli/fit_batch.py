@@ -28,6 +28,7 @@ def fit_many(
     cameras: str | None,
     resume: bool,
     json_out: bool,
+    replace: bool = False,
     batch: BatchOptions,
 ) -> None:
     from ..pipelines.batch_fit import (
@@ -51,6 +52,7 @@ def fit_many(
         masks=masks,
         out_root=out if out is not None else Path("fits"),
         cameras=cameras,
+        keep_existing=not (resume or replace),
     )
     if template is None:
         refresh_search_packs(store_root())

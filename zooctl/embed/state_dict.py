@@ -9,7 +9,8 @@ then every storage as an int64 element count and its raw little-endian bytes), w
 
 Only plain tensors are rebuilt (``torch._utils._rebuild_tensor_v2``), which is all a state dict of
 an ``nn.Module`` holds; anything else torch would unpickle is refused, so this is no less safe than
-``torch.load(weights_only=True)``.
+``torch.load(weights_only=True)``. A TorchScript archive (``torch.jit.save``, as OpenAI's CLIP
+files are) is read the same way: its modules' tensors by attribute path, its code never loaded.
 """
 
 from __future__ import annotations
@@ -73,14 +74,22 @@ class _TensorRef:
         return np.ascontiguousarray(view)
 
 
+class _ScriptObject:
+    """A TorchScript module in an archive, read as data: its attributes only (the archive's code
+    is never loaded, so a crafted model cannot run anything)."""
+
+    def __setstate__(self, state: Any) -> None:
+        self.attrs = state if isinstance(state, dict) else {}
+
+
 def _rebuild_tensor(storage, storage_offset, size, stride, *_ignored):
     return _TensorRef(storage, storage_offset, size, stride)
 
 
 class _Unpickler(pickle.Unpickler):
-    def __init__(self, f, storages: dict[str, _Storage]):
+    def __init__(self, f, storages: dict[str, _Storage], script: bool = False):
         super().__init__(f)
-        self.storages = storages
+        self.storages, self.script = storages, script
 
     def find_class(self, module: str, name: str) -> Any:
         if module == "collections" and name == "OrderedDict":
@@ -89,6 +98,8 @@ class _Unpickler(pickle.Unpickler):
             return _rebuild_tensor
         if module == "torch" and name in _STORAGE_DTYPES:
             return _StorageType(name)
+        if self.script and (module == "__torch__" or module.startswith("__torch__.")):
+            return _ScriptObject
         raise InputError(f"the weights file holds a {module}.{name}, which a plain state dict does not")
 
     def persistent_load(self, pid: Any) -> Any:
@@ -102,7 +113,30 @@ class _Unpickler(pickle.Unpickler):
         return self.storages[key]
 
 
+class _PlainUnpickler(pickle.Unpickler):
+    """Numbers, strings and containers only: the legacy stream's header records and key list."""
+
+    def find_class(self, module: str, name: str) -> Any:
+        raise InputError(f"the weights file holds a {module}.{name} where plain data belongs")
+
+
+def _plain_load(f: Any) -> Any:
+    return _PlainUnpickler(f).load()
+
+
+def _flatten_script(obj: _ScriptObject, prefix: str, out: dict[str, Any]) -> dict[str, Any]:
+    """A scripted module's parameters and buffers under their state-dict names (``a.b.weight``)."""
+    for key, value in getattr(obj, "attrs", {}).items():
+        if isinstance(value, _TensorRef):
+            out[prefix + str(key)] = value
+        elif isinstance(value, _ScriptObject):
+            _flatten_script(value, f"{prefix}{key}.", out)
+    return out
+
+
 def _materialise(obj: Any) -> Any:
+    if isinstance(obj, _ScriptObject):
+        obj = _flatten_script(obj, "", collections.OrderedDict())
     if isinstance(obj, _TensorRef):
         return obj.to_numpy()
     if isinstance(obj, dict):
@@ -118,7 +152,8 @@ def _read_zip(path: Path) -> Any:
             raise InputError(f"{path} is a zip file but not a torch.save archive (no data.pkl)")
         prefix = pkl[: -len("data.pkl")]
         storages: dict[str, _Storage] = {}
-        obj = _Unpickler(io.BytesIO(z.read(pkl)), storages).load()
+        script = any(n.startswith(f"{prefix}code/") for n in names)  # a TorchScript archive
+        obj = _Unpickler(io.BytesIO(z.read(pkl)), storages, script).load()
         for key, st in storages.items():
             raw = z.read(f"{prefix}data/{key}")
             st.data = np.frombuffer(raw, dtype=st.dtype, count=st.numel)
@@ -127,14 +162,14 @@ def _read_zip(path: Path) -> Any:
 
 def _read_legacy(path: Path) -> Any:
     with open(path, "rb") as f:
-        if pickle.load(f) != LEGACY_MAGIC:
+        if _plain_load(f) != LEGACY_MAGIC:
             raise InputError(f"{path} is not a PyTorch weights file (wrong magic number)")
-        if pickle.load(f) != LEGACY_PROTOCOL:
+        if _plain_load(f) != LEGACY_PROTOCOL:
             raise InputError(f"{path} uses an unknown PyTorch serialisation protocol")
-        pickle.load(f)  # system info (endianness, type sizes): torch writes little-endian only
+        _plain_load(f)  # system info (endianness, type sizes): torch writes little-endian only
         storages: dict[str, _Storage] = {}
         obj = _Unpickler(f, storages).load()
-        for key in pickle.load(f):
+        for key in _plain_load(f):
             st = storages[str(key)]
             count = int(np.frombuffer(f.read(8), "<i8")[0])
             st.data = np.frombuffer(f.read(count * st.dtype.itemsize), dtype=st.dtype, count=count)
@@ -152,6 +187,6 @@ def load_state_dict(path: str | Path) -> dict[str, np.ndarray]:
         raise
     except (OSError, EOFError, pickle.UnpicklingError, KeyError, ValueError, IndexError) as e:
         raise InputError(f"cannot read the weights file {path}: {e}") from None
-    if not isinstance(obj, dict):
+    if not isinstance(obj, dict | _ScriptObject):
         raise InputError(f"{path} does not hold a state dict (found a {type(obj).__name__})")
     return _materialise(obj)

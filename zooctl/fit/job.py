@@ -8,14 +8,24 @@ record marked ``interrupted`` and its last state in ``state.pt`` for ``--resume`
 from __future__ import annotations
 
 import dataclasses
+import json
+import os
 import shlex
+import shutil
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..errors import AlreadyExistsError, InputError, MissingDependencyError, NotFoundError, UsageError
+from ..errors import (
+    AlreadyExistsError,
+    InputError,
+    MissingDependencyError,
+    NotFoundError,
+    UsageError,
+    ZooctlError,
+)
 from ..names import check_name, sanitize_name
 from ..store.fits import FitStore
 from .config import FitConfig, preset
@@ -235,8 +245,13 @@ def fit_job(
     out_root: Path | None = None,
     cameras: str | None = None,
     fits: FitStore | None = None,
+    replace: bool = False,
 ) -> dict[str, Any]:
     """Fit a video and write its outputs and store record; returns the record (``fit.json``).
+
+    A name already in the store is refused unless ``replace``: then the new fit runs in a private
+    folder and replaces the old one only once it has finished (a failed or interrupted run leaves
+    the old fit as it was).
 
     ``cameras``: known camera rotations (`zooctl.fit.inputs.load_camera_rotations`: a file, or
     ``gt`` for a benchmark video's own cameras).
@@ -246,10 +261,11 @@ def fit_job(
     worker's private folder; the batch driver commits it, `zooctl.pipelines.batch_fit`)."""
     from ..store.bank import Bank
     from .template import select_template
-    from .view_trial import mirror_wanted, trial_with_mirror
 
     fits = fits if fits is not None else FitStore(store_root)
     bank = bank if bank is not None else Bank.open(store_root)
+    if name is not None and not resume:
+        check_name_free(fits, check_name(name, "fit name"), replace)
     state = None
     if resume:
         if name is None:
@@ -278,6 +294,7 @@ def fit_job(
         if cameras != "gt":
             cameras = str(Path(cameras).expanduser().resolve())
     name = check_name(name or sanitize_name(video.name), "fit name")
+    replacing = not resume and not check_name_free(fits, name, replace)
     t_ret = time.perf_counter()
     if resume and state is not None:
         asset = bank.get(template)  # the template chosen (and tried) when the fit started
@@ -292,33 +309,153 @@ def fit_job(
     else:
         out_dir = Path(out_root) / name if out_root is not None else fits.path(name)
     out_dir = out_dir.resolve()  # the record names its files by absolute paths
-    out_dir.mkdir(parents=True, exist_ok=True)
-    record: dict[str, Any] = {
-        "status": "running",
-        "source": str(source),
-        "video": video.name,
-        "masks": masks,
-        "cameras": cameras,
-        "box": list(box) if box is not None else None,
-        "stored_video": video.source[len("video:") :] if video.source.startswith("video:") else None,
-        "mask_source": video.mask_source,
-        "frames": video.num_frames if cfg.max_frames is None else min(cfg.max_frames, video.num_frames),
-        "image_size": list(video.size),
-        "fps": video.fps,
-        "template": asset.name,
-        "retrieval": candidates,
-        "excluded": sorted(exclude or []),
-        "out": str(out_dir.resolve()),
-        "config": cfg.to_dict(),
-        "outputs": {},
-    }
-    fits.save_record(name, record)
-    from ..store.fs import write_json_atomic
+    final_fits, final_out, staged = fits, out_dir, None
+    if replacing:  # the old fit and its outputs stay until the new fit is committed
+        staged = fits.staging(name)
+        fits = FitStore(staged)
+        in_store = final_out == final_fits.path(name).resolve()
+        out_dir = (fits.path(name) if in_store else staged / "out").resolve()
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        record: dict[str, Any] = {
+            "status": "running",
+            "source": str(source),
+            "video": video.name,
+            "masks": masks,
+            "cameras": cameras,
+            "box": list(box) if box is not None else None,
+            "stored_video": video.source[len("video:") :] if video.source.startswith("video:") else None,
+            "mask_source": video.mask_source,
+            "frames": video.num_frames if cfg.max_frames is None else min(cfg.max_frames, video.num_frames),
+            "image_size": list(video.size),
+            "fps": video.fps,
+            "template": asset.name,
+            "retrieval": candidates,
+            "excluded": sorted(exclude or []),
+            "out": str(out_dir.resolve()),
+            "config": cfg.to_dict(),
+            "outputs": {},
+        }
+        fits.save_record(name, record)
+        from ..store.fs import write_json_atomic
 
-    write_json_atomic(fits.path(name) / "config.json", cfg.to_dict())
+        write_json_atomic(fits.path(name) / "config.json", cfg.to_dict())
 
-    def checkpoint(st: dict[str, Any]) -> None:
-        fits.save_state(name, st)
+        def checkpoint(st: dict[str, Any]) -> None:
+            fits.save_state(name, st)
+
+        record = _run_and_write(
+            video,
+            asset,
+            cfg,
+            reporter,
+            checkpoint,
+            state,
+            template,
+            candidates,
+            source,
+            out_dir,
+            fits,
+            name,
+            outputs,
+            record,
+            t_ret,
+            t_trials,
+            t_start,
+        )
+    except BaseException:
+        if staged is not None:
+            shutil.rmtree(staged, ignore_errors=True)
+        raise
+    if staged is not None:
+        record = _commit_replacement(final_fits, name, staged, fits.path(name), out_dir, final_out)
+    return record | {"name": name}
+
+
+def check_name_free(fits: FitStore, name: str, replace: bool) -> bool:
+    """True when no fit is called ``name``; False when one is and ``replace`` allows a new one."""
+    if not fits.exists(name):
+        return True
+    if replace:
+        return False
+    try:
+        status = fits.get(name).get("status", "unknown")
+    except ZooctlError:
+        status = "unreadable"
+    raise AlreadyExistsError(
+        f"a fit named {name!r} exists already (status {status})",
+        hint=f"--replace fits it again (the old fit stays until the new one finishes), --resume "
+        f"continues an interrupted one, --name picks another name, or `zooctl fits rm {name}`",
+    )
+
+
+def _commit_replacement(
+    fits: FitStore, name: str, staged: Path, staged_fit: Path, staged_out: Path, final_out: Path
+) -> dict[str, Any]:
+    """Move a finished private fit into the store in place of the old one: the record and fit.json
+    rebased to the final paths, outputs outside the store published, then the folders swapped."""
+    from ..store.fits import rebase_paths
+    from ..store.fs import json_bytes, temp_path
+
+    final_fit = fits.path(name).resolve()
+    moves = [(str(staged_out), str(final_out)), (str(staged_fit.resolve()), str(final_fit))]
+
+    def rebased(doc: Any) -> Any:
+        for old, new in moves:
+            doc = rebase_paths(doc, old, new)
+        return doc
+
+    record = rebased(json.loads((staged_fit / "record.json").read_text()))
+    (staged_fit / "record.json").write_bytes(json_bytes(record))
+    inside = staged_out == staged_fit.resolve()
+    pending: list[tuple[Path, Path]] = []
+    try:
+        for p in sorted(staged_out.rglob("*")) if staged_out.is_dir() else []:
+            if not p.is_file():
+                continue
+            data = p.read_bytes()
+            if p.name == "fit.json":
+                data = json_bytes(rebased(json.loads(data)))
+            if inside:
+                p.write_bytes(data)
+                continue
+            dest = final_out / p.relative_to(staged_out)
+            tmp = temp_path(dest)
+            tmp.write_bytes(data)
+            pending.append((tmp, dest))
+
+        def publish_outputs() -> None:
+            for tmp, dest in pending:
+                os.replace(tmp, dest)
+
+        fits.replace_with(name, staged_fit, publish_outputs)
+    finally:
+        for tmp, _ in pending:
+            tmp.unlink(missing_ok=True)
+        shutil.rmtree(staged, ignore_errors=True)
+    return record
+
+
+def _run_and_write(
+    video: Any,
+    asset: Any,
+    cfg: FitConfig,
+    reporter: Reporter | None,
+    checkpoint: Any,
+    state: Any,
+    template: str | None,
+    candidates: list[Any],
+    source: str,
+    out_dir: Path,
+    fits: FitStore,
+    name: str,
+    outputs: tuple[str, ...],
+    record: dict[str, Any],
+    t_ret: float,
+    t_trials: float | None,
+    t_start: float,
+) -> dict[str, Any]:
+    from .view_trial import mirror_wanted, trial_with_mirror
 
     mirror_s = None
     try:
@@ -330,6 +467,13 @@ def fit_job(
         result = fit_video(video, asset, cfg, reporter, checkpoint, state)
     except KeyboardInterrupt:
         record["status"] = "interrupted"
+        fits.save_record(name, record)
+        raise
+    except Exception as exc:  # listed as failed, not as running forever
+        record["status"] = "failed"
+        record["error"] = (exc.message if isinstance(exc, ZooctlError) else f"{type(exc).__name__}: {exc}")[
+            :500
+        ]
         fits.save_record(name, record)
         raise
     result.timings["retrieval"] = t_ret
@@ -350,7 +494,7 @@ def fit_job(
     write_fit_json(record | {"name": name, "schema_version": 1}, out_dir / "fit.json")
     record["outputs"]["fit_json"] = str(out_dir / "fit.json")
     fits.save_record(name, record)
-    return record | {"name": name}
+    return record
 
 
 def write_outputs(

@@ -115,9 +115,70 @@ def _trapped_diagnostics() -> Iterator[Any]:
         os.close(devnull)
 
 
+def _confined_layers(path: Path) -> None:
+    """Open every layer the stage would compose (sublayers, references, payloads, value clips,
+    in variants too) one by one and refuse, before USD opens it, one that is outside the file's
+    folder after symlinks, missing or not a regular file: a downloaded asset must not make
+    zooctl read other files of the user's (the rule glTF URIs follow)."""
+    from pxr import Sdf
+
+    folder = path.resolve().parent
+    hint = f"keep every layer it uses in {path.name}'s folder (or below), or flatten it into one file"
+    todo, seen = [Sdf.Layer.FindOrOpen(str(path))], set()
+    while todo:
+        layer = todo.pop()
+        if layer is None or layer.identifier in seen:
+            continue
+        seen.add(layer.identifier)
+        for what, asset in _layer_arcs(layer):
+            if not asset:
+                continue
+            resolved = layer.ComputeAbsolutePath(asset)
+            outer = Path(resolved.split("[", 1)[0])  # a layer inside a .usdz: the package file
+            try:
+                real = outer.resolve(strict=True)
+            except (OSError, RuntimeError):
+                raise _bad(path, f"its {what} {asset!r} is missing or cannot be resolved", hint) from None
+            if not real.is_relative_to(folder):
+                raise _bad(path, f"its {what} {asset!r} is outside the file's folder", hint)
+            if not real.is_file():
+                raise _bad(path, f"its {what} {asset!r} is not a regular file", hint)
+            if what != "value clip":
+                todo.append(Sdf.Layer.FindOrOpen(resolved))
+
+
+def _layer_arcs(layer) -> Iterator[tuple[str, str]]:
+    """(kind, asset path) of every arc in ``layer`` that opens another file."""
+    from pxr import Sdf
+
+    for sub in layer.subLayerPaths:
+        yield "sublayer", sub
+    specs: list[Any] = []
+
+    def visit(p) -> None:
+        spec = layer.GetObjectAtPath(p)
+        if isinstance(spec, Sdf.VariantSpec):
+            spec = spec.primSpec
+        if isinstance(spec, Sdf.PrimSpec):
+            specs.append(spec)
+
+    layer.Traverse(Sdf.Path.absoluteRootPath, visit)
+    for spec in specs:
+        for ref in spec.referenceList.GetAddedOrExplicitItems():
+            yield "reference", ref.assetPath
+        for pay in spec.payloadList.GetAddedOrExplicitItems():
+            yield "payload", pay.assetPath
+        clips = spec.GetInfo("clips") if spec.HasInfo("clips") else {}
+        for clip_set in dict(clips).values():
+            for a in list(clip_set.get("assetPaths", [])) + [clip_set.get("manifestAssetPath")]:
+                if a is not None:
+                    yield "value clip", getattr(a, "path", str(a))
+
+
 def _load(path: Path, name: str) -> RiggedAsset:
     from pxr import Usd, UsdGeom, UsdSkel
 
+    _confined_layers(path)
     stage = Usd.Stage.Open(str(path), Usd.Stage.LoadAll)
     if stage is None:
         raise _bad(path, "not a readable USD file", _USD_HINT)

@@ -78,7 +78,14 @@ def fit_image(
     cfg = load_config(config, "fast")
     cfg.device = device
     rec = fit_job(
-        str(image), store_root, cfg, template=template, masks=masks, reporter=reporter, outputs=("loss",)
+        str(image),
+        store_root,
+        cfg,
+        template=template,
+        masks=masks,
+        reporter=reporter,
+        outputs=("loss",),
+        replace=True,
     )
     return FitStore(store_root).character(rec["name"]), rec["name"]
 

@@ -68,12 +68,17 @@ def plan_fits(
     masks: str | None = None,
     out_root: Path | None = None,
     cameras: str | None = None,
+    keep_existing: bool = True,
 ) -> list[BatchItem]:
     """One item per input: its fit name, and whether a worker must first decode and store it.
 
     Names follow `zooctl fit`: the video's name, with ``-2``, ``-3`` ... for a second input of
-    the same name in this batch."""
-    from ..fit.job import _single_image, plan_stored_video
+    the same name in this batch. A name the store already has is refused up front while
+    ``keep_existing`` (no ``--replace`` or ``--resume``); the old fit is never touched then."""
+    from ..fit.job import _single_image, check_name_free, plan_stored_video
+    from ..store.fits import FitStore
+
+    fits = FitStore(store_root)
 
     if masks not in (None, "auto"):
         raise UsageError(
@@ -101,6 +106,7 @@ def plan_fits(
             base = sanitize_name(base)
             name = next(n for n in [base] + [f"{base}-{k}" for k in range(2, 1000)] if n not in names)
             task.name = check_name(name, "fit name")
+            check_name_free(fits, task.name, not keep_existing)
         except ZooctlError as exc:
             items.append(BatchItem(sanitize_name(p.name or src), task, src, error=exc))
             continue
@@ -201,7 +207,7 @@ def _read_tree(folder: Path) -> dict[str, bytes]:
 
 def commit_fit(item: BatchItem, value: dict[str, Any]) -> dict[str, Any]:
     """Driver side: store the video, write the outputs and the fit's store folder (record last)."""
-    from ..store.fits import RECORD_VERSION, FitStore
+    from ..store.fits import RECORD_VERSION, FitStore, rebase_paths
     from ..store.fs import store_lock, write_bytes_atomic, write_json_atomic
 
     task: FitTask = item.payload
@@ -217,7 +223,7 @@ def commit_fit(item: BatchItem, value: dict[str, Any]) -> dict[str, Any]:
     out = Path(task.out) if task.out is not None else fits.path(task.name).resolve()
 
     def as_stored(doc: dict[str, Any]) -> dict[str, Any]:  # the worker's paths and video name, as stored
-        doc = _rebase(doc, value["scratch_out"], str(out))
+        doc = rebase_paths(doc, value["scratch_out"], str(out))
         return _renamed_video(doc, planned, stored) if stored != planned else doc
 
     record = as_stored(value["record"])
@@ -270,14 +276,3 @@ def _renamed_video(record: dict[str, Any], old: str, new: str) -> dict[str, Any]
     if isinstance(record.get("notes"), list):
         renamed["notes"] = [n.replace(said, says) if isinstance(n, str) else n for n in record["notes"]]
     return record | renamed
-
-
-def _rebase(obj: Any, old: str, new: str) -> Any:
-    """``obj`` with every string path under ``old`` moved under ``new``."""
-    if isinstance(obj, str):
-        return new + obj[len(old) :] if obj == old or obj.startswith(old + "/") else obj
-    if isinstance(obj, dict):
-        return {k: _rebase(v, old, new) for k, v in obj.items()}
-    if isinstance(obj, list):
-        return [_rebase(v, old, new) for v in obj]
-    return obj

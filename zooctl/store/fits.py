@@ -13,14 +13,17 @@ and, unless ``--out`` sent them elsewhere, the outputs (``<name>.usd``, ``<name>
 
 from __future__ import annotations
 
+import ctypes
 import json
+import os
 import shutil
+import tempfile
 from pathlib import Path
 from typing import Any
 
 from ..errors import NotFoundError, StoreError
 from ..names import check_name
-from .fs import store_lock, write_bytes_atomic, write_json_atomic, writing
+from .fs import fsync_dir, store_lock, write_bytes_atomic, write_json_atomic, writing
 from .indexed import NamedStore
 
 RECORD_VERSION = 1
@@ -94,12 +97,21 @@ class FitStore(NamedStore):
                 f"fit {name!r} has no saved state to resume", hint="start it again without --resume"
             )
         try:
-            return torch.load(p, map_location="cpu", weights_only=False)
+            # weights_only: tensors, numbers, strings and containers only, never code (a state
+            # file is as untrusted as any file in a store someone else may have written).
+            state = torch.load(p, map_location="cpu", weights_only=True)
         except Exception as exc:
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             raise StoreError(
-                f"the saved state of fit {name!r} is unreadable: {exc}",
+                f"the saved state of fit {name!r} is unreadable or not plain data: {first}",
                 hint="start it again without --resume",
             ) from None
+        if not isinstance(state, dict):
+            raise StoreError(
+                f"the saved state of fit {name!r} is not a fit state (a {type(state).__name__})",
+                hint="start it again without --resume",
+            )
+        return state
 
     def save_character(self, name: str, asset: Any) -> None:
         from .asset_h5 import write_asset
@@ -126,9 +138,71 @@ class FitStore(NamedStore):
             )
         return read_asset(p)
 
+    def staging(self, name: str) -> Path:
+        """A private store root for a fit that will replace ``name`` (`replace_with`): inside this
+        store's fits folder, so the swap is a rename on one filesystem, and hidden from `names`."""
+        with writing(f"preparing to replace fit {name!r}"):
+            self.dir.mkdir(parents=True, exist_ok=True)
+            return Path(tempfile.mkdtemp(prefix=f".replacing-{check_name(name, 'fit name')}.", dir=self.dir))
+
+    def replace_with(self, name: str, staged: Path, before_swap: Any = None) -> None:
+        """Make the finished fit folder ``staged`` (inside `staging`'s folder) the fit ``name``.
+
+        Under the lock, ``before_swap()`` runs first (publishing outputs that live outside the
+        store), then the two folders are exchanged in one rename where the OS can, so a reader
+        sees the old fit or the new one, never neither; the old folder is removed afterwards."""
+        final = self.path(name)
+        old: Path | None = None
+        with store_lock(self.root), writing(f"replacing fit {name!r}"):
+            if before_swap is not None:
+                before_swap()
+            if final.exists():
+                if _exchange(staged, final):
+                    old = staged
+                else:
+                    old = staged.with_name(staged.name + ".old")
+                    os.replace(final, old)
+                    os.replace(staged, final)
+            else:
+                os.replace(staged, final)
+            fsync_dir(self.dir)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+
     def remove(self, name: str) -> None:
         with store_lock(self.root), writing(f"removing fit {name!r}"):
             if not self.exists(name):
                 raise self._not_found(name)
             self.record_path(name).unlink()  # the fit is gone once its record is
         shutil.rmtree(self.path(name), ignore_errors=True)
+
+
+def rebase_paths(obj: Any, old: str, new: str) -> Any:
+    """``obj`` (a record's JSON) with every string path under ``old`` moved under ``new``."""
+    if isinstance(obj, str):
+        return new + obj[len(old) :] if obj == old or obj.startswith(old + "/") else obj
+    if isinstance(obj, dict):
+        return {k: rebase_paths(v, old, new) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [rebase_paths(v, old, new) for v in obj]
+    return obj
+
+
+_RENAME_EXCHANGE = 2
+_AT_FDCWD = -100
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two paths atomically (Linux ``renameat2(RENAME_EXCHANGE)``); False where unsupported."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        fn = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    if fn(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (22, 38, 95):  # EINVAL, ENOSYS, EOPNOTSUPP: this filesystem or kernel cannot
+        return False
+    raise OSError(err, os.strerror(err), str(b))

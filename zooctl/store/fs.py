@@ -112,7 +112,7 @@ def store_lock(root: Path, timeout: float | None = None) -> Iterator[None]:
     timeout = LOCK_TIMEOUT_S if timeout is None else timeout
     with writing(f"opening the store lock {root / '.lock'}"):
         root.mkdir(parents=True, exist_ok=True)
-        fd = os.open(root / ".lock", os.O_RDWR | os.O_CREAT, 0o644)
+        fd = _open_lock(root / ".lock")
     try:
         deadline = time.monotonic() + timeout
         told = False
@@ -134,6 +134,26 @@ def store_lock(root: Path, timeout: float | None = None) -> Iterator[None]:
         yield
     finally:
         os.close(fd)  # closing releases the flock
+
+
+def _open_lock(path: Path) -> int:
+    """The lock file's descriptor. Never through a symlink (its holder line would overwrite the
+    link's target, wherever that is) and never a FIFO or device: such a store is refused."""
+    import stat
+
+    hint = f"remove {path} (zooctl makes a fresh lock file) and check who put it there"
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC, 0o644)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise StoreError(
+                f"the store lock {path} is a symbolic link; zooctl does not write through it", hint=hint
+            ) from None
+        raise
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise StoreError(f"the store lock {path} is not a regular file", hint=hint)
+    return fd
 
 
 def _write_holder(fd: int) -> None:

@@ -134,12 +134,15 @@ def load_checkpoint(path: str | Path, act: str = "quick_gelu") -> VisionTransfor
     try:
         raw = torch.load(path, map_location="cpu", weights_only=True)
     except Exception:
-        try:  # OpenAI's released .pt files are TorchScript archives
-            raw = torch.jit.load(str(path), map_location="cpu").state_dict()
-        except Exception as exc:
+        # OpenAI's released .pt files are TorchScript archives: read as data, never run.
+        from zooctl.embed.state_dict import load_state_dict
+
+        try:
+            raw = {k: torch.from_numpy(v.copy()) for k, v in load_state_dict(path).items()}
+        except InputError as exc:
             raise InputError(
-                f"{path} is not a PyTorch checkpoint: {type(exc).__name__}",
-                hint="give a CLIP/OpenCLIP .pt or .pth file",
+                f"{path} is not a plain PyTorch checkpoint: {exc.message}",
+                hint="give a CLIP/OpenCLIP .pt or .pth file (weights only: a file that carries code is refused)",
             ) from None
     state = _visual_state(raw)
     if not state:
