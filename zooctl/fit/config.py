@@ -209,6 +209,11 @@ class FitConfig:
             )
             if st.iters < 0 or st.batch < 1 or min(rates) <= 0:
                 raise UsageError(f"{name}: iters >= 0, batch >= 1 and positive learning rates are required")
+            if name == "stage2" and st.iters < 1:  # no articulation at all: not a fit
+                raise UsageError(
+                    f"stage 2 needs at least 1 iteration (--iters or stage2.iters), got {st.iters}",
+                    hint=f"the presets run {', '.join(f'{k} {v().stage2.iters}' for k, v in PRESETS.items())}",
+                )
             if not 0 < st.lr_final <= 1:
                 raise UsageError(f"{name}: lr_final must be in (0, 1]")
             _check_registered("renderer", st.renderer, f"{name}.renderer")
