@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from ._common import JsonOpt, console, print_json, print_table, store_root
+from ._common import JsonOpt, console, print_json, print_skipped, print_table, store_root
 
 app = typer.Typer(help="List, show, export and remove fits.", no_args_is_help=True)
 
@@ -20,7 +20,8 @@ def _fits():
 @app.command("list")
 def list_(json_out: bool = JsonOpt) -> None:
     """Every fit: status, template, frames, mask IoU."""
-    recs = _fits().list()
+    recs, skipped = _fits().records()
+    print_skipped(skipped, "not listed")
     if json_out:
         print_json(
             [

@@ -58,20 +58,34 @@ class FitStore(NamedStore):
     def get(self, name: str) -> dict[str, Any]:
         p = self.record_path(name)
         try:
-            return json.loads(p.read_text())
+            record = json.loads(p.read_bytes())
         except FileNotFoundError:
             raise self._not_found(name) from None
-        except (OSError, json.JSONDecodeError) as exc:
-            raise StoreError(f"the record of fit {name!r} is unreadable: {exc}") from None
+        except OSError as exc:
+            raise StoreError(f"the record of fit {name!r} is unreadable: {exc.strerror}") from None
+        except (ValueError, RecursionError) as exc:  # UnicodeDecodeError is a ValueError
+            record, problem = None, f"not JSON ({str(exc)[:80]})"
+        else:
+            problem = record_problem(name, record)
+        if problem:
+            raise StoreError(
+                f"the record of fit {name!r} is damaged: {problem}",
+                hint=f"remove it with `zooctl fits rm {name}`, then fit the video again",
+            )
+        return record
 
-    def list(self) -> list[dict[str, Any]]:
-        out = []
+    def records(self) -> tuple[list[dict[str, Any]], dict[str, str]]:
+        """Every readable fit record, and {name: why} for the fits whose record is not."""
+        out, skipped = [], {}
         for n in self.names():
             try:
                 out.append(self.get(n))
-            except StoreError:
-                continue
-        return out
+            except StoreError as exc:
+                skipped[n] = exc.message
+        return out, skipped
+
+    def list(self) -> list[dict[str, Any]]:
+        return self.records()[0]
 
     def save_record(self, name: str, record: dict[str, Any]) -> None:
         record = dict(record, schema_version=RECORD_VERSION, name=name)
@@ -175,6 +189,35 @@ class FitStore(NamedStore):
                 raise self._not_found(name)
             self.record_path(name).unlink()  # the fit is gone once its record is
         shutil.rmtree(self.path(name), ignore_errors=True)
+
+
+_TYPES: dict[str, tuple[type, ...]] = {
+    "status": (str,),
+    "source": (str,),
+    "template": (str,),
+    "out": (str,),
+    "frames": (int,),
+    "image_size": (list,),
+    "metrics": (dict,),
+    "outputs": (dict,),
+}
+
+
+def record_problem(name: str, record: Any) -> str | None:
+    """What makes ``record`` unusable as fit ``name``'s record (None: nothing): the fields that
+    `fits list` and `fits show` read, checked for their types (schemas/fit_record.schema.json)."""
+    if not isinstance(record, dict):
+        return f"it holds a JSON {type(record).__name__}, not an object"
+    if record.get("name") != name:
+        return "it has no name" if "name" not in record else f"it names another fit ({record['name']!r})"
+    for key, types in _TYPES.items():
+        v = record.get(key)
+        if v is not None and (not isinstance(v, types) or isinstance(v, bool)):
+            return f"its {key!r} is a {type(v).__name__}"
+    iou = (record.get("metrics") or {}).get("mask_iou")
+    if iou is not None and (isinstance(iou, bool) or not isinstance(iou, (int, float))):
+        return f"its mask IoU is a {type(iou).__name__}"
+    return None
 
 
 def rebase_paths(obj: Any, old: str, new: str) -> Any:
