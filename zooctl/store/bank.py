@@ -103,11 +103,26 @@ class Bank(IndexedStore):
         return self.assets_dir / f"{name}.json"
 
     def get(self, name: str) -> RiggedAsset:
-        """Load an asset. Raises `NotFoundError` when the bank has no such asset."""
+        """Load an asset and check it (`RiggedAsset.validate`, what every exporter and `bank add`
+        require): a damaged file is one `StoreError` for every command that reads it. Raises
+        `NotFoundError` when the bank has no such asset."""
+        from ..errors import InputError
         from .asset_h5 import read_asset
 
         self.summary(name)
-        return read_asset(self.asset_path(name))
+        asset = read_asset(self.asset_path(name))
+        try:
+            if asset.name != name:
+                raise InputError(f"its file holds an asset named {asset.name!r}")
+            asset.validate()
+        except (InputError, ValueError, IndexError, TypeError) as exc:  # arrays of the wrong kind too
+            why = exc.message if isinstance(exc, InputError) else f"{type(exc).__name__}: {exc}"
+            raise StoreError(
+                f"asset {name!r} in the bank is damaged: {why.removeprefix(f'asset {name!r}: ')}",
+                hint=f"add it again with `zooctl bank add FILE --name {name} --replace`, "
+                f"or remove it with `zooctl bank rm {name}`",
+            ) from None
+        return asset
 
     def __iter__(self) -> Iterator[str]:
         return iter(self.names())
