@@ -46,9 +46,11 @@ bench: $(STAMP)
 	$(BIN)/python bench/render.py --threads 1
 	$(BIN)/python bench/export.py
 
+# vulture: dead code (settings in pyproject.toml, false positives in tools/vulture_whitelist.py)
 lint: $(STAMP)
-	$(BIN)/ruff check zooctl tests bench plugins
-	$(BIN)/ruff format --check zooctl tests bench plugins
+	$(BIN)/ruff check zooctl tests bench plugins tools
+	$(BIN)/ruff format --check zooctl tests bench plugins tools
+	$(BIN)/vulture
 
 clean:
 	rm -rf $(VENV) build *.egg-info

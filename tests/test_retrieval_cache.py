@@ -89,7 +89,7 @@ def test_query_embeddings_are_cached_beside_the_stored_video(stored_video):
     q3, _, _ = query_embeddings("seq", ["silhouette"], k=4, size=64, store_root=root, need_images=True)
     assert q3.images.shape == (4, 64, 64, 3)  # a gallery needs pixels
     # another sampling is another entry
-    q4, e4, _ = query_embeddings("seq", ["silhouette"], k=2, size=64, store_root=root)
+    _, e4, _ = query_embeddings("seq", ["silhouette"], k=2, size=64, store_root=root)
     assert e4["silhouette"].shape == (2, 576) and query_cache.cache_path(videos, "seq", 2, 64).exists()
     # a damaged cache is a miss and is rewritten
     path.write_bytes(b"PK\x03\x04 not a zip")

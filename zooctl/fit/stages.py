@@ -20,7 +20,6 @@ frame pairs); smoothness always covers the whole sequence (it is cheap: no rende
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,7 +44,6 @@ from .losses import (
 from .scene import FitScene
 
 Tensor = torch.Tensor
-StepCallback = Callable[[int, int, dict[str, float]], None]  # (stage, iteration, loss terms)
 
 
 @dataclass

@@ -43,12 +43,6 @@ def polyline(points: list[np.ndarray] | np.ndarray, n: int) -> np.ndarray:
     return np.stack([np.interp(t, s, pts[:, k]) for k in range(3)], axis=1)
 
 
-def ellipse_profile(n: int, power: float = 0.5) -> np.ndarray:
-    """(n,) radius scale of an ellipsoid-like end-to-end profile: 0 at both ends, 1 in the middle."""
-    x = np.linspace(-1.0, 1.0, n)
-    return np.clip(1.0 - x * x, 0.0, 1.0) ** power
-
-
 def tube(part: Part) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Sweep ``part`` into a closed mesh.
 

@@ -48,15 +48,6 @@ def chain_weights(
     return w / w.sum(axis=1, keepdims=True)
 
 
-def part_weights(
-    line_index: np.ndarray, dense_line: np.ndarray, columns: np.ndarray, num_joints: int
-) -> np.ndarray:
-    """Scatter centre-line weights (N, C) to vertices: (V, num_joints) dense, via ``columns`` (C,)."""
-    out = np.zeros((len(line_index), num_joints), dtype=np.float64)
-    np.add.at(out, (slice(None), columns), dense_line[line_index])
-    return out
-
-
 def sparse(dense: np.ndarray, k: int = 4) -> tuple[np.ndarray, np.ndarray]:
     """Top-k sparse weights (V, k) joints and weights; see `zooctl.asset.sparsify_weights`."""
     return sparsify_weights(dense, k)

@@ -46,13 +46,6 @@ def renders_flow(renderer: Any) -> bool:
         return False
 
 
-def renderer_names() -> list[str]:
-    """Every registered renderer (built in or from a plugin)."""
-    from ..plugins import get_registry
-
-    return get_registry().names("renderer")
-
-
 def get_renderer(name: str, image_size: Any = None, device: str = "cpu", **options: Any) -> Any:
     """Build the renderer registered as ``name``; an unknown name is a `NotFoundError` listing them."""
     from ..plugins import get_registry

@@ -441,13 +441,6 @@ def render_asset(
     return np.concatenate(out)
 
 
-def thumbnail(
-    asset, size: int = 256, clip: str | None = None, frame: int = 0, supersample: int = 2
-) -> np.ndarray:
-    """One (size, size, 3) uint8 image of the asset: the given clip frame, else its rest pose."""
-    return render_asset(asset, clip, None if clip is None else [frame], size=size, supersample=supersample)[0]
-
-
 def contact_sheet(
     images: Sequence[np.ndarray],
     labels: Sequence[str] | None = None,

@@ -226,16 +226,6 @@ class _FlowProjectKernel(torch.autograd.Function):
         return g_pts, g_intr, None, None, None
 
 
-class ZBufferRenderer(nn.Module):
-    """Hard rasteriser: vertices (B, V, 3), faces (F, 3), `Camera` -> `Fragments`."""
-
-    def __init__(self, image_size: int | tuple[int, int] | None = None, device: str = "cpu"):
-        super().__init__()
-
-    def forward(self, vertices: Tensor, faces: Tensor, camera: Camera) -> Fragments:
-        return rasterize(vertices, faces, camera)
-
-
 class FlowRenderer(nn.Module):
     """Optical flow of a surface moving from ``vertices`` to ``vertices_next`` (module docstring).
 

@@ -59,13 +59,6 @@ class ArticulationModel(Protocol):
     def smoothness_loss(self, rotations: Tensor) -> Tensor: ...
 
 
-def articulation_names() -> list[str]:
-    """Every registered articulation model (built in or from a plugin)."""
-    from ..plugins import get_registry
-
-    return get_registry().names("articulation_model")
-
-
 def get_articulation_model(name: str, asset: Any, device: str = "cpu", **options: Any) -> Any:
     """Build the articulation model registered as ``name`` for ``asset``."""
     from ..plugins import get_registry
