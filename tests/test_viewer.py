@@ -289,3 +289,60 @@ def test_export_again_replaces_the_earlier_export(fit, site):
     r = zooctl("view", "walk", "--export", str(site), store=store)
     assert r.code == 0, r.err
     assert (site / "index.html").stat().st_mtime >= t - 1
+
+
+@pytest.fixture(scope="module")
+def bank_site(tmp_path_factory):
+    """A gallery export of a bank of two procedural animals (turntables cached in a private folder)."""
+    from zooctl.procedural import build_animal
+    from zooctl.store.bank import Bank
+
+    root = tmp_path_factory.mktemp("gallery")
+    store = root / "store"
+    bank = Bank(store)
+    bank.add(build_animal("quadruped", name="quadruped"))
+    bank.add(build_animal("bird", name="bird"))
+    env = {"ZOOCTL_VIEWER_CACHE": str(root / "cache")}
+    r = zooctl("view", "--bank", "--export", str(root / "site"), store=store, env=env)
+    assert r.code == 0, r.err
+    return store, root / "site", env
+
+
+def test_bank_gallery_filters_and_plays_an_asset(bank_site, browser):
+    _, site, _ = bank_site
+    _open(browser, (site / "index.html").as_uri())
+    names = browser.evaluate("Array.from(document.querySelectorAll('.tile .name')).map(e => e.textContent)")
+    assert sorted(names) == ["bird", "quadruped"]
+    assert browser.evaluate("document.getElementById('count').textContent") == "2 of 2 assets"
+    # Every turntable is an image of its asset, not a blank.
+    tile = browser.screenshot(".tile .turn")
+    assert tile.std() > 10
+    browser.evaluate("document.querySelector('.tag.chip[data-tag=bird]').click()")
+    assert browser.evaluate("document.getElementById('count').textContent") == "1 of 2 assets"
+    visible = "Array.from(document.querySelectorAll('.tile')).filter(t => !t.hidden).map(t => t.querySelector('.name').textContent)"
+    assert browser.evaluate(visible) == ["bird"]
+    browser.evaluate("Array.from(document.querySelectorAll('.tile')).find(t => !t.hidden).click()")
+    assert browser.wait_for("document.body.dataset.asset", timeout=30) == "bird"
+    clips = browser.evaluate("Array.from(document.getElementById('clip').options).map(o => o.textContent)")
+    assert clips and all("(" in c for c in clips)
+    browser.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))", True)
+    a = browser.screenshot("#canvas3d")
+    browser.evaluate("new Promise(r => setTimeout(r, 300))", True)
+    b = browser.screenshot("#canvas3d")
+    assert _drawn(a).mean() > 0.005, "the opened asset is not drawn"
+    assert (_drawn(a) != _drawn(b)).mean() > 0.0005, "the asset's clip does not play"
+    assert browser.errors() == []
+
+
+def test_bank_tag_option_and_cache(bank_site, tmp_path):
+    store, _, env = bank_site
+    r = zooctl("view", "--bank", "--tag", "bird", "--export", str(tmp_path / "birds"), store=store, env=env)
+    assert r.code == 0, r.err
+    assert len(list((tmp_path / "birds" / "turntables").iterdir())) == 1
+    assert len(list((tmp_path / "birds" / "assets").iterdir())) == 1
+    r = zooctl(
+        "view", "--bank", "--tag", "nosuchtag", "--export", str(tmp_path / "none"), store=store, env=env
+    )
+    assert r.code != 0 and "no asset in the bank has the tag nosuchtag" in r.err
+    r = zooctl("view", "walk", "--tag", "bird", store=store, env=env)
+    assert r.code != 0 and "--tag filters the bank gallery" in r.err
