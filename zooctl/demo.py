@@ -98,6 +98,7 @@ def _export_and_animate(con, args, rec) -> int:
     glb = next((v for v in rec["outputs"].values() if str(v).endswith(".glb")), None)
     if glb is None:
         con.print("[yellow]the fit wrote no .glb: skipping the motion demo[/]")
+        _print_view_command(con)
         return 0
     _zooctl("bank", "add", glb, "--name", "demo-fit", "--replace", "--no-views", "--tag", "fitted")
     _zooctl(
@@ -106,7 +107,24 @@ def _export_and_animate(con, args, rec) -> int:
     )  # fmt: skip
     _zooctl("animate", "demo-fit", "--sample", "5", "--prior", "demo", "--out", str(out / "animate"))
     con.print(f"done: everything is in {out}/ (fit, exports, bank.png, animate/)")
+    _print_view_command(con)
     return 0
+
+
+def _print_view_command(con) -> None:
+    """The last line: the one command that opens the fit in the browser viewer (`zooctl view`,
+    the zooctl-viewer plugin `make demo` installs)."""
+    import importlib.util
+    import os
+    import shlex
+
+    store = os.environ.get("ZOOCTL_STORE")
+    cmd = "zooctl " + (f"--store {shlex.quote(store)} " if store else "") + "view demo"
+    if importlib.util.find_spec("zooctl_viewer") is None:
+        con.print("to look at the fit in 3D: pip install -e plugins/zooctl-viewer, then", highlight=False)
+    else:
+        con.print("turn the fitted animal around in your browser:", highlight=False)
+    con.print(f"  $ {cmd}", highlight=False, markup=False)
 
 
 if __name__ == "__main__":
