@@ -319,20 +319,22 @@ class VideoStore(IndexedStore):
 
         self.summary(name)
         try:
-            with h5py.File(self.path(name), "r") as f:
+            with open_h5(self.path(name), "the video file", hint) as f:
+                fd, md = f["frames"], f["masks"]
+                _check_frames_masks(self.path(name), fd.shape, md.shape, f["boxes"].shape, hint)
                 idx = np.unique(np.asarray(pick(f["boxes"][()]), np.int64))
                 if len(idx) == 0:
                     _, h, w, _ = f["frames"].shape
                     return idx, np.zeros((0, h, w, 3), np.uint8), np.zeros((0, h, w), bool)
                 # One read per frame: h5py's point selection over chunked, compressed data is
                 # much slower than plain reads of whole chunks (BENCHMARKS.md, Retrieval).
-                fd, md = f["frames"], f["masks"]
-                return idx, np.stack([fd[int(i)] for i in idx]), np.stack([md[int(i)] for i in idx]).astype(bool)
-        except (OSError, KeyError, ValueError, TypeError) as exc:
-            raise StoreError(
-                f"the video file {self.path(name)} is unreadable: {exc}",
-                hint="remove it with `zooctl video rm` and add it again",
-            ) from None
+                return (
+                    idx,
+                    np.stack([fd[int(i)] for i in idx]),
+                    np.stack([md[int(i)] for i in idx]).astype(bool),
+                )
+        except (OSError, KeyError, ValueError, TypeError, IndexError) as exc:
+            raise StoreError(f"the video file {self.path(name)} is unreadable: {exc}", hint=hint) from None
 
     def get(self, name: str, what: tuple[str, ...] = ("frames", "masks", "flow")) -> VideoRecord:
         """Load a stored video (only the parts in ``what``). Raises `NotFoundError` for an unknown name."""
@@ -386,3 +388,17 @@ class VideoStore(IndexedStore):
         summary = self.checked_item(read_video_h5(path), name, path).summary()
         summary["bytes"] = path.stat().st_size
         return summary, []
+
+
+def _check_frames_masks(path: Path, frames: tuple, masks: tuple, boxes: tuple, hint: str) -> None:
+    """A `StoreError` unless a video file's frames (T, H, W, 3), masks (T, H, W) and boxes (T, 4)
+    agree: a damaged file with fewer masks than frames is one clear line, not an IndexError."""
+    if len(frames) != 4 or frames[3] != 3:
+        why = f"its frames are {frames}, not (T, H, W, 3)"
+    elif tuple(masks) != tuple(frames[:3]):
+        why = f"it has masks {tuple(masks)} for frames {tuple(frames[:3])}"
+    elif tuple(boxes) != (frames[0], 4):
+        why = f"it has boxes {tuple(boxes)} for {frames[0]} frames"
+    else:
+        return
+    raise StoreError(f"the video file {path} is damaged: {why}", hint=hint)
