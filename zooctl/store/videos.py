@@ -318,21 +318,18 @@ class VideoStore(IndexedStore):
         import h5py
 
         self.summary(name)
+        hint = "remove it with `zooctl video rm` and add it again"
         try:
-            with open_h5(self.path(name), "the video file", hint) as f:
+            with h5py.File(self.path(name), "r") as f:
                 fd, md = f["frames"], f["masks"]
                 _check_frames_masks(self.path(name), fd.shape, md.shape, f["boxes"].shape, hint)
                 idx = np.unique(np.asarray(pick(f["boxes"][()]), np.int64))
                 if len(idx) == 0:
-                    _, h, w, _ = f["frames"].shape
+                    _, h, w, _ = fd.shape
                     return idx, np.zeros((0, h, w, 3), np.uint8), np.zeros((0, h, w), bool)
                 # One read per frame: h5py's point selection over chunked, compressed data is
                 # much slower than plain reads of whole chunks (BENCHMARKS.md, Retrieval).
-                return (
-                    idx,
-                    np.stack([fd[int(i)] for i in idx]),
-                    np.stack([md[int(i)] for i in idx]).astype(bool),
-                )
+                return idx, np.stack([fd[int(i)] for i in idx]), np.stack([md[int(i)] for i in idx]).astype(bool)
         except (OSError, KeyError, ValueError, TypeError, IndexError) as exc:
             raise StoreError(f"the video file {self.path(name)} is unreadable: {exc}", hint=hint) from None
 
