@@ -175,6 +175,20 @@ def _layer_arcs(layer) -> Iterator[tuple[str, str]]:
                     yield "value clip", getattr(a, "path", str(a))
 
 
+def composition_error_line(error: Any) -> str:
+    """One line for a USD composition error: a cycle as the chain of layer file names (USD
+    prints it over eight lines, with session-layer addresses), anything else squeezed to one."""
+    text = str(error).split(" (instantiating", 1)[0]
+    if text.startswith("Cycle detected"):
+        # "@a@,@anon:...@</P> references: @b@</P> which references: @a@</P> which CANNOT ..."
+        # (payloads read the same)
+        chain = text.split("CANNOT", 1)[0]
+        names = [Path(p).name for p in re.findall(r"@([^@]+)@", chain) if not p.startswith("anon:")]
+        if names:
+            return "a cycle of references " + " -> ".join(names)
+    return " ".join(text.split())[:300]
+
+
 def _load(path: Path, name: str) -> RiggedAsset:
     from pxr import Usd, UsdGeom, UsdSkel
 
@@ -186,7 +200,7 @@ def _load(path: Path, name: str) -> RiggedAsset:
     if errors:
         raise _bad(
             path,
-            f"its layers do not compose: {str(errors[0]).split(' (instantiating', 1)[0][:300]}",
+            f"its layers do not compose: {composition_error_line(errors[0])}",
             "fix the sublayers and references it names (a cycle, a missing file)",
         )
     cache = UsdSkel.Cache()
