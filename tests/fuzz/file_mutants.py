@@ -394,9 +394,35 @@ def _uri_case(rng, folder: Path, i: int) -> Case:
 # -- USD mutations ----------------------------------------------------------------------------
 
 
+_ARCS = {
+    "sublayer": "#usda 1.0\n(\n    subLayers = [@{p}@]\n)\n",
+    "reference": '#usda 1.0\ndef "A" (\n    prepend references = @{p}@\n)\n{{\n}}\n',
+    "payload": '#usda 1.0\ndef "A" (\n    payload = @{p}@\n)\n{{\n}}\n',
+    "variant_payload": (
+        '#usda 1.0\ndef "A" (\n    variants = {{\n        string v = "x"\n    }}\n    prepend variantSets = "v"\n)\n'
+        '{{\n    variantSet "v" = {{\n        "x" (\n            payload = @{p}@\n        ) {{\n        }}\n    }}\n}}\n'
+    ),
+}
+
+
+def _usd_arc_escape(rng, text: str, folder: Path) -> tuple[str, str]:
+    """A layer whose only content is an arc to the whole (valid) seed asset outside its folder:
+    importing anything from it means the outside file was opened."""
+    outside = folder.parent / f"outside_{folder.name}.usda"
+    outside.write_text(text)
+    how = _pick(rng, ["absolute", "dotdot", "symlink"])
+    target = {"absolute": str(outside), "dotdot": f"../{outside.name}", "symlink": "./inside.usda"}[how]
+    if how == "symlink":
+        (folder / "inside.usda").symlink_to(outside)
+    arc = _pick(rng, sorted(_ARCS))
+    return f"arc_{arc}_{how}", _ARCS[arc].format(p=target)
+
+
 def _usd_mutation(rng, text: str, folder: Path) -> tuple[str, str]:
-    kind = _pick(rng, ["joints", "sublayer", "missing_attr", "values", "time", "text_noise"])
+    kind = _pick(rng, ["joints", "sublayer", "missing_attr", "values", "time", "text_noise", "arc"])
     lines = text.splitlines()
+    if kind == "arc":
+        return _usd_arc_escape(rng, text, folder)
     if kind == "joints":
         m = re.search(r"uniform token\[\] joints = \[(.*?)\]", text)
         if m:
@@ -505,7 +531,10 @@ def mutants(workdir: Path, n: int, seed: int = 18) -> list[Case]:
             kind, text = _usd_mutation(rng, text, folder)
             path = folder / "m.usda"
             path.write_text(text)
-            cases.append(Case(f"{i:04d}_usd_{kind}_{name}", f"usd_{kind}", path))
+            arc = kind.startswith("arc_")
+            cases.append(
+                Case(f"{i:04d}_usd_{kind}_{name}", "usd_arc" if arc else f"usd_{kind}", path, must_fail=arc)
+            )
             continue
         name, doc, binary = _pick(rng, docs)
         if r < 0.45:

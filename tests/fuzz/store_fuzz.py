@@ -87,6 +87,9 @@ class State:
     kinds: list[str] = field(default_factory=list)
     touched: set[str] = field(default_factory=set)
     readonly: bool = False  # needs permissions to apply (skipped where they cannot)
+    outside: dict[str, bytes | None] = field(
+        default_factory=dict
+    )  # files beyond the store, as they must stay
 
 
 def _asset_files(base: dict, name: str) -> list[str]:
@@ -297,11 +300,19 @@ def _d_readonly(root, base, rng, st):
 
 
 def _d_lock(root, base, rng, st):
-    how = rng.choice(["garbage", "folder"])
+    how = rng.choice(["garbage", "folder", "symlink", "dangling symlink", "fifo"])
     lock = root / ".lock"
     lock.unlink(missing_ok=True)
     if how == "folder":
         lock.mkdir()
+    elif how == "fifo":
+        os.mkfifo(lock)
+    elif how.endswith("symlink"):  # writing through it would empty, overwrite or create its target
+        target = root.parent / f"outside-{st.seed}.txt"
+        if how == "symlink":
+            target.write_bytes(b"a file of the user's, outside the store")
+        st.outside[str(target)] = target.read_bytes() if target.exists() else None
+        lock.symlink_to(target)
     else:
         lock.write_bytes(_garbage(rng, 200))
     return f"lock file {how}"
@@ -486,9 +497,14 @@ def run_state(
             rec.setdefault("errors", {})[" ".join(res["args"])] = res["err"].strip().splitlines()[0][:300]
     for p in [root, *root.rglob("*")]:  # let the checks and the cleanup read everything again
         try:
-            p.chmod(0o755 if p.is_dir() else 0o644)
+            if not p.is_symlink():
+                p.chmod(0o755 if p.is_dir() else 0o644)
         except OSError:
             pass
+    for path, content in st.outside.items():
+        now = Path(path).read_bytes() if Path(path).exists() else None
+        if now != content:
+            rec["problems"].append(f"a file outside the store was written through the lock: {path}")
     after = hashes(root, keep)
     changed = [r for r in keep if before[r] != after[r]]
     if changed:
