@@ -221,7 +221,12 @@ class RiggedAsset:
             "license": self.meta.get("license", ""),
             "source": self.meta.get("source", ""),
             "has_texture": self.texture_png is not None,
+            # what animal it is (`zooctl.retrieval.labels`): absent until labelled
+            **{k: self.meta[k] for k in LABEL_KEYS if isinstance(self.meta.get(k), str)},
         }
+
+
+LABEL_KEYS = ("label", "label_source")  # the asset's animal label and where it came from
 
 
 def lbs(

@@ -51,6 +51,12 @@ def add(
     ),
     tag: list[str] = typer.Option(None, "--tag", help="Tag to attach (repeatable), e.g. --tag quadruped."),
     license: str = typer.Option(None, "--license", help="License of the asset, e.g. CC0-1.0."),
+    label: str = typer.Option(
+        None,
+        "--label",
+        help='What animal it is, e.g. --label "red fox" (default: what its name, tags or rendered '
+        "views show; `bank label` changes it).",
+    ),
     replace: bool = typer.Option(False, "--replace", help="Overwrite an asset of the same name."),
     views: bool = typer.Option(
         None,
@@ -92,7 +98,9 @@ def add(
     if batch.executor is not None or resume:  # a batch: import and views in workers, stored here
         from .bank_batch import add_many
 
-        opts = dict(name=name, tags=tag, license=license, replace=replace, views=views, resume=resume)
+        opts = dict(
+            name=name, tags=tag, license=license, replace=replace, views=views, resume=resume, label=label
+        )
         limits_with(**limits)  # a bad value is one error here; the workers apply them
         return add_many(paths, json_out=json_out, limits=limits, batch=batch, **opts)
 
@@ -106,6 +114,7 @@ def add(
             replace=replace,
             views=views,
             progress=progress,
+            label=label,
         )
     failed = [r for r in results if r.error is not None]
     if json_out:
@@ -167,6 +176,7 @@ def list_(
                 str(r["joints"]),
                 str(len(r["clips"])),
                 f"{size:.3g}",
+                r.get("label") or "-",
                 ", ".join(r.get("tags", [])),
             ]
         )
@@ -177,6 +187,7 @@ def list_(
         ("joints", "right"),
         ("clips", "right"),
         ("size", "right"),
+        ("label", "left"),
         ("tags", "left"),
     ]
     print_table(cols, table, title=f"{len(rows)} assets")
@@ -203,6 +214,7 @@ def show(name: str = typer.Argument(..., help="Asset name."), json_out: bool = J
         console.print(f"source: {card['source']}", highlight=False)
     if card.get("tags"):
         console.print(f"tags: {', '.join(card['tags'])}", highlight=False)
+    console.print(f"label: {_label_line(card)}", highlight=False, markup=False)
     for w in card.get("meta", {}).get("import_warnings", []):
         console.print(f"[yellow]import warning:[/] {w}", highlight=False)
     console.print(f"clips ({len(card['clips'])}):", highlight=False)
@@ -214,6 +226,47 @@ def show(name: str = typer.Argument(..., help="Asset name."), json_out: bool = J
     for j, (jn, p) in enumerate(zip(names, parents)):
         nodes[j] = (tree if p < 0 else nodes[p]).add(jn, highlight=False)
     console.print(tree)
+
+
+def _label_line(entry: dict) -> str:
+    """ "Shiba Inu (domestic dog > Canidae > Carnivora > quadruped; given)", or why there is none."""
+    from ..retrieval.semantic import label_taxon
+
+    label = entry.get("label")
+    if not isinstance(label, str):
+        return "none (`zooctl bank label NAME` infers one, `bank label NAME LABEL` sets it)"
+    taxon = label_taxon(label)
+    where = entry.get("label_source", "given")
+    return f"{label} ({taxon.lineage() + '; ' if taxon else ''}{where})"
+
+
+@app.command("label")
+def label_cmd(
+    name: str = typer.Argument(..., help="Asset name."),
+    label: str = typer.Argument(
+        None,
+        help='What animal it is: a common name ("red fox", "horse") or a body plan ("quadruped"). '
+        "Without it, inferred again from the asset's name, tags and rendered views.",
+        show_default=False,
+    ),
+    json_out: bool = JsonOpt,
+) -> None:
+    """Set or infer what animal an asset is (search ranks assets of the video's animal first)."""
+    from ..errors import UsageError
+    from ..retrieval.labels import relabel
+
+    bank = _bank()
+    bank.summary(name)  # a missing asset is one clear error before any work
+    entry = relabel(bank, name, label)
+    if entry is None:
+        raise UsageError(
+            f"neither the name, the tags nor the rendered views of {name!r} show an animal zooctl knows",
+            hint=f'give it one: `zooctl bank label {name} "red fox"`',
+        )
+    if json_out:
+        print_json({"name": name, "label": entry["label"], "label_source": entry["label_source"]})
+    else:
+        console.print(f"{name}: {_label_line(entry)}", highlight=False, markup=False)
 
 
 add_rm_command(app, _bank, "Remove assets from the bank.", "Asset names to remove.")

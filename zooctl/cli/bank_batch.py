@@ -29,6 +29,7 @@ def add_many(
     batch: BatchOptions,
     device: str = "cpu",
     limits: dict | None = None,
+    label: str | None = None,
 ) -> None:
     from ..pipelines.batch_bank import bank_task, commit_bank, plan_add, skip_stored
     from ..pipelines.ingest import _views_default
@@ -36,7 +37,7 @@ def add_many(
 
     bank = Bank.open(store_root())
     views = _views_default() if views is None else views
-    items = plan_add(bank, paths, name, tags, license, replace, views, resume, device, limits)
+    items = plan_add(bank, paths, name, tags, license, replace, views, resume, device, limits, label)
     ex = batch.make_executor(device)
     report = run_cli_batch(ex, bank_task, items, commit_bank, skip_stored if resume else None, json_out)
     report_batch(report, json_out, "assets", _COLS, _row)

@@ -113,11 +113,27 @@ class EffnetEmbedder:
         images = check_images(images)
         return l2_normalize(np.concatenate([self._forward(c, False) for c in self._chunks(images)]))
 
+    def embed_and_classify(self, images: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One forward pass: (N, 1280) unit-norm embeddings and (N, 1000) ImageNet probabilities."""
+        from .base import check_images, l2_normalize
+
+        images = check_images(images)
+        feats = np.concatenate([self._forward(c, False) for c in self._chunks(images)]).astype(np.float32)
+        if self.backend == "numpy":
+            w, b = self.model.fc_weight, self.model.fc_bias
+        else:
+            w = self.model._fc.weight.detach().float().cpu().numpy().T
+            b = self.model._fc.bias.detach().float().cpu().numpy()
+        return l2_normalize(feats), _softmax(feats @ w + b)
+
     def classify(self, images: np.ndarray) -> np.ndarray:
         """(N, H, W, 3) uint8 -> (N, 1000) ImageNet class probabilities."""
         from .base import check_images
 
         images = check_images(images)
-        z = np.concatenate([self._forward(c, True) for c in self._chunks(images)]).astype(np.float64)
-        z = np.exp(z - z.max(-1, keepdims=True))
-        return (z / z.sum(-1, keepdims=True)).astype(np.float32)
+        return _softmax(np.concatenate([self._forward(c, True) for c in self._chunks(images)]))
+
+
+def _softmax(z: np.ndarray) -> np.ndarray:
+    z = np.exp(z.astype(np.float64) - z.max(-1, keepdims=True))
+    return (z / z.sum(-1, keepdims=True)).astype(np.float32)

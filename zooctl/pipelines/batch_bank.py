@@ -34,6 +34,7 @@ class BankTask:
     size: int | None = None
     device: str = "cpu"
     limits: dict[str, Any] = field(default_factory=dict)  # `bank add --max-*`, applied in the worker
+    label: str | None = None  # `bank add --label`
 
 
 def _has_views(bank: Bank, name: str, embedders: list[str]) -> bool:
@@ -52,8 +53,13 @@ def plan_add(
     resume: bool = False,
     device: str = "cpu",
     limits: dict[str, Any] | None = None,
+    label: str | None = None,
 ) -> list[BatchItem]:
     from ..retrieval.index import enabled_embedders
+    from ..retrieval.labels import check_label
+
+    if label is not None:
+        check_label(label)
 
     if name is not None and len(paths) > 1:
         raise UsageError("--name needs exactly one PATH", hint="add the files one at a time, or drop --name")
@@ -62,7 +68,7 @@ def plan_add(
     for p in paths:
         key = check_name(name, "asset name") if name else sanitize_name(Path(p).stem)
         task = BankTask(str(bank.root), key, str(Path(p).resolve()), views, embedders, sorted(tags or []))
-        task.license, task.replace, task.device = license, replace, device
+        task.license, task.replace, task.device, task.label = license, replace, device, label
         task.limits = {k: v for k, v in (limits or {}).items() if v is not None}
         item = BatchItem(key, task, str(p))
         if key in seen:
@@ -111,6 +117,9 @@ def bank_task(task: BankTask, report) -> dict[str, Any]:
             asset.meta["tags"] = sorted(set(asset.meta.get("tags", [])) | set(task.tags))
         if task.license is not None:
             asset.meta["license"] = task.license
+        from ..retrieval.labels import label_asset
+
+        label_asset(asset, task.label)
     else:
         report("read")
         asset, summary = bank.get(task.name), bank.summary(task.name)

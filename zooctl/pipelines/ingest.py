@@ -52,14 +52,20 @@ def add_files(
     replace: bool = False,
     views: bool | None = None,
     progress: Callable[[str, int, int], None] | None = None,
+    label: str | None = None,
 ) -> list[AddResult]:
     """Import and store each path; one bad file does not stop the others (its result holds the error).
 
     ``views`` renders and embeds each added asset's retrieval views (`zooctl.retrieval.index`);
     default: on, unless the environment sets ZOOCTL_VIEWS=0. ``progress(stage, done, total)`` is
-    called after each file.
+    called after each file. ``label``: what animal the assets are (`zooctl.retrieval.labels`;
+    default: what their names, tags or views show).
     """
+    from ..retrieval.labels import check_label, label_asset
+
     views = _views_default() if views is None else views
+    if label is not None:
+        check_label(label)
     if name is not None and len(paths) > 1:
         raise UsageError("--name needs exactly one PATH", hint="add the files one at a time, or drop --name")
     if name is not None:
@@ -76,6 +82,7 @@ def add_files(
                 asset.meta["tags"] = sorted(set(asset.meta.get("tags", [])) | set(tags))
             if license is not None:
                 asset.meta["license"] = license
+            label_asset(asset, label)
             new = not bank.exists(asset_name)
             summary = bank.add(asset, replace=replace)
             if views:
@@ -108,6 +115,11 @@ def seed_starter(
     views = _views_default() if views is None else views
     assets = random_assets(random, seed=seed, labels=plans) if random > 0 else None
     added = seed_bank(bank, seed=seed, plans=plans, variants=variants, replace=replace, assets=assets)
+    from ..retrieval.labels import relabel
+
+    for n in added:  # the starter animals are named by their body plans
+        if not isinstance(bank.summary(n).get("label"), str):
+            relabel(bank, n)
     for i, n in enumerate(added if views else []):
         _index_views(bank, bank.get(n))
         if progress is not None:

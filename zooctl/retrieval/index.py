@@ -98,6 +98,7 @@ class ComputedViews:
     kinds: dict[str, str]
     identities: dict[str, str]
     size: int
+    classes: np.ndarray | None = None  # (1000,) mean ImageNet probabilities of the views (effnet)
 
 
 def compute_views(
@@ -127,12 +128,17 @@ def compute_views(
         embs[e], kinds[e] = arr, kind
         if ident:
             idents[e] = ident
+    classes = None
     for e in names + [e for e in others if e not in kept]:
         emb = cached_embedder(e, device)
-        embs[e] = embed_inputs(emb, vs.images, vs.masks)
+        if e == "effnet" and hasattr(emb, "embed_and_classify"):  # one pass: views and their classes
+            embs[e], probs = emb.embed_and_classify(vs.images)
+            classes = probs.mean(0)
+        else:
+            embs[e] = embed_inputs(emb, vs.images, vs.masks)
         kinds[e] = getattr(emb, "input_kind", "rgb")
         idents[e] = embedder_identity(emb)
-    return ComputedViews(vs, embs, kinds, idents, size)
+    return ComputedViews(vs, embs, kinds, idents, size, classes)
 
 
 def store_views(bank, name: str, cv: ComputedViews, digest: str | None = None) -> dict[str, Any]:
@@ -153,6 +159,9 @@ def store_views(bank, name: str, cv: ComputedViews, digest: str | None = None) -
         "views_id": views_id,
     }
     bank.update_summary(name, views=entry)
+    from .labels import label_from_views
+
+    label_from_views(bank, name, cv.classes)  # an asset nothing else names: what its views show
     return entry
 
 

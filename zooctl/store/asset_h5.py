@@ -31,7 +31,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from ..asset import Clip, RiggedAsset
+from ..asset import LABEL_KEYS, Clip, RiggedAsset
 from ..errors import StoreError
 from .h5 import read_h5
 
@@ -185,4 +185,5 @@ def card_of(asset: RiggedAsset) -> dict[str, Any]:
         "parents": [int(p) for p in asset.parents],
         "skin_influences": int(asset.skin_joints.shape[1]),
         "meta": json.loads(json.dumps(asset.meta, default=str)),
+        **{k: asset.meta[k] for k in LABEL_KEYS if isinstance(asset.meta.get(k), str)},
     }

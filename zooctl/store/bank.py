@@ -166,6 +166,44 @@ class Bank(IndexedStore):
             index["assets"][name].update(fields)
             write_json_atomic(self.index_path, index)
 
+    def set_label(self, name: str, label: str, source: str) -> dict[str, Any]:
+        """Record what animal an asset is (``label``, and where it came from: ``source``) in its
+        file's meta, its card and its index entry, each replaced atomically under the lock.
+        Its retrieval views stay valid (`views_h5.summary_digest` leaves the label out)."""
+        import shutil
+
+        import h5py
+
+        from .asset_h5 import card_of, read_asset
+        from .fs import publish, temp_path
+
+        fields = {"label": label, "label_source": source}
+        with store_lock(self.root), writing(f"labelling asset {name!r}"):
+            index = self._read_index()
+            if name not in index["assets"]:
+                raise self._not_found(name, index["assets"])
+            path = self.asset_path(name)
+            tmp = temp_path(path)
+            try:
+                shutil.copyfile(path, tmp)
+                with h5py.File(tmp, "r+") as f:
+                    meta = json.loads(f.attrs.get("meta", "{}"))
+                    meta.update(fields)
+                    f.attrs["meta"] = json.dumps(meta, default=str)
+                publish(tmp, path)
+            finally:
+                tmp.unlink(missing_ok=True)
+            try:
+                card = json.loads(self.card_path(name).read_bytes())
+                card["meta"].update(fields)
+            except (OSError, ValueError, KeyError, AttributeError, TypeError):
+                card = card_of(read_asset(path))
+            card.update(fields)
+            write_bytes_atomic(self.card_path(name), json.dumps(card, indent=1).encode())
+            index["assets"][name].update(fields)
+            write_json_atomic(self.index_path, index)
+            return index["assets"][name]
+
     def remove_leftovers(self, keep: set[str]) -> tuple[int, int]:
         """Cards and retrieval sidecars of assets that are gone, pack files nothing refers to."""
         from .fs import remove_stale_temps

@@ -1,0 +1,117 @@
+"""The semantic term of `bank search`: what the query shows, by the shipped EfficientNet-Lite0's own
+ImageNet head, against what each bank asset is (its label, placed in `zooctl.retrieval.taxonomy`).
+
+The query's class distribution is the mean of its crops' ImageNet probabilities over the 398 animal
+classes; it is not renormalised, so a query the classifier does not take for an animal (a stylised
+render, a blurred crop) has little mass and the term fades by itself: it is confidence-weighted.
+An asset's semantic score is the expected taxonomic agreement, ``sum_c p(c) * agreement(c, label)
+/ 4`` (1: the same species with certainty; `zooctl.retrieval.taxonomy.agreement`). An asset
+without a label scores 0 (it still competes on appearance). The fused search score adds
+``-weight * score``. Bank labels inferred from rendered views use the same head: the deepest rank
+whose most probable taxon holds at least half the views' mean probability.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from functools import lru_cache
+from typing import Any
+
+import numpy as np
+
+from .taxonomy import ANIMAL_CLASSES, LEVELS, Taxon, agreement, load_taxonomy, shared_taxon
+
+# Fused-score weight of the semantic term (appearance terms are z-scores). Chosen leave-one-out
+# over the real videos and the rendered queries of `bench/retrieval.py`: see BENCHMARKS.md.
+SEMANTIC_WEIGHT = 2.0
+VIEW_LABEL_MASS = 0.5  # a majority of the views' probability, not a tuned threshold
+SEMANTIC_EMBEDDER = "effnet"  # the embedder whose network classifies the query
+
+
+def class_distribution(probs: np.ndarray) -> np.ndarray:
+    """(K, 1000) ImageNet probabilities of K crops -> (398,) mean probability of each animal class."""
+    p = np.asarray(probs, np.float64)
+    if p.ndim != 2 or p.shape[0] == 0:
+        return np.zeros(ANIMAL_CLASSES)
+    return p[:, :ANIMAL_CLASSES].mean(0)
+
+
+@lru_cache(maxsize=4096)
+def agreement_vector(taxon: Taxon) -> np.ndarray:
+    """(398,) agreement of every ImageNet animal class with ``taxon``, divided by 4 (0..1)."""
+    tax = load_taxonomy()
+    return np.array([agreement(c, taxon) for c in tax.imagenet], np.float64) / 4.0
+
+
+@lru_cache(maxsize=4096)
+def label_taxon(label: str) -> Taxon | None:
+    """The taxon an asset's stored label names (None: not an animal the taxonomy knows)."""
+    return load_taxonomy().resolve(label) if label else None
+
+
+def entry_taxon(entry: dict[str, Any] | None) -> Taxon | None:
+    """The taxon of a bank index entry's ``label`` (None without one)."""
+    label = entry.get("label") if isinstance(entry, dict) else None
+    return label_taxon(label) if isinstance(label, str) else None
+
+
+def semantic_scores(dist: np.ndarray, taxa: Iterable[Taxon | None]) -> np.ndarray:
+    """(A,) expected agreement of the query distribution ``dist`` (398,) with each asset's taxon."""
+    seen: dict[Taxon, float] = {}
+    out = []
+    for t in taxa:
+        if t is not None and t not in seen:
+            seen[t] = float(dist @ agreement_vector(t))
+        out.append(0.0 if t is None else seen[t])
+    return np.array(out, np.float64)
+
+
+def top_classes(dist: np.ndarray, n: int = 3) -> list[tuple[str, float]]:
+    """The ``n`` most probable animal classes of a query distribution: (class name, probability)."""
+    tax = load_taxonomy()
+    order = np.argsort(-dist, kind="stable")[:n]
+    return [(tax.classes[i], float(dist[i])) for i in order if dist[i] > 0]
+
+
+def query_taxon(dist: np.ndarray) -> Taxon | None:
+    """The animal the query most probably shows: the most probable species of the family with the
+    most probability (dog breeds or ducks spread over many classes), None with no animal mass."""
+    if dist.size == 0 or float(dist.max()) <= 0:
+        return None
+    tax = load_taxonomy()
+    fam: dict[str, float] = {}
+    for c, t in enumerate(tax.imagenet):
+        fam[t.family] = fam.get(t.family, 0.0) + float(dist[c])
+    best = max(fam, key=fam.__getitem__)
+    members = [c for c, t in enumerate(tax.imagenet) if t.family == best]
+    return tax.imagenet[max(members, key=lambda c: dist[c])]
+
+
+def matched_taxon(dist: np.ndarray, taxon: Taxon | None) -> tuple[str, str] | None:
+    """(rank, name) of what an asset's taxon shares with the query's most probable species."""
+    q = query_taxon(dist)
+    return None if q is None or taxon is None else shared_taxon(q, taxon)
+
+
+def views_taxon(probs: np.ndarray) -> Taxon | None:
+    """The label of an asset from its rendered views' ImageNet probabilities ((V, 1000) or their
+    (1000,) mean): the deepest rank whose most probable taxon holds `VIEW_LABEL_MASS` of the
+    probability; None when no body plan does."""
+    p = np.asarray(probs, np.float64)
+    p = p.mean(0) if p.ndim == 2 else p
+    p = p[:ANIMAL_CLASSES]
+    tax = load_taxonomy()
+    for rank in ("species", "family", "order", "body plan"):
+        key = "body_plan" if rank == "body plan" else rank
+        mass: dict[str, float] = {}
+        for c, taxon in enumerate(tax.imagenet):
+            k = getattr(taxon, key)
+            mass[k] = mass.get(k, 0.0) + float(p[c])
+        best = max(mass, key=mass.__getitem__)
+        if mass[best] >= VIEW_LABEL_MASS:
+            return tax.node(rank, best)
+    return None
+
+
+def rank_name(level: int) -> str:
+    return {v: k for k, v in LEVELS.items()}.get(level, "none")
