@@ -269,3 +269,16 @@ def test_bench_make_clips_motion_is_recorded_and_falls_back_without_clips(tmp_pa
     assert meta["motion"] == "random" and meta["clip"] is None
     with pytest.raises(UsageError, match="motion"):
         make_video(tube, tmp_path, frames=3, size=32, motion="walk")
+
+
+def test_a_named_clip_is_the_one_filmed(tmp_path):
+    """`make demo` films the starter animal walking: `make_video(..., clip="walk")` plays that clip
+    (meta.json says so), and a clip the animal lacks is a clear error naming the ones it has."""
+    from zooctl.procedural import build_animal
+
+    asset = build_animal("quadruped", name="q")
+    folder = make_video(asset, tmp_path, frames=4, size=48, seed=3, motion="clips", clip="walk")
+    assert json.loads((folder / "meta.json").read_text())["clip"] == "walk"
+    with pytest.raises(UsageError, match="no clip 'gallop'.*") as err:
+        make_video(asset, tmp_path / "b", frames=4, size=48, motion="clips", clip="gallop")
+    assert "walk" in err.value.hint

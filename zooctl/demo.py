@@ -1,4 +1,4 @@
-"""`make demo`: seed the starter bank, render a starter animal in a new random motion, fit it.
+"""`make demo`: seed the starter bank, film a starter animal walking (one of its own clips), fit it.
 
 Leaves ``demo/`` with the fitted ``<name>.usd`` (with ``/World/Camera``), ``<name>.glb``,
 ``overlay.mp4`` (fit over the video, beside a turning view), ``loss.png`` and ``fit.json``, plus
@@ -33,6 +33,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--animal", default="quadruped", help="starter animal to film and fit (default quadruped)"
     )
+    ap.add_argument(
+        "--clip",
+        default="walk",
+        help="the animal's own clip to film (default walk; 'random': random joint rotations)",
+    )
     ap.add_argument("--frames", type=int, default=36)
     ap.add_argument("--size", type=int, default=240)
     ap.add_argument("--out", type=Path, default=Path("demo"))
@@ -47,9 +52,20 @@ def main(argv: list[str] | None = None) -> int:
         added = seed_starter(bank)
         con.print(f"starter bank at {store}/bank: {len(bank)} assets ({len(added)} added)")
         animal = bank.get(args.animal)
-        video_dir = make_video(animal, args.out / "video", frames=args.frames, size=args.size, seed=args.seed)
+        own = args.clip != "random"
+        video_dir = make_video(
+            animal,
+            args.out / "video",
+            frames=args.frames,
+            size=args.size,
+            seed=args.seed,
+            motion="clips" if own else "random",
+            clip=args.clip if own else None,
+        )
         con.print(
-            f"rendered {args.animal} in a new random motion (seed {args.seed}): {video_dir / 'video.mp4'}"
+            f"filmed {args.animal} "
+            + (f"in its {args.clip} clip" if own else "in random joint rotations")
+            + f" from a moving camera (seed {args.seed}): {video_dir / 'video.mp4'}"
         )
         from .cli.fit import RichReporter
 

@@ -96,17 +96,22 @@ def random_motion(
 
 
 def clip_motion(
-    asset: RiggedAsset, frames: int, rng: np.random.Generator, fps: float = 30.0
+    asset: RiggedAsset, frames: int, rng: np.random.Generator, fps: float = 30.0, name: str | None = None
 ) -> tuple[np.ndarray, str] | None:
-    """((T, J, 4, 4) local transforms, clip name): one of the asset's clips drawn by ``rng``,
-    resampled to ``fps`` (rotations slerped, the rest linear), played forwards and backwards (a
+    """((T, J, 4, 4) local transforms, clip name): the clip ``name`` or one of the asset's clips
+    drawn by ``rng``, resampled to ``fps`` (rotations slerped, the rest linear), played forwards and backwards (a
     loop of a clip that is not a cycle would jump) from a random time for ``frames``, the root
     joints at their rest translation (so the animal stays where the camera orbits); None without a
     clip of two or more frames."""
     names = sorted(n for n, c in asset.clips.items() if c.num_frames > 1)
     if not names:
         return None
-    clip = asset.clips[names[int(rng.integers(len(names)))]]
+    if name is not None and name not in names:
+        raise UsageError(
+            f"{asset.name} has no clip {name!r} of two or more frames",
+            hint=f"its clips: {', '.join(names)}" if names else "it has no clips: use --motion random",
+        )
+    clip = asset.clips[name if name is not None else names[int(rng.integers(len(names)))]]
     period = 2.0 * clip.duration
     t = (float(rng.uniform(0, clip.duration)) + np.arange(frames) / fps) % period
     x = np.where(t > clip.duration, period - t, t) * clip.fps
@@ -200,8 +205,10 @@ def make_video(
     seed: int = 0,
     fps: float = 30.0,
     motion: str = "random",
+    clip: str | None = None,
 ) -> Path:
-    """Render one test video of ``asset`` into ``out_dir/<asset.name>/`` (module docstring)."""
+    """Render one test video of ``asset`` into ``out_dir/<asset.name>/`` (module docstring);
+    ``clip`` names the clip a ``motion="clips"`` video plays (default: one drawn at random)."""
     from ..io.video import write_mp4
     from ..render.camera import Camera
     from ..render.preview import fit_camera, orbit_camera
@@ -213,8 +220,8 @@ def make_video(
         raise UsageError(f"--motion {motion!r} is not one of {', '.join(MOTIONS)}")
     rng = np.random.default_rng([seed, sum(asset.name.encode())])
     # 12 more frames than shown: the last one is a held-out novel pose for the re-animation metric.
-    clip = clip_motion(asset, frames + KEY_EVERY, rng, fps) if motion == "clips" else None
-    local, clip_name = clip if clip is not None else (random_motion(asset, frames + KEY_EVERY, rng), None)
+    played = clip_motion(asset, frames + KEY_EVERY, rng, fps, clip) if motion == "clips" else None
+    local, clip_name = played if played is not None else (random_motion(asset, frames + KEY_EVERY, rng), None)
     mats = asset.skinning_matrices(local)  # (T + 12, J, 4, 4)
     from ..asset import lbs
 
