@@ -1,4 +1,4 @@
-"""`bank add FILES... --executor` and `bank reindex --executor`: the batch forms (issue 23)."""
+"""`bank add FILES... --executor` and `bank reindex --executor`: the batch forms."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""`zooctl bank search` and `zooctl bank reindex`: video-to-template retrieval (issue 6)."""
+"""`zooctl bank search` and `zooctl bank reindex`: video-to-template retrieval."""
 
 from __future__ import annotations
 

@@ -56,14 +56,14 @@ def rig(
         )
 
 
-from . import bench_retrieval  # noqa: E402  (issue 6: retrieval accuracy)
+from . import bench_retrieval  # noqa: E402  (retrieval accuracy)
 
 bench_retrieval.register(app)
 
-from . import bench_motion  # noqa: E402  (issue 8: motion prior metrics)
+from . import bench_motion  # noqa: E402  (motion prior metrics)
 
 bench_motion.register(app)
 
-from . import bench_fit  # noqa: E402  (issue 7: CASA fit benchmark)
+from . import bench_fit  # noqa: E402  (CASA fit benchmark)
 
 bench_fit.register(app)

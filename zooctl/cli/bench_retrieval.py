@@ -1,4 +1,4 @@
-"""`zooctl bench retrieval`: leave-one-out retrieval accuracy over a set of assets (issue 6)."""
+"""`zooctl bench retrieval`: leave-one-out retrieval accuracy over a set of assets."""
 
 from __future__ import annotations
 
