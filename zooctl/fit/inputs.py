@@ -145,6 +145,7 @@ def _read_mask_folder(folder: Path, indices: np.ndarray, size: tuple[int, int]) 
     from PIL import Image
 
     from ..video.decode import image_files
+    from ..video.images import open_image
 
     files = image_files(folder)
     if len(files) == 0:
@@ -157,7 +158,7 @@ def _read_mask_folder(folder: Path, indices: np.ndarray, size: tuple[int, int]) 
                 f"{folder} has {len(files)} masks, the video needs {int(indices.max()) + 1}",
                 hint="give one mask per frame",
             )
-        with Image.open(files[i]) as im:
+        with open_image(files[i]) as im:
             a = np.asarray(im.convert("L").resize((W, H), Image.Resampling.NEAREST))
         out[n] = a > 0
     return out

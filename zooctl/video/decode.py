@@ -149,6 +149,8 @@ class _Budget:
 def _decode_folder(folder, fps, start, end, max_frames, max_size, progress, budget) -> DecodedVideo:
     from PIL import Image
 
+    from .images import open_image
+
     kind, annotations, img_dir = "images", None, folder
     if folder.is_file():  # one photo: the folder of that one image
         img_dir = folder.parent
@@ -184,9 +186,11 @@ def _decode_folder(folder, fps, start, end, max_frames, max_size, progress, budg
         data = f.read_bytes()
         digest.update(f.name.encode() + b"\0" + data)
         try:
-            with Image.open(f) as im:
+            with open_image(f) as im:
                 im.load()
                 rgb = im.convert("RGB")
+        except InputError:
+            raise
         except Exception as exc:
             raise InputError(
                 f"{f} is not a readable image: {exc}", hint="remove or replace that file"

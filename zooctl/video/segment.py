@@ -120,7 +120,7 @@ class MaskSegmenter:
         return mask
 
     def _from_folder(self, t, h, w, progress) -> np.ndarray:
-        from PIL import Image
+        from .images import open_image
 
         folder = self.path / "Annotations" if (self.path / "Annotations").is_dir() else self.path
         files = image_files(folder)
@@ -133,7 +133,7 @@ class MaskSegmenter:
         out = np.zeros((t, h, w), bool)
         for k, i in enumerate(pick):
             try:
-                with Image.open(files[i]) as im:
+                with open_image(files[i]) as im:
                     im.load()
                     m = mask_from_image(np.asarray(im), im.mode, files[i].name)
             except OSError as exc:
