@@ -14,7 +14,7 @@ from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass, replace
 
-from .errors import InputError
+from .errors import InputError, ZooctlError
 
 
 @dataclass(frozen=True)
@@ -76,3 +76,73 @@ def check(what: str, value: float, key: str, unit: str = "", factor: float = 1) 
 
 def _num(v: float) -> str:
     return f"{v:,.0f}" if math.isfinite(v) and v == int(v) else f"{v:,g}"
+
+
+# -- reads: what one file may make zooctl read or allocate --------------------------------------
+#
+# A sparse file claims gigabytes it does not hold, and an HDF5 dataset declares any shape in a few
+# bytes; readers check these limits against the sizes a file declares *before* reading it. The
+# defaults are far above real data (the shared animals: under 1 MB; a stored DAVIS video: about
+# 600 MB of arrays; a 1,000-asset index: about 1 MB) and keep a read under 2 GB.
+
+
+@dataclass(frozen=True)
+class ReadLimits:
+    max_file_mb: float = 512.0  # one input file read whole: a model, a glTF buffer or image
+    max_json_mb: float = 64.0  # one JSON text: a store index, card or record, a config, glTF JSON
+    max_array_mb: float = 1024.0  # the arrays one stored HDF5 file declares (asset, video, views)
+
+
+READ_ENV = {
+    "max_file_mb": "ZOOCTL_MAX_FILE_MB",
+    "max_json_mb": "ZOOCTL_MAX_JSON_MB",
+    "max_array_mb": "ZOOCTL_MAX_ARRAY_MB",
+}
+
+
+def read_limits() -> ReadLimits:
+    """The read limits in force: the defaults, each replaced by its environment variable when set."""
+    import os
+
+    values = {}
+    for key, var in READ_ENV.items():
+        text = os.environ.get(var, "").strip()
+        if not text:
+            continue
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and value > 0):
+            raise InputError(f"{var}={text!r} is not a positive number of megabytes", hint=f"unset {var}")
+        values[key] = value
+    return ReadLimits(**values)
+
+
+def max_read_bytes(key: str) -> int:
+    """Read limit ``key`` of `ReadLimits` in bytes."""
+    return int(getattr(read_limits(), key) * 2**20)
+
+
+def check_read(what: str, nbytes: float, key: str, error: type[ZooctlError] | None = None) -> None:
+    """Raise ``error`` (default `InputError`) when ``nbytes`` is over read limit ``key``: ``what``
+    says what is that big ("the asset file x.h5 declares arrays of"); the hint names the variable
+    that raises the limit."""
+    lim = max_read_bytes(key)
+    if not nbytes <= lim:
+        err: type[ZooctlError] = InputError if error is None else error
+        raise err(
+            f"{what} {mb_text(nbytes)}, over the read limit of {mb_text(lim)}", hint=read_hint(key, nbytes)
+        )
+
+
+def read_hint(key: str, nbytes: float) -> str:
+    """What to do about a file over read limit ``key``: the variable, set to what it needs."""
+    need = math.ceil(nbytes / 2**20) if math.isfinite(nbytes) else "N"
+    return f"if the file is what you meant, raise the limit: {READ_ENV[key]}={need}"
+
+
+def mb_text(nbytes: float) -> str:
+    if not math.isfinite(nbytes):
+        return f"{nbytes} bytes"
+    return f"{nbytes / 2**20:,.1f} MB" if nbytes >= 2**20 else f"{nbytes:,.0f} bytes"
