@@ -133,42 +133,6 @@ def _record(t=12, h=40, w=56):
     )
 
 
-def _parts(rec):
-    return (rec.frames, rec.flow_forward, rec.flow_backward, rec.occlusion_forward, rec.occlusion_backward)
-
-
-def test_a_file_begun_in_the_background_equals_one_written_at_once(store, tmp_path):
-    rec = _record()
-    one, bg = VideoStore.open(tmp_path / "one"), VideoStore.open(store)
-    one.add(rec)
-    bg.add(rec, image=bg.begin_image(*_parts(rec)))
-    a, b = one.get("bg"), bg.get("bg")
-    for key in (
-        "frames",
-        "masks",
-        "flow_forward",
-        "flow_backward",
-        "occlusion_forward",
-        "occlusion_backward",
-    ):
-        assert np.array_equal(getattr(a, key), getattr(b, key)), key
-    assert a.segmenter == b.segmenter and a.source == b.source and a.fps == b.fps
-    assert describe_h5(one.path("bg")) == describe_h5(bg.path("bg"))
-    validate(describe_h5(bg.path("bg")), "video_h5.schema.json")
-    assert bg.summary("bg")["bytes"] == bg.path("bg").stat().st_size
-
-
-def test_a_background_image_is_for_its_own_arrays_and_can_be_dropped(store):
-    rec, other = _record(), _record()
-    vs = VideoStore.open(store)
-    image = vs.begin_image(*_parts(other))
-    with pytest.raises(ValueError, match="not those this image was started with"):
-        vs.add(rec, image=image)
-    image.close()
-    image.close()  # twice: no-op
-    assert vs.names() == [] and not list((store / "videos").glob("*.h5"))
-
-
 def save_blank_masks(folder: Path, n: int, shape) -> Path:
     folder.mkdir()
     for i in range(n):

@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from . import _common
-from ._common import JsonOpt, console, print_json, print_table, stage_progress, store_root
+from ._common import JsonOpt, console, err_console, print_json, print_table, stage_progress, store_root
 
 app = typer.Typer(
     help="Turn videos into frames, masks and optical flow, stored once for every fit.", no_args_is_help=True
@@ -81,10 +81,13 @@ def add(
         help="Longest side DIS flow is computed at (the stored flow is upsampled to the frames; default 640; 0: full size).",
     ),
     fps: float = typer.Option(
-        None, "--fps", help="Resample a video file to this rate; for image folders, their rate (default 30)."
+        None,
+        "--fps",
+        help="Resample a video file to this rate; for image folders, their rate (default 30). Default: the "
+        "source's rate up to 300 frames; a longer clip keeps at most 15 fps and its first 20 s.",
     ),
     start: float = typer.Option(None, "--start", help="First second to keep."),
-    end: float = typer.Option(None, "--end", help="Second to stop at."),
+    end: float = typer.Option(None, "--end", help="Second to stop at (default: see --fps)."),
     max_frames: int = typer.Option(None, "--max-frames", help="Keep at most this many frames."),
     max_size: int = typer.Option(
         854, "--max-size", help="Downscale so the longest side is at most this many pixels (0: keep)."
@@ -92,7 +95,8 @@ def add(
     max_memory: float = typer.Option(
         2.0,
         "--max-memory",
-        help="Refuse a video whose preprocessing would need more than this many GB (about 32 bytes per stored pixel).",
+        help="Refuse frames so large that preprocessing would need more than this many GB (about 32 bytes per "
+        "stored pixel, a few frames at a time: the video's length does not count).",
     ),
     replace: bool = typer.Option(False, "--replace", help="Overwrite a video of the same name."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars."),
@@ -127,8 +131,13 @@ def add(
         flow_options=flow_opts,
         replace=replace,
     )
+
+    def notify(text: str) -> None:
+        if not json_out:
+            err_console.print(text, highlight=False, markup=False)
+
     with stage_progress(not quiet and not json_out) as progress:
-        summary = add_video(_store(), path, opts, progress=progress)
+        summary = add_video(_store(), path, opts, progress=progress, notify=notify)
     if json_out:
         print_json(summary)
     else:

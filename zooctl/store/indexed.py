@@ -194,22 +194,36 @@ class IndexedStore(NamedStore):
             with writing(f"adding {self.noun} {name!r}"):
                 for tmp, (_, content) in zip(temps, files):
                     tmp.write_bytes(content)
-                with store_lock(self.root):
-                    index = self._read_index()
-                    if not replace and name in index[self.key]:
-                        raise self.exists_error(name)
-                    index[self.key][name] = summary
-                    idx_tmp = temp_path(self.index_path)
-                    try:
-                        idx_tmp.write_bytes(json_bytes(index))
-                        for tmp, (final, _) in zip(temps, files):
-                            publish(tmp, final)
-                        self.remove_side_data(name)
-                        publish(idx_tmp, self.index_path)
-                    finally:
-                        idx_tmp.unlink(missing_ok=True)
+            self.publish_written(
+                name, summary, [(tmp, final) for tmp, (final, _) in zip(temps, files)], replace
+            )
         finally:
             for tmp in temps:
+                tmp.unlink(missing_ok=True)
+
+    def publish_written(
+        self, name: str, summary: dict[str, Any], written: list[tuple[Path, Path]], replace: bool
+    ) -> None:
+        """`publish_item` for files already written to temporaries ((temporary from `temp_path`,
+        final path), the item file first): under the lock the name is checked again, then the
+        files and the index entry are published. The temporaries are gone afterwards either way."""
+        try:
+            with writing(f"adding {self.noun} {name!r}"), store_lock(self.root):
+                index = self._read_index()
+                if not replace and name in index[self.key]:
+                    raise self.exists_error(name)
+                index[self.key][name] = summary
+                idx_tmp = temp_path(self.index_path)
+                try:
+                    idx_tmp.write_bytes(json_bytes(index))
+                    for tmp, final in written:
+                        publish(tmp, final)
+                    self.remove_side_data(name)
+                    publish(idx_tmp, self.index_path)
+                finally:
+                    idx_tmp.unlink(missing_ok=True)
+        finally:
+            for tmp, _ in written:
                 tmp.unlink(missing_ok=True)
 
     def remove(self, name: str) -> None:

@@ -7,10 +7,11 @@ Layout under the store root (JSON Schemas: ``schemas/video_index.schema.json`` a
     videos/<name>.h5       frames, masks, boxes, forward/backward flow, occlusion masks, source metadata
     videos/<name>.cache/   derived data (retrieval query embeddings), removed with the video
 
-Same rules as the bank: the HDF5 file is built in memory (`video add` starts on its frames and flow
-in the background while the masks are made: `VideoImage`) and written to a temporary beside its
-final path outside the lock (the slow part), then under the store's writers' lock the name is
-checked again, the file is fsynced and ``os.replace``d into place, and the index is replaced last.
+Same rules as the bank: the HDF5 file is written to a temporary beside its final path outside the
+lock (the slow part: `video add` streams frames, flow and masks into it as they are made with a
+`VideoWriter`; a video held in memory is built as a file image first), then under the store's
+writers' lock the name is checked again, the file is fsynced and ``os.replace``d into place, and
+the index is replaced last.
 A failure at any point (a full disk included) leaves the store as it was (at worst an unindexed
 temporary that `cleanup` removes). A missing or damaged index is an error naming
 `zooctl video repair`, which rebuilds it from the video files (`zooctl.store.indexed`).
@@ -18,9 +19,11 @@ temporary that `cleanup` removes). A missing or damaged index is an error naming
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import shutil
-import threading
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -29,8 +32,8 @@ import numpy as np
 
 from ..errors import StoreError
 from ..names import check_name
-from .fs import h5_image, writing
-from .h5 import read_h5
+from .fs import h5_image, temp_path, writing
+from .h5 import open_h5, read_h5
 from .indexed import INDEX_VERSION, IndexedStore
 
 __all__ = ["INDEX_VERSION", "FILE_VERSION", "VideoRecord", "VideoStore"]
@@ -91,23 +94,40 @@ class VideoRecord:
         """The index entry: what `video list` prints without opening the HDF5 file."""
         t, h, w = self.frames.shape[:3]
         cov = self.masks.reshape(t, -1).mean(1)
-        return {
-            "name": self.name,
-            "frames": int(t),
-            "fps": float(self.fps),
-            "width": int(w),
-            "height": int(h),
-            "duration_s": round(t / self.fps, 3),
-            "mask_coverage_mean": round(float(cov.mean()), 4),
-            "empty_masks": int((cov == 0).sum()),
-            "segmenter": str(self.segmenter.get("name", "")),
-            "flow_estimator": str(self.flow_estimator.get("name", "")),
-            "source": {
-                "path": str(self.source.get("path", "")),
-                "kind": str(self.source.get("kind", "")),
-                "sha256": str(self.source.get("sha256", "")),
-            },
-        }
+        return video_summary(
+            self.name, (t, h, w), self.fps, cov, self.segmenter, self.flow_estimator, self.source
+        )
+
+
+def video_summary(
+    name: str,
+    shape: tuple[int, int, int],
+    fps: float,
+    coverage: np.ndarray,
+    segmenter: dict[str, Any],
+    flow_estimator: dict[str, Any],
+    source: dict[str, Any],
+) -> dict[str, Any]:
+    """A video's index entry from its (T, H, W), rate, per-frame mask coverage and metadata."""
+    t, h, w = shape
+    cov = np.asarray(coverage, np.float64)
+    return {
+        "name": name,
+        "frames": int(t),
+        "fps": float(fps),
+        "width": int(w),
+        "height": int(h),
+        "duration_s": round(t / fps, 3),
+        "mask_coverage_mean": round(float(cov.mean()), 4),
+        "empty_masks": int((cov == 0).sum()),
+        "segmenter": str(segmenter.get("name", "")),
+        "flow_estimator": str(flow_estimator.get("name", "")),
+        "source": {
+            "path": str(source.get("path", "")),
+            "kind": str(source.get("kind", "")),
+            "sha256": str(source.get("sha256", "")),
+        },
+    }
 
 
 def boxes_of(masks: np.ndarray) -> np.ndarray:
@@ -134,9 +154,21 @@ def write_video_h5(path: Path, rec: VideoRecord) -> None:
 
 
 def _fill_video(f: Any, rec: VideoRecord) -> None:
-    _fill_bulk(
-        f, rec.frames, rec.flow_forward, rec.flow_backward, rec.occlusion_forward, rec.occlusion_backward
-    )
+    t, h, w = rec.frames.shape[:3]
+    g = f.create_group("flow")
+    # frames and flow take lzf: 2.4x faster to write than gzip for 20% more bytes (BENCHMARKS.md)
+    f.create_dataset("frames", data=rec.frames, chunks=(1, h, w, 3), compression="lzf")
+    for key, arr in (("forward", rec.flow_forward), ("backward", rec.flow_backward)):
+        g.create_dataset(
+            key, data=arr.astype(np.float16), chunks=(1, h, w, 2), compression="lzf", shuffle=True
+        )
+    for key, arr in (
+        ("occlusion_forward", rec.occlusion_forward),
+        ("occlusion_backward", rec.occlusion_backward),
+    ):
+        g.create_dataset(
+            key, data=arr.astype(np.uint8), chunks=(1, h, w), compression="gzip", compression_opts=_GZIP
+        )
     _fill_rest(f, rec)
 
 
@@ -161,84 +193,188 @@ def _fill_rest(f: Any, rec: VideoRecord) -> None:
     f.create_dataset("source_indices", data=np.asarray(rec.source_indices, np.int64))
 
 
-def _fill_bulk(
-    f: Any, frames, flow_forward, flow_backward, occlusion_forward, occlusion_backward, stop=None
-) -> None:
-    """Frames, flow and occlusion: most of the bytes and of the time. ``stop()`` true: give up."""
-    t, h, w = frames.shape[:3]
-    g = f.create_group("flow")
-    # frames and flow take lzf: 2.4x faster to write than gzip for 20% more bytes (BENCHMARKS.md)
-    parts = [
-        (f, "frames", frames, np.uint8, (1, h, w, 3), {"compression": "lzf"}),
-        (g, "forward", flow_forward, np.float16, (1, h, w, 2), {"compression": "lzf", "shuffle": True}),
-        (g, "backward", flow_backward, np.float16, (1, h, w, 2), {"compression": "lzf", "shuffle": True}),
-    ]
-    parts += [
-        (g, key, arr, np.uint8, (1, h, w), {"compression": "gzip", "compression_opts": _GZIP})
-        for key, arr in (("occlusion_forward", occlusion_forward), ("occlusion_backward", occlusion_backward))
-    ]
-    step = 8  # frames per write: a cancelled background write stops within one step
-    for group, key, arr, dtype, chunks, filters in parts:
-        ds = group.create_dataset(key, shape=arr.shape, dtype=dtype, chunks=chunks, **filters)
-        for i in range(0, len(arr), step):
-            if stop is not None and stop():
-                return
-            ds[i : i + step] = arr[i : i + step].astype(dtype, copy=False)
+class _KeepingFile(io.RawIOBase):
+    """A file HDF5 writes through (h5py's file-object driver) that keeps the first write error
+    instead of passing it to the library: HDF5 closing a file after a failed write (a full disk)
+    can crash the process, so writes after the error are dropped and the owner raises it."""
 
+    def __init__(self, path: Path) -> None:
+        self._f = open(path, "w+b", buffering=0)
+        self.error: OSError | None = None
 
-class VideoImage:
-    """A video's HDF5 file built in memory, its bulk (frames, flow, occlusion: `_fill_bulk`) on a
-    background thread while the masks are still being made (h5py compresses without the GIL).
+    def readable(self) -> bool:
+        return True
 
-    ``finish(rec)`` adds the rest and returns the file's bytes, as `h5_image` would; ``close()``
-    abandons it. The arrays must not change until then.
-    """
+    def writable(self) -> bool:
+        return True
 
-    def __init__(self, frames, flow_forward, flow_backward, occlusion_forward, occlusion_backward) -> None:
-        import io
+    def seekable(self) -> bool:
+        return True
 
-        import h5py
+    def seek(self, offset: int, whence: int = 0) -> int:
+        return self._f.seek(offset, whence)
 
-        self._arrays = (frames, flow_forward, flow_backward, occlusion_forward, occlusion_backward)
-        self._buf = io.BytesIO()
-        self._file = h5py.File(self._buf, "w")
-        self._stop = threading.Event()
-        self._error: BaseException | None = None
-        self._thread = threading.Thread(target=self._run, name="zooctl-video-image", daemon=True)
-        self._thread.start()
+    def tell(self) -> int:
+        return self._f.tell()
 
-    def _run(self) -> None:
-        try:
-            _fill_bulk(self._file, *self._arrays, stop=self._stop.is_set)
-        except BaseException as exc:  # re-raised by finish(), in the caller's thread
-            self._error = exc
+    def readinto(self, b) -> int:
+        return self._f.readinto(b)
 
-    def finish(self, rec: VideoRecord) -> bytes:
-        """The file's bytes with ``rec``'s masks and metadata (``rec`` must hold the same arrays)."""
-        parts = (
-            rec.frames,
-            rec.flow_forward,
-            rec.flow_backward,
-            rec.occlusion_forward,
-            rec.occlusion_backward,
-        )
-        if any(a is not b for a, b in zip(parts, self._arrays)):
-            raise ValueError("the record's frames or flow are not those this image was started with")
-        self._thread.join()
-        try:
-            if self._error is not None:
-                raise self._error
-            _fill_rest(self._file, rec)
-        finally:
-            self._file.close()
-        return self._buf.getvalue()
+    def write(self, b) -> int:
+        n = len(memoryview(b))
+        if self.error is None:
+            try:
+                self._f.write(b)  # unbuffered: a short write raises or is retried by the driver
+            except OSError as exc:
+                self.error = exc
+        return n
+
+    def truncate(self, size: int | None = None) -> int:
+        if self.error is None:
+            try:
+                return self._f.truncate(size)
+            except OSError as exc:
+                self.error = exc
+        return self.tell() if size is None else size
 
     def close(self) -> None:
-        """Stop the background write (within one step) and drop the image; no-op once finished."""
-        self._stop.set()
-        self._thread.join()
-        if self._file:  # h5py: false once closed
-            self._file.close()
+        super().close()
+        self._f.close()
+
+
+class VideoWriter:
+    """A video's HDF5 file written as it is made, to a temporary beside its final path (layout as
+    `write_video_h5`): frames and flow a few at a time as they are decoded and computed, the masks
+    once made, the attributes last; memory holds a few frames whatever the length.
+
+    `VideoStore.add_written` publishes the finished file; ``discard()`` (safe to call again, and
+    after a failure) closes and removes it. ``frames`` is the frames dataset for reading back.
+    """
+
+    def __init__(self, tmp: Path, size: tuple[int, int]) -> None:
+        import h5py
+
+        self.path = Path(tmp)
+        w, h = size
+        self._what = f"writing {self.path}"
+        self._io = _KeepingFile(self.path)
+        self._t = 0
+        self._pairs = 0
+        self._masks: Any = None
+        self._boxes: list[np.ndarray] = []
+        self.coverage: list[float] = []
+        with self._writing():
+            self._f = f = h5py.File(self._io, "w")
+            g = f.create_group("flow")
+
+            def grow(group, key, shape, dtype, **filters):
+                return group.create_dataset(
+                    key,
+                    shape=(0, *shape),
+                    maxshape=(None, *shape),
+                    dtype=dtype,
+                    chunks=(1, *shape),
+                    **filters,
+                )
+
+            # frames and flow take lzf: 2.4x faster to write than gzip for 20% more bytes (BENCHMARKS.md)
+            self.frames = grow(f, "frames", (h, w, 3), np.uint8, compression="lzf")
+            flow = {"compression": "lzf", "shuffle": True}
+            occ = {"compression": "gzip", "compression_opts": _GZIP}
+            self._flow = [
+                grow(g, "forward", (h, w, 2), np.float16, **flow),
+                grow(g, "backward", (h, w, 2), np.float16, **flow),
+                grow(g, "occlusion_forward", (h, w), np.uint8, **occ),
+                grow(g, "occlusion_backward", (h, w), np.uint8, **occ),
+            ]
+
+    def __len__(self) -> int:
+        return self._t
+
+    def add_frames(self, frames: np.ndarray) -> None:
+        """Append (N, H, W, 3) uint8 frames."""
+        n = len(frames)
+        with self._writing():
+            self.frames.resize(self._t + n, axis=0)
+            self.frames[self._t : self._t + n] = frames
+        self._t += n
+
+    def add_flow(self, forward, backward, occlusion_forward, occlusion_backward) -> None:
+        """Append the flow of the next N frame pairs ((N, H, W, 2) float, (N, H, W) bool)."""
+        parts = (forward, backward, occlusion_forward, occlusion_backward)
+        n = len(forward)
+        with self._writing():
+            for ds, arr in zip(self._flow, parts):
+                ds.resize(self._pairs + n, axis=0)
+                ds[self._pairs : self._pairs + n] = np.asarray(arr).astype(ds.dtype, copy=False)
+        self._pairs += n
+
+    def set_mask(self, i: int, mask: np.ndarray) -> None:
+        """Store frame i's (H, W) bool mask; every frame's, in order 0, 1, ..."""
+        if i != len(self._boxes):
+            raise ValueError(f"masks are stored in order: expected frame {len(self._boxes)}, got {i}")
+        with self._writing():
+            if self._masks is None:
+                _, h, w, _ = self.frames.shape
+                self._masks = self._f.create_dataset(
+                    "masks",
+                    shape=(self._t, h, w),
+                    dtype=np.uint8,
+                    chunks=(1, h, w),
+                    compression="gzip",
+                    compression_opts=_GZIP,
+                )
+            self._masks[i] = mask
+        self._boxes.append(boxes_of(mask[None])[0])
+        self.coverage.append(float(mask.mean()))
+
+    def finish(
+        self, name: str, fps: float, source: dict, source_indices, segmenter: dict, flow_estimator: dict
+    ):
+        """Write the attributes and close the file; returns the video's index summary."""
+        t, h, w, _ = self.frames.shape
+        if t < 2 or self._pairs != t - 1 or len(self._boxes) != t or len(source_indices) != t:
+            raise ValueError(
+                f"incomplete video file: {t} frames, {self._pairs} flow pairs, {len(self._boxes)} masks"
+            )
+        with self._writing():
+            f = self._f
+            f.attrs["zooctl_kind"] = "video"
+            f.attrs["schema_version"] = FILE_VERSION
+            f.attrs["name"] = name
+            f.attrs["fps"] = float(fps)
+            f.attrs["source"] = json.dumps(source, sort_keys=True, default=str)
+            f.attrs["segmenter"] = json.dumps(segmenter, sort_keys=True, default=str)
+            f.attrs["flow_estimator"] = json.dumps(flow_estimator, sort_keys=True, default=str)
+            f.create_dataset("boxes", data=np.stack(self._boxes).astype(np.int32))
+            f.create_dataset("source_indices", data=np.asarray(source_indices, np.int64))
+            f.close()
+            self._io.close()
+        summary = video_summary(
+            name, (t, h, w), fps, np.asarray(self.coverage), segmenter, flow_estimator, source
+        )
+        summary["bytes"] = self.path.stat().st_size
+        return summary
+
+    @contextlib.contextmanager
+    def _writing(self) -> Iterator[None]:
+        """A write failure, HDF5's or the one the file kept, as one clear `StoreError`."""
+        with writing(self._what):
+            try:
+                yield
+            except OSError as exc:
+                raise self._io.error or exc from None
+            if self._io.error is not None:
+                raise self._io.error
+
+    def discard(self) -> None:
+        """Close and remove the temporary (whatever state it is in)."""
+        with contextlib.suppress(Exception):
+            if getattr(self, "_f", None):
+                self._f.close()
+        with contextlib.suppress(Exception):
+            self._io.close()
+        self.path.unlink(missing_ok=True)
 
 
 def read_video_h5(path: Path, what: tuple[str, ...] = ("frames", "masks", "flow")) -> VideoRecord:
@@ -315,12 +451,10 @@ class VideoStore(IndexedStore):
         Returns the sorted indices (K,), frames (K, H, W, 3) uint8 and masks (K, H, W) bool.
         Frames are stored one per chunk, so this decodes K frames, not T.
         """
-        import h5py
-
         self.summary(name)
         hint = "remove it with `zooctl video rm` and add it again"
         try:
-            with h5py.File(self.path(name), "r") as f:
+            with open_h5(self.path(name), "the video file", hint) as f:
                 fd, md = f["frames"], f["masks"]
                 _check_frames_masks(self.path(name), fd.shape, md.shape, f["boxes"].shape, hint)
                 idx = np.unique(np.asarray(pick(f["boxes"][()]), np.int64))
@@ -329,7 +463,11 @@ class VideoStore(IndexedStore):
                     return idx, np.zeros((0, h, w, 3), np.uint8), np.zeros((0, h, w), bool)
                 # One read per frame: h5py's point selection over chunked, compressed data is
                 # much slower than plain reads of whole chunks (BENCHMARKS.md, Retrieval).
-                return idx, np.stack([fd[int(i)] for i in idx]), np.stack([md[int(i)] for i in idx]).astype(bool)
+                return (
+                    idx,
+                    np.stack([fd[int(i)] for i in idx]),
+                    np.stack([md[int(i)] for i in idx]).astype(bool),
+                )
         except (OSError, KeyError, ValueError, TypeError, IndexError) as exc:
             raise StoreError(f"the video file {self.path(name)} is unreadable: {exc}", hint=hint) from None
 
@@ -346,17 +484,25 @@ class VideoStore(IndexedStore):
             raise self.exists_error(name)
         return name
 
-    def begin_image(self, frames, flow_forward, flow_backward, occlusion_forward, occlusion_backward):
-        """Start writing a video's frames and flow in the background (see `VideoImage`); pass the
-        result to `add` with the record, or ``close()`` it."""
-        return VideoImage(frames, flow_forward, flow_backward, occlusion_forward, occlusion_backward)
+    def begin_file(self, name: str, size: tuple[int, int]) -> VideoWriter:
+        """A `VideoWriter` for a new video ``name`` of frames ``size`` (w, h), on a temporary beside
+        its final path; publish it with `add_written`, or ``discard()`` it."""
+        return VideoWriter(temp_path(self.path(name)), size)
 
-    def add(self, rec: VideoRecord, replace: bool = False, image: VideoImage | None = None) -> dict[str, Any]:
-        """Store a video atomically; returns its index summary. ``image``: its file, started with
-        `begin_image` on the record's frames and flow."""
+    def add_written(
+        self, name: str, writer: VideoWriter, summary: dict[str, Any], replace: bool = False
+    ) -> None:
+        """Publish a finished `VideoWriter`'s file as ``name`` with its index entry, atomically
+        (under the store's lock the name is checked again); the temporary is gone afterwards."""
+        check_name(name, "video name")
+        self.publish_written(name, summary, [(writer.path, self.path(name))], replace)
+
+    def add(self, rec: VideoRecord, replace: bool = False) -> dict[str, Any]:
+        """Store a video held in memory atomically; returns its index summary (`video add` streams
+        into `begin_file` instead)."""
         name = self.check_new(rec.name, replace)
         rec.validate()
-        image = h5_image(lambda f: _fill_video(f, rec)) if image is None else image.finish(rec)
+        image = h5_image(lambda f: _fill_video(f, rec))
         summary = rec.summary()
         summary["bytes"] = len(image)
         self.publish_item(name, summary, [(self.path(name), image)], replace)

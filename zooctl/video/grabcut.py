@@ -20,6 +20,7 @@ seed (re-seeding). Works on CPU, offline.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 
 import cv2
@@ -29,6 +30,7 @@ from ..errors import InputError, UsageError
 from . import cues, hint
 from .flow import DISFlow, VideoFlow, compute_video_flow, fb_inconsistent, resize_flow, warp
 from .localise import Evidence, Localiser, class_name, fuse, main_region
+from .scratch import Resized, ScratchArray, working
 
 Box = tuple[int, int, int, int]  # x, y, w, h in pixels of the frames given to segment()
 
@@ -154,27 +156,50 @@ class GrabCutTracker:
             0
         )  # GrabCut seeds its colour models with k-means on OpenCV's global RNG: be repeatable
         if flow is None:
-            flow = compute_video_flow(DISFlow(self.flow_preset), frames)
-        scale = self.work_size / max(h, w) if self.work_size and max(h, w) > self.work_size else 1.0
-        if scale == 1.0:
+            flow = compute_video_flow(DISFlow(self.flow_preset), np.asarray(frames))
+        sw, sh = self.flow_size(w, h)
+        if (sw, sh) == (w, h):
             return self._honour(frames, box, box_frame, progress, flow)
         # GrabCut and its cues work at a bounded size (4x faster at 480p, and the band/window sizes
-        # were tuned there); the masks come back up with a linear upsample of their 0/1 values
-        sw, sh = round(w * scale), round(h * scale)
-        small = np.stack([cv2.resize(f, (sw, sh), interpolation=cv2.INTER_AREA) for f in frames])
-        small_flow = VideoFlow(*(_resize_flow(f, sw, sh) for f in (flow.forward, flow.backward)), None, None)
+        # were tuned there); the masks come back up with a linear upsample of their 0/1 values.
+        # A lazy video (frames read from the store's file) keeps its working set in scratch files.
+        scale = self._scale(w, h)
+        small = working(frames, t, (sh, sw, 3), np.uint8)
+        for i in range(t):
+            small[i] = cv2.resize(frames[i], (sw, sh), interpolation=cv2.INTER_AREA)
+        if tuple(flow.forward.shape[1:3]) == (sh, sw):  # given at the size GrabCut works at
+            small_flow = VideoFlow(flow.forward, flow.backward, None, None)
+        else:
+            small_flow = VideoFlow(
+                *(_resize_flow(f, sw, sh, frames) for f in (flow.forward, flow.backward)), None, None
+            )
         small_box = None if box is None else tuple(int(round(v * scale)) for v in box)
         masks = self._honour(small, small_box, box_frame, progress, small_flow)
-        return np.stack(
-            [cv2.resize(m.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR) > 0.5 for m in masks]
-        )
+        if isinstance(frames, np.ndarray):
+            return np.stack(
+                [
+                    cv2.resize(m.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR) > 0.5
+                    for m in masks
+                ]
+            )
+        return Resized(masks, w, h)
+
+    def flow_size(self, w: int, h: int) -> tuple[int, int]:
+        """(w, h) GrabCut works at for frames of (w, h): the flow it reads, at that size."""
+        scale = self._scale(w, h)
+        return (w, h) if scale == 1.0 else (round(w * scale), round(h * scale))
+
+    def _scale(self, w: int, h: int) -> float:
+        return self.work_size / max(h, w) if self.work_size and max(h, w) > self.work_size else 1.0
 
     def _honour(self, frames, box, box_frame, progress, flow) -> np.ndarray:
         """`_segment`, and with a box whose animal the localiser chose: again from the box's own seed
         when the mask on the box's frame is not what the box was drawn around. The frames' colour
         bins and the localiser's looks (they depend on the frames alone) serve both passes."""
-        bins = [cues.lab_bins(f) for f in frames]
-        self._evidence: dict[int, Evidence] = {}
+        bins = working(frames, len(frames), frames.shape[1:3], np.int32)
+        for i in range(len(frames)):
+            bins[i] = cues.lab_bins(frames[i])
+        self._evidence = _Seen(frames)
         masks = self._segment(frames, bins, box, box_frame, progress, flow)
         if box is None or self.report["box_use"] == "seeded" or hint.agrees(masks[box_frame], box):
             return masks
@@ -191,7 +216,7 @@ class GrabCutTracker:
         else:
             s, masks_s = self._start(frames, bins, flow)
             how[s] = "localiser"
-        masks = np.zeros((t, h, w), bool)
+        masks = working(frames, t, (h, w), bool)
         masks[s] = masks_s
         if not masks_s.any():
             how[s] = "empty"
@@ -320,7 +345,8 @@ class GrabCutTracker:
             region, _ = main_region(hint.focus(score, cues.box_mask(score.shape, box)))
             region &= cues.box_mask(score.shape, box)
             if ev.confidence >= self.min_confidence and region.any():
-                self._within = hint.carry(region, flow.forward, flow.backward, b)
+                within = working(frames, len(frames), score.shape, bool)
+                self._within = hint.carry(region, flow.forward, flow.backward, b, out=within)
                 s, seed = self._start(frames, bins, flow, extra=b)
                 if seed.any():
                     return s, seed, "localiser"
@@ -558,6 +584,50 @@ def _closed(mask: np.ndarray) -> np.ndarray:
     return cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, cues.disk(2)).astype(bool)
 
 
-def _resize_flow(flow: np.ndarray, w: int, h: int) -> np.ndarray:
-    """(N, H, W, 2) flow -> (N, h, w, 2), displacements rescaled to the new pixel size."""
-    return np.stack([resize_flow(f, w, h) for f in flow])
+def _resize_flow(flow, w: int, h: int, like=None):
+    """(N, H, W, 2) flow -> (N, h, w, 2), displacements rescaled to the new pixel size (in memory,
+    or in a scratch file when ``like`` is not a NumPy array)."""
+    out = working(like if like is not None else flow, len(flow), (h, w, 2), np.float32)
+    for i in range(len(flow)):
+        out[i] = resize_flow(np.asarray(flow[i], np.float32), w, h)
+    return out
+
+
+class _Seen:
+    """The localiser's looks by frame (`Evidence`), as a dict: for a lazy video the class maps
+    wait in a scratch file, so a long video holds only their summaries."""
+
+    def __init__(self, frames) -> None:
+        self._lazy = not isinstance(frames, np.ndarray)
+        self._items: dict[int, Evidence] = {}
+        self._maps: ScratchArray | None = None
+        self._where: dict[int, int] = {}
+
+    def __contains__(self, i: int) -> bool:
+        return i in self._items
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def __iter__(self):
+        return iter(self._items)
+
+    def __setitem__(self, i: int, ev: Evidence) -> None:
+        if not self._lazy:
+            self._items[i] = ev
+            return
+        if self._maps is None:
+            self._maps = ScratchArray(0, ev.animal.shape, ev.animal.dtype)
+        self._where[i] = len(self._maps)
+        self._maps.append(ev.animal)
+        self._items[i] = dataclasses.replace(ev, animal=np.zeros((0, 0), ev.animal.dtype))
+
+    def __getitem__(self, i: int) -> Evidence:
+        ev = self._items[i]
+        if not self._lazy:
+            return ev
+        return dataclasses.replace(ev, animal=self._maps[self._where[i]])  # type: ignore[index]
+
+    def values(self):
+        """Summaries of the looks (their class maps left out)."""
+        return self._items.values()

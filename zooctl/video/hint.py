@@ -14,16 +14,17 @@ from . import cues
 from .flow import warp
 
 
-def carry(region: np.ndarray, forward: np.ndarray, backward: np.ndarray, frame: int) -> np.ndarray:
+def carry(region: np.ndarray, forward, backward, frame: int, out=None) -> np.ndarray:
     """(H, W) bool region on frame ``frame`` -> (T, H, W) bool: where it is on every frame.
 
     ``forward`` / ``backward``: (T-1, H, W, 2) flow from frame i to i+1 and from i+1 to i. The region
     is warped frame by frame as a soft map (what drifts off the animal fades instead of cutting it),
     and kept where it holds at least a quarter of its weight, widened by a band of a tenth of its size
-    so the animal's own evidence, not the warp's outline, decides where it ends.
+    so the animal's own evidence, not the warp's outline, decides where it ends. ``out``: a zeroed
+    (T, H, W) bool array-like to fill (a scratch array for a long video) instead of a new array.
     """
     t = len(forward) + 1
-    out = np.zeros((t, *region.shape), bool)
+    out = np.zeros((t, *region.shape), bool) if out is None else out
     out[frame] = region
     for order, pulls in ((range(frame + 1, t), backward), (range(frame - 1, -1, -1), forward)):
         soft = region.astype(np.float32)  # one frame at a time: long videos hold only the bool maps
@@ -31,9 +32,10 @@ def carry(region: np.ndarray, forward: np.ndarray, backward: np.ndarray, frame: 
             soft = warp(soft, pulls[i - 1] if i > frame else pulls[i])
             out[i] = soft >= 0.25
     for i in range(t):
-        if out[i].any():
-            r = 0.1 * float(np.sqrt(out[i].sum()))
-            out[i] = cv2.dilate(out[i].astype(np.uint8), cues.disk(r)).astype(bool)
+        m = out[i]
+        if m.any():
+            r = 0.1 * float(np.sqrt(m.sum()))
+            out[i] = cv2.dilate(m.astype(np.uint8), cues.disk(r)).astype(bool)
     return out
 
 

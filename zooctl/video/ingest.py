@@ -59,20 +59,114 @@ def default_name(path: Path) -> str:
     return sanitize_name(stem)
 
 
-def preprocess(
+# The frame budget `video add` keeps when the user does not choose: a clip's own rate up to
+# BUDGET_FRAMES frames; a longer one one frame in k (the least k that brings the rate to at most
+# BUDGET_FPS) and its first BUDGET_SECONDS. 15 fps still samples a trot's stride (2-3 Hz) five
+# times or more; 300 frames keep a fit to minutes on a CPU (its time grows with the frames).
+BUDGET_FRAMES = 300
+BUDGET_FPS = 15.0
+BUDGET_SECONDS = 20.0
+CHUNK = 8  # frames decoded, flowed and written at a time: what preprocessing holds at once
+
+
+@dataclass
+class FramePlan:
+    """Which frames of a source `video add` keeps: its window, one frame in ``every``, and a
+    note for the user when the budget (not the user) chose."""
+
+    start: float | None
+    end: float | None
+    every: int = 1
+    note: str | None = None
+
+
+def plan_frames(path: Path, opts: AddOptions) -> FramePlan:
+    """The frame budget: the user's --fps, --end or --max-frames choose; else a clip over
+    ``BUDGET_FRAMES`` frames keeps one frame in k and its first ``BUDGET_SECONDS`` (see above)."""
+    from .decode import probe
+
+    if opts.fps is not None or opts.end is not None or opts.max_frames is not None:
+        return FramePlan(opts.start, opts.end)
+    info = probe(path)
+    t0 = opts.start or 0.0
+    span = None if info.duration is None else max(info.duration - t0, 0.0)
+    if span is not None and round(span * info.fps) <= BUDGET_FRAMES:
+        return FramePlan(opts.start, None)
+    every = max(int(np.ceil(info.fps / BUDGET_FPS - 1e-9)), 1)
+    rate = info.fps / every
+    keep = min(BUDGET_SECONDS, BUDGET_FRAMES / rate)
+    end = t0 + keep if span is None or span > keep + 0.5 / rate else None
+    shown_end = t0 + (keep if end is not None else span)  # type: ignore[operator]
+    of = f"a {t0 + span:.3g} s clip" if span is not None else "a clip of unknown length"
+    note = (
+        f"kept {t0:g}-{shown_end:.3g} s at {rate:.3g} fps of {of} at {info.fps:.3g} fps "
+        f"(at most {BUDGET_FRAMES} frames by default); --start/--end/--fps to choose"
+    )
+    return FramePlan(opts.start, end, every, note)
+
+
+def preprocess(path: str | Path, opts: AddOptions, progress: StageProgress | None = None):
+    """Decode ``path`` and compute flow and masks; returns a `zooctl.store.videos.VideoRecord`
+    (in memory: `add_video` streams into the store instead)."""
+    import tempfile
+
+    from ..store.videos import VideoWriter, read_video_h5
+
+    path = Path(path).expanduser()
+    name = opts.name or default_name(path)
+    with tempfile.TemporaryDirectory(prefix="zooctl-video-") as tmp:
+        file = Path(tmp) / f"{name}.h5"
+        ingest(
+            path,
+            AddOptions(**{**opts.__dict__, "name": name}),
+            lambda size: VideoWriter(file, size),
+            progress,
+        )
+        return read_video_h5(file)
+
+
+def add_video(
+    store,
     path: str | Path,
     opts: AddOptions,
     progress: StageProgress | None = None,
-    on_flow: Callable[[np.ndarray, Any], None] | None = None,
-):
-    """Decode ``path`` and compute flow and masks; returns a `zooctl.store.videos.VideoRecord`.
+    notify: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """Preprocess ``path`` into ``store`` (a `VideoStore`); returns the index summary.
 
-    ``on_flow(frames, flow)``: called once the frames and flow (a `zooctl.video.flow.VideoFlow`) are
-    final, before segmentation (`add_video` starts writing them to the store there)."""
+    Streams: frames, flow and masks go to a temporary file beside the video's final path as they
+    are made (memory holds a few frames whatever the length), published under the store's lock
+    once complete; any failure removes it and leaves the store as it was. ``notify`` is told what
+    the frame budget kept, when it chose."""
+    name = opts.name or default_name(Path(path))
+    store.check_new(name, opts.replace)  # fail before minutes of work
+    opts = AddOptions(**{**opts.__dict__, "name": name})
+    writers = []
+
+    def begin(size: tuple[int, int]):
+        writers.append(store.begin_file(name, size))
+        return writers[-1]
+
+    try:
+        summary = ingest(Path(path), opts, begin, progress, notify)
+        store.add_written(name, writers[0], summary, replace=opts.replace)
+        return summary
+    finally:
+        for w in writers:  # gone once published; a failure on the way: removed
+            w.discard()
+
+
+def ingest(
+    path: Path,
+    opts: AddOptions,
+    begin: Callable[[tuple[int, int]], Any],
+    progress: StageProgress | None = None,
+    notify: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """Decode, flow and segment ``path`` into the `zooctl.store.videos.VideoWriter` that
+    ``begin((w, h))`` makes, a few frames at a time; finishes it and returns its summary."""
     from ..plugins import get_registry
-    from ..store.videos import VideoRecord
-    from .decode import DEFAULT_MAX_MEMORY_GB, DEFAULT_MAX_SIZE, decode
-    from .flow import compute_video_flow
+    from .decode import DEFAULT_MAX_MEMORY_GB, DEFAULT_MAX_SIZE, check_frame_memory, open_video
 
     path = Path(path).expanduser()
     name = opts.name or default_name(path)
@@ -80,84 +174,92 @@ def preprocess(
     flow_spec = registry.get("flow_estimator", opts.flow)
     seg_name, seg_opts = _choose_segmenter(path, opts)
     seg_spec = registry.get("segmenter", seg_name)  # unknown names fail before decoding
+    estimator = flow_spec.create(**opts.flow_options)
 
     def stage(label: str) -> Callable[[int, int | None], None] | None:
         return None if progress is None else (lambda done, total: progress(label, done, total))
 
+    plan = plan_frames(path, opts)
+    if plan.note and notify is not None:
+        notify(plan.note)
     max_size = DEFAULT_MAX_SIZE if opts.max_size is None else (opts.max_size or None)
-    dv = decode(
+    stream = open_video(
         path,
         fps=opts.fps,
-        start=opts.start,
-        end=opts.end,
+        start=plan.start,
+        end=plan.end,
         max_frames=opts.max_frames,
         max_size=max_size,
-        progress=stage("decode"),
-        max_memory_gb=DEFAULT_MAX_MEMORY_GB if opts.max_memory_gb is None else opts.max_memory_gb,
+        every=plan.every,
     )
-    t, h, w = dv.frames.shape[:3]
-    if t < 2:
-        raise InputError(
-            f"{path.name} gives only {t} frame"
-            + (" in the chosen window" if opts.start or opts.end is not None else ""),
-            hint="a video needs at least 2 frames (flow and tracking need motion); give a longer clip or window",
-        )
-    estimator = flow_spec.create(**opts.flow_options)
-    vf = compute_video_flow(estimator, dv.frames, progress=stage("flow"))
-    if on_flow is not None:
-        on_flow(dv.frames, vf)
-
+    w, h = stream.size
+    check_frame_memory(
+        w, h, CHUNK, DEFAULT_MAX_MEMORY_GB if opts.max_memory_gb is None else opts.max_memory_gb
+    )
     if seg_name == "masks":
-        seg_opts.setdefault("source_indices", dv.source_indices)
-        seg_opts.setdefault("original_size", dv.original_size)
-        seg_opts.setdefault("source_frames", dv.source_frames)
-        seg_opts.setdefault("source_exact", dv.kind != "file")
+        seg_opts.setdefault("source_indices", None)
+        seg_opts.setdefault("original_size", stream.original_size)
+        seg_opts.setdefault("source_frames", stream.source_frames)
+        seg_opts.setdefault("source_exact", stream.kind != "file")
         seg_opts.setdefault("path", path)  # a DAVIS folder: MaskSegmenter reads its Annotations/
     segmenter = seg_spec.create(**seg_opts)
-    box = _scale_box(opts.box, dv.original_size, (w, h))
-    kwargs: dict[str, Any] = {"box": box, "progress": stage("segment")}
-    if getattr(segmenter, "uses_flow", False):
-        kwargs["flow"] = vf
-    if opts.box_frame:
-        import inspect
+    uses_flow = getattr(segmenter, "uses_flow", False)
+    flow_size = segmenter.flow_size(w, h) if uses_flow and hasattr(segmenter, "flow_size") else (w, h)
+    writer = begin((w, h))
+    seg_flow = _stream_frames(stream, writer, estimator, flow_size if uses_flow else None, stage)
+    try:
+        t = len(writer)
+        if t < 2:
+            raise InputError(
+                f"{path.name} gives only {t} frame"
+                + (" in the chosen window" if opts.start or plan.end is not None else ""),
+                hint="a video needs at least 2 frames (flow and tracking need motion); give a longer clip or window",
+            )
+        if seg_name == "masks":
+            segmenter.source_indices = np.asarray(stream.source_indices, np.int64)
+        box = _scale_box(opts.box, stream.original_size, (w, h))
+        kwargs: dict[str, Any] = {"box": box, "progress": stage("segment")}
+        if uses_flow:
+            kwargs["flow"] = seg_flow
+        if opts.box_frame:
+            import inspect
 
-        if box is None:
-            raise UsageError("--box-frame places --box: give both", hint="--box x,y,w,h --box-frame N")
-        if "box_frame" not in inspect.signature(segmenter.segment).parameters:
-            raise UsageError(f"the {seg_name} segmenter takes its box on the first frame only")
-        kwargs["box_frame"] = opts.box_frame
-    masks = np.asarray(segmenter.segment(dv.frames, **kwargs), dtype=bool)
-    if masks.shape != (t, h, w):
-        raise InputError(
-            f"segmenter {seg_name!r} returned masks of shape {masks.shape}, expected {(t, h, w)}"
-        )
-
-    masks, report = check_masks(masks, seg_name, user=seg_name == "masks")
+            if box is None:
+                raise UsageError("--box-frame places --box: give both", hint="--box x,y,w,h --box-frame N")
+            if "box_frame" not in inspect.signature(segmenter.segment).parameters:
+                raise UsageError(f"the {seg_name} segmenter takes its box on the first frame only")
+            kwargs["box_frame"] = opts.box_frame
+        masks = segmenter.segment(writer.frames, **kwargs)
+        if not hasattr(masks, "shape"):
+            masks = np.asarray(masks, dtype=bool)
+        if tuple(masks.shape) != (t, h, w):
+            raise InputError(
+                f"segmenter {seg_name!r} returned masks of shape {tuple(masks.shape)}, expected {(t, h, w)}"
+            )
+        report = store_masks(masks, writer, seg_name, user=seg_name == "masks")
+    finally:
+        for part in () if seg_flow is None else (seg_flow.forward, seg_flow.backward):
+            part.close()
     recorded = {
         k: str(Path(v).resolve()) if isinstance(v, Path) else str(v)
         for k, v in seg_opts.items()
         if k not in ("source_indices", "original_size", "source_frames", "source_exact")
     }
-    return VideoRecord(
-        name=name,
-        frames=dv.frames,
-        masks=masks,
-        flow_forward=vf.forward,
-        flow_backward=vf.backward,
-        occlusion_forward=vf.occlusion_forward,
-        occlusion_backward=vf.occlusion_backward,
-        fps=dv.fps,
+    return writer.finish(
+        name,
+        stream.fps,
         source={
-            "path": str(dv.path),
-            "kind": dv.kind,
-            "sha256": dv.sha256,
-            "fps": dv.source_fps,
-            "original_width": dv.original_size[0],
-            "original_height": dv.original_size[1],
-            "start": opts.start,
-            "end": opts.end,
+            "path": str(stream.path),
+            "kind": stream.kind,
+            "sha256": stream.sha256,
+            "fps": stream.source_fps,
+            "original_width": stream.original_size[0],
+            "original_height": stream.original_size[1],
+            "start": plan.start,
+            "end": plan.end,
+            **({"every": plan.every} if plan.every > 1 else {}),
         },
-        source_indices=dv.source_indices,
+        source_indices=stream.source_indices,
         segmenter={
             "name": seg_name,
             "options": recorded,
@@ -170,18 +272,89 @@ def preprocess(
     )
 
 
+def _stream_frames(stream, writer, estimator, flow_size, stage):
+    """Decode ``stream`` ``CHUNK`` frames at a time into ``writer``, with the flow of each frame
+    pair. ``flow_size`` (w, h): also keep the float32 flow at that size for the segmenter (a
+    `zooctl.video.flow.VideoFlow` of scratch arrays, returned); None: it needs none."""
+    from .flow import VideoFlow, compute_video_flow, resize_flow
+    from .scratch import ScratchArray
+
+    decoded, flowed = stage("decode"), stage("flow")
+    total = stream.total
+    keep: VideoFlow | None = None
+    prev: np.ndarray | None = None
+    chunk: list[np.ndarray] = []
+
+    def flush() -> None:
+        nonlocal prev, keep
+        frames = np.stack(chunk)
+        chunk.clear()
+        writer.add_frames(frames)
+        pairs = frames if prev is None else np.concatenate([prev[None], frames])
+        prev = frames[-1]
+        if decoded:
+            decoded(len(writer), total)
+        if len(pairs) < 2:
+            return
+        vf = compute_video_flow(estimator, pairs)
+        writer.add_flow(vf.forward, vf.backward, vf.occlusion_forward, vf.occlusion_backward)
+        if flow_size is not None:
+            if keep is None:  # grown as pairs arrive: the decoder's count is a header's estimate
+                shape = (flow_size[1], flow_size[0], 2)
+                keep = VideoFlow(
+                    ScratchArray(0, shape, np.float32), ScratchArray(0, shape, np.float32), None, None
+                )
+            fw, fh = flow_size
+            for f, b in zip(vf.forward, vf.backward):
+                same = (fw, fh) == (f.shape[1], f.shape[0])
+                keep.forward.append(f if same else resize_flow(f, fw, fh))
+                keep.backward.append(b if same else resize_flow(b, fw, fh))
+        if flowed:
+            flowed(len(writer) - 1, None if total is None else max(total - 1, 1))
+
+    for frame in stream:
+        chunk.append(frame)
+        if len(chunk) == CHUNK:
+            flush()
+    if chunk:
+        flush()
+    return keep
+
+
+def store_masks(masks, writer, seg_name: str, user: bool) -> dict[str, Any]:
+    """Check ``masks`` (T, H, W) bool, array-like) as `check_masks` does and store them with
+    ``writer``, one frame at a time; returns what to report."""
+    cov = np.array([float(np.asarray(masks[i], bool).mean()) for i in range(len(masks))])
+    clear, report = check_coverage(cov, seg_name, user)
+    for i in range(len(masks)):
+        m = np.asarray(masks[i], bool)
+        writer.set_mask(i, np.zeros_like(m) if clear[i] else m)
+    return report
+
+
 MIN_COVERAGE = 0.001  # of the frame: below this a mask is a speck the fit cannot use
 
 
 def check_masks(masks: np.ndarray, seg_name: str, user: bool) -> tuple[np.ndarray, dict[str, Any]]:
-    """Masks (T, H, W) bool as a segmenter gave them -> the masks to store and what to report.
+    """Masks (T, H, W) bool as a segmenter gave them -> the masks to store and what to report
+    (`check_coverage`)."""
+    t = len(masks)
+    clear, report = check_coverage(masks.reshape(t, -1).mean(1), seg_name, user)
+    if clear.any():
+        masks = masks.copy()
+        masks[clear] = False
+    return masks, report
+
+
+def check_coverage(cov: np.ndarray, seg_name: str, user: bool) -> tuple[np.ndarray, dict[str, Any]]:
+    """Per-frame mask coverage (T,) -> which frames to clear (T,) bool and what to report.
 
     Frames without an animal are kept empty (the fit skips them) and listed. Specks under
     ``MIN_COVERAGE`` of the frame: an automatic segmenter's are cleared (noise), a user's are listed,
     and refused when most masked frames are specks. No animal in any frame is an InputError.
     """
-    t = len(masks)
-    cov = masks.reshape(t, -1).mean(1)
+    t = len(cov)
+    cov = np.asarray(cov, np.float64)
     small = (cov > 0) & (cov < MIN_COVERAGE)
     if user and small.sum() > 0.5 * max(int((cov > 0).sum()), 1):
         raise InputError(
@@ -189,43 +362,21 @@ def check_masks(masks: np.ndarray, seg_name: str, user: bool) -> tuple[np.ndarra
             f"of {t} frames (median {np.median(cov[cov > 0]):.3%})",
             hint="the animal must be visible in the masks: check they belong to this video and are not inverted",
         )
+    clear = np.zeros(t, bool)
     if not user and small.any():
-        masks = masks.copy()
-        masks[small] = False
-        small[:] = False
-    empty = ~masks.reshape(t, -1).any(1)
+        clear = small.copy()
+        cov = np.where(clear, 0.0, cov)
+        small = np.zeros(t, bool)
+    empty = cov == 0
     if empty.all():
         raise InputError(
             f"the {seg_name} segmenter found no animal in any of the {t} frames; nothing was stored",
             hint="give --box x,y,w,h around the animal (and --box-frame N), or your own --masks",
         )
-    report = {"empty_frames": np.flatnonzero(empty).tolist()}
+    report: dict[str, Any] = {"empty_frames": np.flatnonzero(empty).tolist()}
     if small.any():
         report["small_frames"] = np.flatnonzero(small).tolist()
-    return masks, report
-
-
-def add_video(
-    store, path: str | Path, opts: AddOptions, progress: StageProgress | None = None
-) -> dict[str, Any]:
-    """Preprocess ``path`` and add it to ``store`` (a `VideoStore`); returns the index summary.
-
-    The store file's frames and flow are written on a background thread while the masks are made."""
-    name = opts.name or default_name(Path(path))
-    store.check_new(name, opts.replace)  # fail before minutes of work
-    images = []
-
-    def begin(frames: np.ndarray, vf: Any) -> None:
-        images.append(
-            store.begin_image(frames, vf.forward, vf.backward, vf.occlusion_forward, vf.occlusion_backward)
-        )
-
-    try:
-        rec = preprocess(path, AddOptions(**{**opts.__dict__, "name": name}), progress, on_flow=begin)
-        return store.add(rec, replace=opts.replace, image=images[0] if images else None)
-    finally:
-        for image in images:  # a failure on the way: stop the background write
-            image.close()
+    return clear, report
 
 
 def _choose_segmenter(path: Path, opts: AddOptions) -> tuple[str, dict[str, Any]]:

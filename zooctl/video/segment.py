@@ -13,7 +13,9 @@ import cv2
 import numpy as np
 
 from ..errors import InputError, MissingDependencyError, UsageError
+from ..files import regular_size
 from .decode import IMAGE_SUFFIXES, VIDEO_SUFFIXES, image_files
+from .scratch import ScratchArray, working
 
 Progress = Callable[[int, int], None]
 
@@ -37,14 +39,22 @@ def check_mask_like(a: np.ndarray, where: str) -> None:
     Coarse colours (8 levels a channel, so compression noise at edges stays in its level): in a mask
     the four commonest cover nearly every pixel; in a photo they rarely reach half.
     """
+    if not _mask_like(a):
+        raise _not_a_mask(where)
+
+
+def _not_a_mask(where: str) -> InputError:
+    return InputError(
+        f"{where} is not a mask: it has the many colours of a photo or video frame",
+        hint="--masks takes single-channel or binary images (animal white or non-zero, background black)",
+    )
+
+
+def _mask_like(a: np.ndarray) -> bool:
     q = (np.asarray(a)[..., :3] if a.ndim == 3 else np.asarray(a)).astype(np.int64) // 32
     codes = q if q.ndim == 2 else (q[..., 0] * 8 + q[..., 1]) * 8 + q[..., 2]
     counts = np.sort(np.bincount(codes.ravel(), minlength=512))[::-1]
-    if counts[:4].sum() < 0.9 * codes.size:
-        raise InputError(
-            f"{where} is not a mask: it has the many colours of a photo or video frame",
-            hint="--masks takes single-channel or binary images (animal white or non-zero, background black)",
-        )
+    return bool(counts[:4].sum() >= 0.9 * codes.size)
 
 
 class MaskSegmenter:
@@ -73,11 +83,14 @@ class MaskSegmenter:
             raise InputError(
                 f"mask source {self.path} does not exist", hint="give a folder of mask images or a mask video"
             )
+        if not self.path.is_dir():
+            regular_size(self.path, "mask source", None)  # a FIFO or a device would block or never end
         self.source_indices = None if source_indices is None else np.asarray(source_indices, dtype=np.int64)
         self.original_size = original_size
 
     def segment(self, frames: np.ndarray, box=None, progress: Progress | None = None) -> np.ndarray:
         t, h, w = frames.shape[:3]
+        self._like = frames  # masks in memory for frames in memory, else in a scratch file
         if self.path.is_dir():
             return self._from_folder(t, h, w, progress)
         if self.path.suffix.lower() in VIDEO_SUFFIXES:
@@ -130,7 +143,7 @@ class MaskSegmenter:
                 hint=f"masks are image files ({' '.join(IMAGE_SUFFIXES)}), one per frame",
             )
         pick = self._pick(len(files), t)
-        out = np.zeros((t, h, w), bool)
+        out = working(self._like, t, (h, w), bool)
         for k, i in enumerate(pick):
             try:
                 with open_image(files[i]) as im:
@@ -144,13 +157,32 @@ class MaskSegmenter:
         return out
 
     def _from_video(self, t, h, w, progress) -> np.ndarray:
-        from .decode import decode
+        from .decode import open_video
 
-        dv = decode(self.path, max_size=None, max_memory_gb=None)
-        check_mask_like(dv.frames[len(dv.frames) // 2], f"the middle frame of {self.path.name}")
-        masks = dv.frames.max(-1) > 127
+        # Enough masks to tell every count `_pick` accepts from those it refuses, and no more: a
+        # long mask video is not read to its end.
+        idx, src = self.source_indices, self.source_frames
+        cap = max(t, int(idx.max()) + 1 if idx is not None and len(idx) else 0, (src or 0) + 1) + 1
+        stream = open_video(self.path, max_size=None, max_frames=cap)
+        # one pass over the mask video: its masks, at the stored size as they are decoded (4K ones
+        # would take 8 MB a frame), wait in a scratch file, unless the frames are in memory anyway
+        lazy = not isinstance(self._like, np.ndarray)
+        masks: list[np.ndarray] | ScratchArray = ScratchArray(0, (h, w), bool) if lazy else []
+        middle = (stream.total or 0) // 2  # a file's header count: about the middle
+        for n, frame in enumerate(stream):
+            if n == middle:  # on about 250k of its pixels: all of a 4K frame take 270 MB to count
+                step = int(np.ceil((frame.shape[0] * frame.shape[1] / 250_000) ** 0.5))
+                check_mask_like(frame[::step, ::step], f"the middle frame of {self.path.name}")
+            masks.append(self._fit(frame.max(-1) > 127, h, w, f"frame {n} of {self.path.name}"))
+        if len(masks) == cap and src is not None:
+            raise InputError(
+                f"over {cap - 1} masks in {self.path} for a video of {t} frames (its source has {src})",
+                hint="give exactly one mask per frame (in the same order as the frames)",
+            )
         pick = self._pick(len(masks), t)
-        out = np.stack([self._fit(masks[i], h, w, f"frame {i} of {self.path.name}") for i in pick])
+        out = working(self._like, t, (h, w), bool)
+        for k, i in enumerate(pick):
+            out[k] = masks[i]
         if progress:
             progress(t, t)
         return out
@@ -285,7 +317,7 @@ class OnnxSegmenter:
         from .cues import box_mask, box_of, largest_components
 
         t, h, w = frames.shape[:3]
-        out = np.zeros((t, h, w), bool)
+        out = working(frames, t, (h, w), bool)
         if not self.prompts:
             keep = box_mask((h, w), tuple(int(v) for v in box)) if box is not None else None
             for i in range(t):
