@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..errors import StoreError
 from ..names import check_name
-from .fs import h5_image, store_lock, write_bytes_atomic, write_json_atomic, writing
+from .fs import h5_image, read_regular, store_lock, write_bytes_atomic, write_json_atomic, writing
 from .indexed import INDEX_VERSION, IndexedStore
 
 if TYPE_CHECKING:  # numpy/h5py stay unimported for `bank list` and `bank show`
@@ -83,7 +83,7 @@ class Bank(IndexedStore):
         """Summary plus joint tree (what `bank show` prints), without opening the HDF5 file."""
         summary = self.summary(name)
         try:
-            card = json.loads(self.card_path(name).read_bytes())
+            card = json.loads(read_regular(self.card_path(name)))
             if not isinstance(card, dict) or not isinstance(card.get("joint_names"), list):
                 raise ValueError("not an asset card")
             if not isinstance(card.get("parents"), list) or not isinstance(card.get("skin_influences"), int):
@@ -240,7 +240,7 @@ class Bank(IndexedStore):
         if views is not None:
             entry["views"] = views
         try:
-            card = json.loads(self.card_path(name).read_bytes())
+            card = json.loads(read_regular(self.card_path(name)))
             ok = isinstance(card, dict) and isinstance(card.get("joint_names"), list)
         except (OSError, ValueError, RecursionError):
             ok = False

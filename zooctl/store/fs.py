@@ -78,18 +78,11 @@ def writing(what: str) -> Iterator[None]:
 
 
 def read_regular(path: Path) -> bytes:
-    """A file's bytes; something else at ``path`` (a FIFO, a device) is an error, not a hang."""
-    import stat
+    """A store JSON file's bytes; something else at ``path`` (a FIFO, a device) or a file over the
+    JSON read limit is an OSError, not a hang or gigabytes read (`zooctl.files.read_regular`)."""
+    from ..files import read_regular as read
 
-    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
-    try:
-        st = os.fstat(fd)
-        if not stat.S_ISREG(st.st_mode):
-            raise IsADirectoryError(errno.EISDIR, "not a regular file", str(path))
-        with os.fdopen(fd, "rb", closefd=False) as f:
-            return f.read()
-    finally:
-        os.close(fd)
+    return read(path, "max_json_mb")
 
 
 def lock_holder(root: Path) -> str:

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import math
+import os
+import stat
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
@@ -9,23 +12,69 @@ from typing import Any, TypeVar
 import numpy as np
 
 from ..errors import StoreError
+from ..files import kind_of
+from ..limits import check_read
 
 T = TypeVar("T")
 
 
+def open_h5(path: Path, what: str, hint: str) -> Any:
+    """``path`` opened read-only with h5py, once it is known to be safe to read: a regular file
+    (a FIFO would block the HDF5 library forever) within the array read limit, whose datasets
+    declare no more than that limit in all and keep their data inside the file (no external or
+    virtual storage, which could name any other file). Anything else is one `StoreError` naming
+    ``what`` ("asset file") with ``hint``."""
+    import h5py
+
+    try:
+        st = os.stat(path)
+        if not stat.S_ISREG(st.st_mode):
+            raise StoreError(f"{what} {path} is {kind_of(st.st_mode)}, not a regular file", hint=hint)
+        check_read(f"{what} {path} is", st.st_size, "max_array_mb", StoreError)
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise StoreError(f"{what} {path} is unreadable: {exc}", hint=hint) from None
+    try:
+        check_read(
+            f"{what} {path} declares arrays of", declared_bytes(f, path, what), "max_array_mb", StoreError
+        )
+    except StoreError:
+        f.close()
+        raise
+    except (OSError, KeyError, ValueError, TypeError, RuntimeError) as exc:
+        f.close()
+        raise StoreError(f"{what} {path} is damaged: {type(exc).__name__}: {exc}", hint=hint) from None
+    return f
+
+
+def declared_bytes(f: Any, path: Path, what: str) -> int:
+    """The bytes the datasets of the open file ``f`` take once read, as their shapes and dtypes
+    declare them (variable-length data counts its pointers; the file's size bounds the rest)."""
+    import h5py
+
+    total = 0
+
+    def visit(name: str, obj: Any) -> None:
+        nonlocal total
+        if isinstance(obj, h5py.Dataset):
+            if obj.external or obj.is_virtual:
+                raise StoreError(
+                    f"{what} {path}: dataset {name} keeps its data in other files, which zooctl never writes",
+                    hint="the file is not one zooctl wrote; remove it",
+                )
+            total += math.prod(obj.shape or ()) * obj.dtype.itemsize
+
+    f.visititems(visit)
+    return total
+
+
 def read_h5(path: Path, what: str, hint: str, read: Callable[[Any], T]) -> T:
-    """``read(h5py.File)`` on ``path`` opened for reading.
+    """``read(h5py.File)`` on ``path`` opened for reading (`open_h5`: checked first).
 
     A file that cannot be opened, or whose content ``read`` trips over (a missing group, a bad
     dtype), is one `StoreError` naming ``what`` ("asset file") and the ``hint``; a `StoreError`
     that ``read`` raises itself passes through as it is."""
-    import h5py
-
-    try:
-        f = h5py.File(path, "r")
-    except OSError as exc:
-        raise StoreError(f"{what} {path} is unreadable: {exc}", hint=hint) from None
-    with f:
+    with open_h5(path, what, hint) as f:
         try:
             return read(f)
         except (OSError, KeyError, ValueError, TypeError, AttributeError) as exc:  # damaged inside

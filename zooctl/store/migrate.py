@@ -5,11 +5,11 @@ from __future__ import annotations
 import shutil
 from typing import Any
 
-import h5py
-
+from ..errors import StoreError
 from .asset_h5 import SCHEMA_VERSION, Migration, migrate_file
 from .bank import Bank
 from .fs import publish, store_lock, temp_path, writing
+from .h5 import open_h5
 
 
 def migrate_bank(bank: Bank, migrations: list[Migration] | None = None) -> dict[str, Any]:
@@ -21,8 +21,11 @@ def migrate_bank(bank: Bank, migrations: list[Migration] | None = None) -> dict[
         for name in bank.names():
             path = bank.asset_path(name)
             try:
-                with h5py.File(path, "r") as f:
+                with open_h5(path, "asset file", "re-add the asset with --replace") as f:
                     v = int(f.attrs.get("schema_version", 0))
+            except StoreError as exc:
+                skipped[name] = exc.message
+                continue
             except (OSError, ValueError, TypeError) as exc:
                 skipped[name] = f"unreadable: {exc}"
                 continue

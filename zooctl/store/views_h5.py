@@ -41,7 +41,7 @@ import h5py
 import numpy as np
 
 from ..errors import NoSpaceError, ReadOnlyStoreError, StoreError
-from .fs import h5_image, publish, store_lock, temp_path, writing
+from .fs import h5_image, publish, read_regular, store_lock, temp_path, writing
 from .h5 import read_h5
 
 SCHEMA_VERSION = 1
@@ -66,7 +66,7 @@ def unreferenced_files(root: Path, names: set[str]) -> list[Path]:
     named: set[str] = set()
     for meta_p in d.glob("pack-*.json"):
         try:
-            named.update(json.loads(meta_p.read_text()).get("files", {}).values())
+            named.update(json.loads(read_regular(meta_p)).get("files", {}).values())
         except (OSError, ValueError, AttributeError):
             pass  # an unreadable pack is a cache: its data files go, and search rebuilds it
     out = []
@@ -288,11 +288,11 @@ def read_pack(root: Path, embedder: str) -> Pack | None:
     """The pack on disk, or None when there is none (or it is unreadable: it is only a cache)."""
     d = views_dir(root)
     try:
-        meta = json.loads(_pack_meta_path(root, embedder).read_text())
+        meta = json.loads(read_regular(_pack_meta_path(root, embedder)))
         if meta.get("schema_version") != SCHEMA_VERSION:
             return None
-        if not all(_PACK_FILE.fullmatch(str(f)) for f in meta["files"].values()):
-            return None
+        if not all(_PACK_FILE.fullmatch(str(f)) and (d / f).is_file() for f in meta["files"].values()):
+            return None  # is_file: a FIFO in its place would block np.load
         emb = np.load(d / meta["files"]["emb"], mmap_mode="r")
         mean = np.load(d / meta["files"]["mean"], mmap_mode="r")
         names, counts, ids = (
@@ -354,7 +354,7 @@ def _publish_pack(d: Path, meta_p: Path, files: dict, meta: dict, emb: np.ndarra
             tmps[2].write_text(json.dumps(meta))
         with store_lock(Path(root)), writing("publishing a search pack"):
             try:
-                old = list(json.loads(meta_p.read_text()).get("files", {}).values())
+                old = list(json.loads(read_regular(meta_p)).get("files", {}).values())
             except (OSError, ValueError, AttributeError, TypeError):
                 old = []
             for t, p in zip(tmps, finals):
