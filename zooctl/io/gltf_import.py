@@ -30,8 +30,10 @@ import numpy as np
 
 from ..asset import Clip, RiggedAsset
 from ..errors import InputError
+from ..files import NotRegularFileError, TooLargeError, read_input, read_regular
 from ..geometry import compose_trs, decompose_trs, quat_normalize, quat_slerp
 from ..limits import check as check_limit
+from ..limits import check_read
 
 GLB_MAGIC = 0x46546C67
 _COMPONENT = {
@@ -58,6 +60,7 @@ class _Doc:
         if path.suffix.lower() == ".glb" or data[:4] == b"glTF":
             self.json, self.glb_bin = _parse_glb(path, data)
         else:
+            check_read(f"{path}: its glTF JSON is", len(data), "max_json_mb")
             try:
                 self.json = json.loads(data.decode("utf-8"))
             except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
@@ -93,13 +96,14 @@ class _Doc:
         if i not in self._buffers:
             b = self.get("buffers")[self.index(i, "buffers", "a bufferView")]
             uri = b.get("uri")
+            length = _count(self.path, b, "byteLength", f"buffer {i}")
+            check_read(f"{self.path}: buffer {i} declares", length, "max_file_mb")
             if uri is None:
                 if self.glb_bin is None:
                     raise InputError(f"{self.path}: buffer {i} has no uri and there is no GLB binary chunk")
                 data = self.glb_bin
             else:
                 data = self._uri(uri, f"buffer {i}")
-            length = _count(self.path, b, "byteLength", f"buffer {i}")
             if len(data) < length:
                 raise InputError(
                     f"{self.path}: buffer {i} is truncated ({len(data)} of {length} bytes)",
@@ -285,12 +289,18 @@ def _read_beside(path: Path, base: Path, uri: str, what: str) -> bytes:
         raise InputError(
             f"{path}: {what} refers to {uri!r}, which is outside the glTF file's folder", hint=hint
         )
-    if not target.is_file():
+    if not target.exists():
         raise InputError(
             f"{path}: {what} refers to {uri!r}, which is missing",
             hint=f"put {uri} next to {path.name}, or export a self-contained .glb",
         )
-    return target.read_bytes()
+    try:
+        return read_regular(target, "max_file_mb")
+    except (NotRegularFileError, TooLargeError) as exc:
+        hint = exc.hint if isinstance(exc, TooLargeError) else hint
+        raise InputError(f"{path}: {what} refers to {uri!r}, which is {exc.strerror}", hint=hint) from None
+    except OSError as exc:
+        raise InputError(f"{path}: {what} refers to {uri!r}, which is unreadable ({exc.strerror})") from None
 
 
 def _bad(path: Path, what: str) -> Any:
@@ -302,7 +312,7 @@ def _read_bytes(path: Path) -> bytes:
         raise InputError(f"{path} is a directory", hint="give a .glb or .gltf file")
     if not path.exists():
         raise InputError(f"{path} does not exist")
-    data = path.read_bytes()
+    data = read_input(path, "the model file")
     if not data:
         raise InputError(f"{path} is empty")
     return data
@@ -330,6 +340,7 @@ def _parse_glb(path: Path, data: bytes) -> tuple[dict[str, Any], bytes | None]:
         if len(chunk) < clen:
             raise InputError(f"{path}: truncated GLB chunk")
         if ctype == 0x4E4F534A:
+            check_read(f"{path}: its GLB JSON chunk is", clen, "max_json_mb")
             try:
                 js = json.loads(chunk.decode("utf-8"))
             except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
