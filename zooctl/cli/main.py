@@ -49,7 +49,6 @@ def main(
         help="Seconds a writer waits for another zooctl process's store lock before giving up "
         "(default: ZOOCTL_LOCK_TIMEOUT, else 120).",
         show_default=False,
-        min=0,
     ),
     version: bool = typer.Option(
         False, "--version", callback=_version, is_eager=True, help="Print the version and exit."

@@ -326,12 +326,13 @@ def preset(name: str) -> FitConfig:
 
 def read_config_file(path: Path) -> Any:
     """The JSON of a config file (any subset of `FitConfig`'s fields), or one clear error."""
+    from ..files import read_input
+
     path = Path(path)
+    data = read_input(path, "config file", "max_json_mb")  # not a FIFO, nor gigabytes
     try:
-        return json.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputError(f"config file {path} does not exist") from None
-    except (OSError, json.JSONDecodeError) as exc:
+        return json.loads(data)
+    except (ValueError, RecursionError) as exc:  # UnicodeDecodeError is a ValueError
         raise InputError(f"config file {path} is not valid JSON: {exc}") from None
 
 

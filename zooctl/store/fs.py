@@ -19,7 +19,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from ..errors import NoSpaceError, ReadOnlyStoreError, StoreError
+from ..errors import NoSpaceError, ReadOnlyStoreError, StoreError, UsageError
 
 _NO_SPACE = {errno.ENOSPC, errno.EFBIG, errno.EDQUOT}
 _READ_ONLY = {errno.EACCES, errno.EPERM, errno.EROFS}
@@ -49,7 +49,19 @@ on_lock_wait: Callable[[str], None] | None = None
 
 def set_lock_timeout(seconds: float) -> None:
     global LOCK_TIMEOUT_S
-    LOCK_TIMEOUT_S = float(seconds)
+    LOCK_TIMEOUT_S = check_wait(seconds, "--wait")
+
+
+def check_wait(seconds: float, source: str) -> float:
+    """``seconds`` as a lock wait: a finite number >= 0 (NaN or infinity would wait forever)."""
+    import math
+
+    if not (math.isfinite(seconds) and seconds >= 0):
+        raise UsageError(
+            f"{source}{' ' if source.startswith('-') else '='}{seconds:g} is not a number of seconds to wait",
+            hint=f"give {source} a finite number of seconds, 0 or more (the default is 120)",
+        )
+    return float(seconds)
 
 
 def os_error(exc: OSError, what: str) -> StoreError:
@@ -102,7 +114,7 @@ def store_lock(root: Path, timeout: float | None = None) -> Iterator[None]:
     The holder writes its pid and command into the file (schemas/store_lock.schema.json), so a
     waiting writer can say whom it waits for.
     """
-    timeout = LOCK_TIMEOUT_S if timeout is None else timeout
+    timeout = check_wait(LOCK_TIMEOUT_S, "ZOOCTL_LOCK_TIMEOUT") if timeout is None else timeout
     with writing(f"opening the store lock {root / '.lock'}"):
         root.mkdir(parents=True, exist_ok=True)
         fd = _open_lock(root / ".lock")
