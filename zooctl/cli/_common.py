@@ -124,7 +124,10 @@ def print_skipped(skipped: dict[str, str], what: str) -> None:
 
 
 def print_repair(report: dict[str, Any], items: str) -> None:
-    """What `bank repair` / `video repair` did (`zooctl.store.indexed.IndexedStore.repair`)."""
+    """What `bank repair` / `video repair` did (`zooctl.store.indexed.IndexedStore.repair`, and
+    for the bank `zooctl.pipelines.ingest.repair_bank`)."""
+    from rich.markup import escape
+
     n = len(report["indexed"])
     verb = "rebuilt" if report["written"] else "checked (nothing to change)"
     console.print(
@@ -136,10 +139,22 @@ def print_repair(report: dict[str, Any], items: str) -> None:
         console.print(f"  {note}", highlight=False, markup=False)
     print_skipped(report["skipped"], "not a valid file, left in place")
     if report["dropped"]:
-        from rich.markup import escape
-
         err_console.print(
             f"[yellow]dropped from the index[/] (no valid file): {escape(', '.join(report['dropped']))}",
+            highlight=False,
+            soft_wrap=True,
+        )
+    if report.get("views_rendered"):
+        console.print(
+            f"rendered the retrieval views a stopped `bank add` left out: {', '.join(report['views_rendered'])}",
+            highlight=False,
+            markup=False,
+            soft_wrap=True,
+        )
+    for name, why in (report.get("views_failed") or {}).items():
+        err_console.print(
+            f"[yellow]views not rendered[/] {escape(name)}: {escape(why)} "
+            f"(`zooctl bank reindex {escape(name)}` tries again)",
             highlight=False,
             soft_wrap=True,
         )
@@ -158,10 +173,16 @@ def add_rm_command(app: typer.Typer, open_store: Callable[[], Any], help: str, n
 
 
 def add_upkeep_commands(
-    app: typer.Typer, open_store: Callable[[], Any], items: str, clean_help: str, repair_help: str
+    app: typer.Typer,
+    open_store: Callable[[], Any],
+    items: str,
+    clean_help: str,
+    repair_help: str,
+    repair_store: Callable[[Any], dict[str, Any]] | None = None,
 ) -> None:
     """Add `clean` and `repair` of an indexed store (`zooctl.store.indexed.IndexedStore`, from
-    ``open_store()``) to ``app``; ``items`` names what it holds in the output ("assets")."""
+    ``open_store()``) to ``app``; ``items`` names what it holds in the output ("assets").
+    ``repair_store(store)``: what `repair` runs (default: ``store.repair()``)."""
 
     def clean(json_out: bool = JsonOpt) -> None:
         store = open_store()
@@ -172,7 +193,8 @@ def add_upkeep_commands(
             print_clean(report, store.noun, store.repair_cmd)
 
     def repair(json_out: bool = JsonOpt) -> None:
-        report = open_store().repair()
+        store = open_store()
+        report = store.repair() if repair_store is None else repair_store(store)
         if json_out:
             print_json(report)
         else:
@@ -192,6 +214,22 @@ def print_clean(report: dict[str, Any], noun: str, repair_cmd: str) -> None:
         err_console.print(
             f"kept {len(report['unindexed'])} {noun} files the index does not name "
             f"({', '.join(report['unindexed'])}): run `{repair_cmd}` to index the valid ones",
+            highlight=False,
+            markup=False,
+            soft_wrap=True,
+        )
+    print_views_pending(report.get("views_pending") or [])
+
+
+def print_views_pending(names: list[str]) -> None:
+    """One line on the assets whose retrieval views a stopped `bank add` never rendered."""
+    if names:
+        shown = ", ".join(names[:5]) + (f" and {len(names) - 5} more" if len(names) > 5 else "")
+        err_console.print(
+            f"{len(names)} asset{'s' if len(names) > 1 else ''} without the retrieval views their "
+            f"`bank add` was rendering when it stopped ({shown}): `bank search` leaves "
+            f"{'them' if len(names) > 1 else 'it'} out; run `zooctl bank repair` to render them",
+            style="yellow",
             highlight=False,
             markup=False,
             soft_wrap=True,

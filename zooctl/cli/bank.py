@@ -16,6 +16,7 @@ from ._common import (
     print_json,
     print_skipped,
     print_table,
+    print_views_pending,
     stage_progress,
     store_root,
 )
@@ -158,7 +159,9 @@ def list_(
     json_out: bool = JsonOpt, tag: str = typer.Option(None, "--tag", help="Only assets with this tag.")
 ) -> None:
     """List the assets in the bank."""
-    rows = _bank().list()
+    bank = _bank()
+    rows = bank.list()
+    print_views_pending(bank.views_pending(rows))
     if tag:
         rows = [r for r in rows if tag in r.get("tags", [])]
     if json_out:
@@ -287,6 +290,12 @@ def migrate(json_out: bool = JsonOpt) -> None:
         print_skipped(report["skipped"], "left as they are")
 
 
+def _repair(bank):
+    from ..pipelines.ingest import repair_bank
+
+    return repair_bank(bank)
+
+
 add_upkeep_commands(
     app,
     _bank,
@@ -298,7 +307,9 @@ indexes the valid ones).""",
     repair_help="""Rebuild the bank index from the asset files (after it was lost or damaged).
 
 Every valid asset file is indexed (its retrieval views too, when their sidecar is intact);
-invalid files are listed with the reason and left where they are. Missing cards are rewritten.""",
+invalid files are listed with the reason and left where they are. Missing cards are rewritten.
+Assets whose `bank add` stopped before their retrieval views were stored get them rendered.""",
+    repair_store=_repair,
 )
 
 

@@ -146,7 +146,7 @@ def commit_bank(item: BatchItem, value: dict[str, Any]) -> dict[str, Any]:
     task: BankTask = item.payload
     bank = Bank.open(Path(task.store))
     summary = (
-        bank.add(value["asset"], replace=task.replace)
+        bank.add(value["asset"], replace=task.replace, views_pending=value["views"] is not None)
         if value["asset"] is not None
         else bank.summary(task.name)
     )

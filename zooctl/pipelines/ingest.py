@@ -84,7 +84,7 @@ def add_files(
                 asset.meta["license"] = license
             label_asset(asset, label)
             new = not bank.exists(asset_name)
-            summary = bank.add(asset, replace=replace)
+            summary = bank.add(asset, replace=replace, views_pending=views)
             if views:
                 summary = {**summary, "views": _index_views(bank, asset, undo=new)}
             r.summary = summary
@@ -125,6 +125,27 @@ def seed_starter(
         if progress is not None:
             progress("views", i + 1, len(added))
     return added
+
+
+def repair_bank(bank: Bank, progress: Callable[[str, int, int], None] | None = None) -> dict[str, Any]:
+    """`bank repair`: the index rebuilt from the asset files (`Bank.repair`), then the retrieval
+    views of the assets a killed `bank add` left without them (`Bank.views_pending`) rendered, as
+    that add would have. The report adds ``views_rendered`` (names) and ``views_failed`` ({name:
+    why}) to `Bank.repair`'s."""
+    from ..retrieval.index import index_asset
+
+    report = bank.repair()
+    pending = bank.views_pending()
+    rendered, failed = [], {}
+    for i, n in enumerate(pending):
+        try:
+            index_asset(bank, bank.get(n))
+            rendered.append(n)
+        except ZooctlError as exc:
+            failed[n] = exc.message
+        if progress is not None:
+            progress("views", i + 1, len(pending))
+    return {**report, "views_rendered": rendered, "views_failed": failed}
 
 
 def _views_default() -> bool:

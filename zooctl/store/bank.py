@@ -31,7 +31,10 @@ from .indexed import INDEX_VERSION, IndexedStore
 if TYPE_CHECKING:  # numpy/h5py stay unimported for `bank list` and `bank show`
     from ..asset import RiggedAsset
 
-__all__ = ["Bank", "INDEX_VERSION"]
+__all__ = ["Bank", "INDEX_VERSION", "PENDING"]
+
+# Index entry field of an asset whose retrieval views its `bank add` had still to render.
+PENDING = "views_pending"
 
 
 def _bbox_ok(b: Any) -> bool:
@@ -131,11 +134,14 @@ class Bank(IndexedStore):
         return len(self._entries())
 
     # -- writing ---------------------------------------------------------------------------
-    def add(self, asset: RiggedAsset, replace: bool = False) -> dict[str, Any]:
+    def add(self, asset: RiggedAsset, replace: bool = False, views_pending: bool = False) -> dict[str, Any]:
         """Store an asset atomically; returns its summary.
 
         The HDF5 file is built in memory outside the lock (slow part, concurrent writers proceed
         in parallel); the existence check, the publish and the index update happen under it.
+        ``views_pending``: the caller renders its retrieval views next; the index entry says so
+        until they are stored (`update_summary` with ``views``), so an add killed in between is
+        reported by `cleanup` and finished by `bank repair` (`views_pending`).
         """
         from .asset_h5 import card_of, fill_asset
 
@@ -146,8 +152,9 @@ class Bank(IndexedStore):
         image = h5_image(lambda f: fill_asset(f, asset), libver="latest")
         summary = asset.summary()
         card = json.dumps(card_of(asset), indent=1).encode()
+        entry = {**summary, PENDING: True} if views_pending else summary
         self.publish_item(
-            name, summary, [(self.asset_path(name), image), (self.card_path(name), card)], replace
+            name, entry, [(self.asset_path(name), image), (self.card_path(name), card)], replace
         )
         return summary
 
@@ -158,13 +165,30 @@ class Bank(IndexedStore):
             p.unlink(missing_ok=True)
 
     def update_summary(self, name: str, **fields: Any) -> None:
-        """Change fields of an asset's index entry (tags, license) under the lock."""
+        """Change fields of an asset's index entry (tags, license) under the lock. Its ``views``
+        stored, its views are no longer pending."""
         with store_lock(self.root), writing(f"updating asset {name!r}"):
             index = self._read_index()
             if name not in index["assets"]:
                 raise self._not_found(name, index["assets"])
             index["assets"][name].update(fields)
+            if "views" in fields:
+                index["assets"][name].pop(PENDING, None)
             write_json_atomic(self.index_path, index)
+
+    def views_pending(self, summaries: list[dict[str, Any]] | None = None) -> list[str]:
+        """Assets whose `bank add` stored them but was stopped (killed) before their retrieval
+        views were: `bank search` leaves them out until `bank repair` renders them
+        (``summaries``: a `list()` already read)."""
+        rows = self.list() if summaries is None else summaries
+        return [s["name"] for s in rows if s.get(PENDING) is True and not isinstance(s.get("views"), dict)]
+
+    def cleanup(self) -> dict[str, Any]:
+        """`IndexedStore.cleanup`, and the assets whose views a killed `bank add` left unrendered
+        (``views_pending``: kept, `bank repair` renders them)."""
+        report = super().cleanup()
+        report["views_pending"] = self.views_pending()
+        return report
 
     def set_label(self, name: str, label: str, source: str) -> dict[str, Any]:
         """Record what animal an asset is (``label``, and where it came from: ``source``) in its
@@ -239,6 +263,7 @@ class Bank(IndexedStore):
         entry.pop("views", None)
         if views is not None:
             entry["views"] = views
+            entry.pop(PENDING, None)  # a killed add had stored them, all but its index entry
         try:
             card = json.loads(read_regular(self.card_path(name)))
             ok = isinstance(card, dict) and isinstance(card.get("joint_names"), list)

@@ -81,9 +81,9 @@ def unreferenced_files(root: Path, names: set[str]) -> list[Path]:
 
 
 def summary_digest(summary: dict[str, Any]) -> str:
-    """A digest of an asset's index entry without its ``views`` and animal label (relabelling keeps
-    the views): changes when the asset is re-added."""
-    s = {k: v for k, v in summary.items() if k not in ("views", "label", "label_source")}
+    """A digest of an asset's index entry without its ``views`` (and whether they are pending) and
+    animal label (relabelling keeps the views): changes when the asset is re-added."""
+    s = {k: v for k, v in summary.items() if k not in ("views", "views_pending", "label", "label_source")}
     return hashlib.sha256(json.dumps(s, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
