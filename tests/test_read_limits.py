@@ -143,6 +143,20 @@ def test_a_fifo_as_config_or_video_is_refused(tmp_path):
     one_clear_line(zooctl(tmp_path / "store", "video", "add", str(image)), "frame.png", "a FIFO")
 
 
+def test_a_stored_record_or_config_that_is_a_fifo_is_refused(tmp_path):
+    store = tmp_path / "store"
+    (store / "fits" / "x").mkdir(parents=True)
+    _fifo(store / "fits" / "x" / "record.json")
+    one_clear_line(zooctl(store, "fits", "show", "x"), "record of fit 'x'", "a FIFO", code=1)
+    prior = tmp_path / "prior"
+    prior.mkdir()
+    _fifo(prior / "config.json")
+    r = library_call(
+        f"from zooctl.store.motion_store import load_prior_dir; load_prior_dir(Path({str(prior)!r}))"
+    )
+    one_clear_line(r, "holds no readable motion prior", "a FIFO", code=1)
+
+
 def test_a_fifo_as_mask_source_is_refused(tmp_path):
     from zooctl.errors import InputError
     from zooctl.video.segment import MaskSegmenter

@@ -23,7 +23,7 @@ from typing import Any
 
 from ..errors import NotFoundError, StoreError
 from ..names import check_name
-from .fs import fsync_dir, store_lock, write_bytes_atomic, write_json_atomic, writing
+from .fs import fsync_dir, read_regular, store_lock, write_bytes_atomic, write_json_atomic, writing
 from .indexed import NamedStore
 
 RECORD_VERSION = 1
@@ -58,7 +58,7 @@ class FitStore(NamedStore):
     def get(self, name: str) -> dict[str, Any]:
         p = self.record_path(name)
         try:
-            record = json.loads(p.read_bytes())
+            record = json.loads(read_regular(p))  # a FIFO here would block `fits show`
         except FileNotFoundError:
             raise self._not_found(name) from None
         except OSError as exc:

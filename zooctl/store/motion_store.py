@@ -19,7 +19,7 @@ from typing import Any
 
 from ..errors import NotFoundError, StoreError
 from ..names import check_name
-from .fs import _pid_alive, fsync_dir, store_lock, writing
+from .fs import _pid_alive, fsync_dir, read_regular, store_lock, writing
 from .indexed import NamedStore
 
 CONFIG = "config.json"
@@ -28,7 +28,7 @@ CONFIG = "config.json"
 def load_prior_dir(path: Path, device: str = "cpu") -> Any:
     """The prior in folder ``path`` through its plugin (``config["plugin"]``)."""
     try:
-        cfg = json.loads((Path(path) / CONFIG).read_text())
+        cfg = json.loads(read_regular(Path(path) / CONFIG))
     except (OSError, json.JSONDecodeError) as exc:
         raise StoreError(
             f"{path} holds no readable motion prior: {exc}", hint="give a folder made by `zooctl motion train`"
@@ -64,7 +64,7 @@ class MotionStore(NamedStore):
     def config(self, name: str) -> dict[str, Any]:
         p = self.path(name) / CONFIG
         try:
-            return json.loads(p.read_text())
+            return json.loads(read_regular(p))
         except FileNotFoundError:
             raise self._not_found(name) from None
         except (OSError, json.JSONDecodeError) as exc:
