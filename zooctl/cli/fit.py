@@ -106,6 +106,12 @@ def fit(
     ),
     config: Path = typer.Option(None, "--config", help="JSON config applied on top of the preset."),
     seed: int = typer.Option(None, "--seed", help="Random seed."),
+    texture: bool = typer.Option(
+        None,
+        "--texture/--no-texture",
+        help="Bake the video's colours onto the character (a UV texture where the template has UVs, else "
+        "vertex colours); --no-texture keeps the template's colours.",
+    ),
     max_frames: int = typer.Option(None, "--max-frames", help="Fit only the first N frames."),
     resume: bool = typer.Option(
         False,
@@ -145,6 +151,8 @@ def fit(
         cfg.camera.focal = focal
     if seed is not None:
         cfg.seed = seed
+    if texture is not None:
+        cfg.texture = texture
     if max_frames is not None:
         cfg.max_frames = max_frames
     cfg.validate()

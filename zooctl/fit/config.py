@@ -166,6 +166,7 @@ class FitConfig:
     ablation: Ablation = field(default_factory=Ablation)
     trials: TemplateTrials = field(default_factory=TemplateTrials)
     pose_prior: PosePrior = field(default_factory=PosePrior)
+    texture: bool = True  # bake the video's colours onto the exported character (fit/texture.py)
     schema_version: int = CONFIG_VERSION
 
     # -- serialisation ------------------------------------------------------------------------
@@ -218,6 +219,8 @@ class FitConfig:
                 raise UsageError(f"{name}: lr_final must be in (0, 1]")
             _check_registered("renderer", st.renderer, f"{name}.renderer")
         _check_registered("articulation_model", self.articulation, "articulation")
+        if not isinstance(self.texture, bool):
+            raise UsageError(f"texture must be true or false, got {self.texture!r}")
         if self.camera.focal is not None and self.camera.focal <= 0:
             raise UsageError(f"--focal {self.camera.focal} must be positive (pixels)")
         if not 0 <= self.camera.mirror_margin < 1:

@@ -507,7 +507,15 @@ def write_outputs(
 ) -> dict[str, Any]:
     """Character, USD, GLB, overlay video, loss plot and metrics; the record fields they fill."""
     from .export import fitted_asset
-    from .outputs import exported_mask_iou, stage_summary, write_glb, write_loss_png, write_overlay, write_usd
+    from .outputs import (
+        bake_colours,
+        exported_mask_iou,
+        stage_summary,
+        write_glb,
+        write_loss_png,
+        write_overlay,
+        write_usd,
+    )
 
     t = time.perf_counter()
     asset = fitted_asset(
@@ -517,8 +525,14 @@ def write_outputs(
         result.video.fps,
         {"source": f"zooctl fit of {result.video.name}"},
     )
-    fits.save_character(name, asset)
     cam = result.input_camera().to("cpu")  # the outputs pose and render the exported asset on the CPU
+    texture = None
+    if result.config.texture:
+        if reporter is not None:
+            reporter.message("baking the video's colours onto the character")
+        asset, texture = bake_colours(asset, cam, result.video)
+        result.timings["texture"] = texture.pop("seconds")
+    fits.save_character(name, asset)  # with its baked colours: `fits export` writes them again
     files: dict[str, str] = {}
     notes: list[str] = []
     if "usd" in outputs:
@@ -575,6 +589,7 @@ def write_outputs(
         "losses": stage_summary(result.history),
         "timings": {k: round(float(v), 3) for k, v in result.timings.items()},
         "metrics": metrics,
+        "texture": texture,
         "fitted": {
             "global_scale": float(result.scene.model.global_scale().detach()),
             "bone_scales": [round(float(b), 4) for b in result.scene.model.bone_scales().detach().cpu()],

@@ -55,6 +55,15 @@ def write_usd(asset: RiggedAsset, camera, path: Path) -> Path:
     return path
 
 
+def bake_colours(asset: RiggedAsset, camera, video) -> tuple[RiggedAsset, dict[str, Any]]:
+    """The character wearing the colours of ``video`` (a `FitVideo`: its frames inside its masks),
+    seen through the fit's ``camera`` at the input resolution, and what the bake did
+    (`zooctl.fit.texture.bake`)."""
+    from .texture import bake
+
+    return bake(asset, camera, video.frames, video.masks)
+
+
 def write_glb(asset: RiggedAsset, path: Path) -> Path:
     """The fitted character as glTF binary, through the registered ``glb`` exporter."""
     from ..io.export import export_asset
