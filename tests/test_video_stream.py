@@ -203,3 +203,15 @@ def test_records_stored_from_memory_still_validate(tmp_path):
     )
     VideoStore.open(tmp_path).add(rec)
     assert VideoStore.open(tmp_path).get("m").frames.shape == (3, 16, 16, 3)
+
+
+def test_max_memory_bounds_the_frame_size_not_the_length(tmp_path):
+    from zooctl.errors import InputError
+
+    folder = davis_folder(tmp_path / "clip", 96, 96, 128)
+    store = VideoStore.open(tmp_path / "store")
+    # all 96 frames at 32 bytes a pixel would need 0.038 GB; a chunk of them needs 0.004 GB
+    add_video(store, folder, AddOptions(name="long", max_memory_gb=0.02))
+    assert store.summary("long")["frames"] == 96
+    with pytest.raises(InputError, match="frames of 128x96 need about .* GB to preprocess"):
+        add_video(store, folder, AddOptions(name="big", max_memory_gb=0.002))
