@@ -2,8 +2,16 @@
 procedural starter bank, `bank add` cost per asset with views and embeddings, and search latency
 with a bank of 10,000 synthetic assets (scoring in-process, and the whole `zooctl bank search`).
 
+The semantic term (issue 49): the seven shared real videos searched in a bank of the 28 shared
+assets and the starter animals, labelled as a user's would be (name, tags, views), by body plan
+and family at top-1 and top-3; the semantic weight swept, and chosen in-sample and leave-one-out
+over the real videos and the rendered leave-one-out queries together. ``--real-store DIR`` reuses
+a store that holds the seven videos (``video add`` without a box) and that bank; without it one is
+built in a temporary folder (about 15 minutes on 2 cores).
+
     .venv/bin/python bench/retrieval.py [--embedder effnet --embedder silhouette] [--views 24]
-        [--synthetic 10000] [--skip-loo] [--out bench/out/retrieval.json]
+        [--synthetic 10000] [--skip-loo] [--skip-real] [--real-store DIR]
+        [--out bench/out/retrieval.json]
 """
 
 from __future__ import annotations
@@ -23,6 +31,11 @@ from _util import SHARED, machine, time_command
 
 from zooctl.cli._common import print_table
 from zooctl.retrieval.benchmark import COLUMNS, loo_benchmark, search_latency, summary_rows, synthetic_bank
+from zooctl.retrieval.semantic import SEMANTIC_WEIGHT
+from zooctl.retrieval.semantic_bench import asset_truth, choose_loo, judge
+
+REAL_VIDEOS = ("dog", "cows", "blackswan", "bear", "elephant", "dog-agility", "mallard-water")
+WEIGHTS = (0.0, 0.5, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0)
 
 
 def time_once(args: list[str], env: dict) -> float:
@@ -31,6 +44,112 @@ def time_once(args: list[str], env: dict) -> float:
     t = time.perf_counter()
     subprocess.run([str(exe), *args], check=True, capture_output=True, env=dict(os.environ, **env))
     return time.perf_counter() - t
+
+
+def build_real_store(root: Path) -> None:
+    """The seven shared videos (`video add`, no box: the localiser and grabcut find the animal) and
+    a bank of the 28 shared assets and the starter animals (`bank seed`, `bank add`)."""
+    env = {"ZOOCTL_STORE": str(root)}
+    for v in REAL_VIDEOS:
+        args = ["video", "add", str(SHARED / "videos" / v / "JPEGImages"), "--name", v, "-q"]
+        time_once(args + ["--flow-preset", "ultrafast", "--flow-size", "320"], env)
+    time_once(["bank", "seed"], env)
+    time_once(["bank", "add", *map(str, sorted((SHARED / "assets").rglob("*.glb")))], env)
+
+
+def real_benchmark(store: Path, embedders: list[str], frames: int) -> dict:
+    """Each real video searched at every weight of `WEIGHTS`: top 3 and the judgement."""
+    from zooctl.retrieval.search import search_source
+    from zooctl.store.bank import Bank
+
+    videos = json.loads((SHARED / "videos" / "labels.json").read_text())
+    asset_labels = json.loads((SHARED / "assets" / "labels.json").read_text())
+    bank = Bank.open(store)
+    entries = bank.list()
+    truths = {
+        e["name"]: asset_truth(e["name"], bank.card(e["name"]).get("meta", {}), asset_labels) for e in entries
+    }
+    out = {"labels": {e["name"]: [e.get("label"), e.get("label_source")] for e in entries}, "weights": {}}
+    for w in WEIGHTS:
+        rows = {}
+        for v in REAL_VIDEOS:
+            _, res = search_source(
+                bank, v, embedders, top=3, frames=frames, store_root=store, semantic_weight=w
+            )
+            rows[v] = judge(videos[v], [m.name for m in res.matches], truths)
+            rows[v]["classes"] = res.classes
+        out["weights"][str(w)] = rows
+    return out
+
+
+def semantic_report(report: dict) -> None:
+    """Tables: every weight on both query sets; the weight chosen in-sample and leave-one-out."""
+    real = report.get("real", {}).get("weights", {})
+    syn = report.get("shared", {}).get("semantic", {})
+    points: dict[float, dict[str, float]] = {}
+    rows = []
+    for w in WEIGHTS:
+        r, s = real.get(str(w), {}), syn.get(str(w))
+        pts = {f"real:{v}": x["family1"] + x["plan1"] for v, x in r.items()}
+        if s is not None:
+            pts.update({f"syn:{x['query']}": float(x["top1_plan"]) for x in s["rows"] if x["answerable"]})
+        points[w] = pts
+        syn_ans = sum(x["top1_plan"] for x in s["rows"] if x["answerable"]) if s else None
+        n_ans = sum(x["answerable"] for x in s["rows"]) if s else None
+        rows.append(
+            [f"{w:g}"]
+            + [f"{sum(x[k] for x in r.values())}/{len(r)}" for k in ("family1", "family3", "plan1", "plan3")]
+            + (
+                [f"{syn_ans}/{n_ans}", f"{sum(x['top3_plan'] for x in s['rows'])}/{len(s['rows'])}"]
+                if s
+                else ["-", "-"]
+            )
+        )
+    cols = [("weight", "right"), ("real family top-1", "right"), ("real family top-3", "right")]
+    cols += [("real plan top-1", "right"), ("real plan top-3", "right")]
+    cols += [("rendered LOO top-1 answerable", "right"), ("rendered LOO top-3", "right")]
+    print_table(
+        cols,
+        rows,
+        title="semantic weight: real videos (family at the rank the bank reaches) and rendered leave-one-out",
+    )
+    queries = sorted(points[WEIGHTS[0]])
+    w_in, ins, loo = choose_loo(points, queries)
+    report["semantic_choice"] = {
+        "in_sample_weight": w_in,
+        "in_sample": ins,
+        "loo": loo,
+        "default": SEMANTIC_WEIGHT,
+    }
+    for part in ("real", "syn"):
+        keys = [q for q in queries if q.startswith(part + ":")]
+        print(
+            f"{part}: in-sample (weight {w_in:g}) {sum(ins[q] for q in keys):g}, leave-one-out "
+            f"{sum(loo[q] for q in keys):g} of {(2 if part == 'real' else 1) * len(keys)}"
+        )
+    chosen = real.get(str(SEMANTIC_WEIGHT), {})
+    print_table(
+        [
+            ("video", "left"),
+            ("top 3", "left"),
+            ("family at", "left"),
+            ("family 1/3", "left"),
+            ("plan 1/3", "left"),
+            ("classes seen", "left"),
+        ],
+        [
+            [
+                v,
+                ", ".join(x["top"]),
+                x["rank"] or "-",
+                f"{int(x['family1'])}/{int(x['family3'])}",
+                f"{int(x['plan1'])}/{int(x['plan3'])}",
+                ", ".join(f"{c} {p:.2f}" for c, p in x["classes"][:2]),
+            ]
+            for v, x in chosen.items()
+        ],
+        title=f"real videos at the default weight {SEMANTIC_WEIGHT:g}",
+    )
 
 
 def main() -> None:
@@ -42,6 +161,8 @@ def main() -> None:
         "--synthetic", type=int, default=10000, help="assets in the synthetic latency bank (0: skip)"
     )
     ap.add_argument("--skip-loo", action="store_true")
+    ap.add_argument("--skip-real", action="store_true", help="no real-video retrieval (issue 49)")
+    ap.add_argument("--real-store", type=Path, default=None, help="a store with the 7 videos and the bank")
     ap.add_argument("--out", type=Path, default=Path("bench/out/retrieval.json"))
     args = ap.parse_args()
     embedders = args.embedder or ["effnet", "silhouette"]
@@ -73,6 +194,7 @@ def main() -> None:
                     frames=args.frames,
                     progress=lambda msg, i, n: print(f"  [{i}/{n}] {msg}", file=sys.stderr, flush=True),
                     queries=queries,
+                    semantic_weights=list(WEIGHTS) if label == "shared" else None,
                 )
                 report[label] = r
                 print_table(
@@ -83,6 +205,19 @@ def main() -> None:
                 print(
                     f"views + embeddings per asset: median {r['index_seconds_per_asset_median']:.2f} s, max {r['index_seconds_per_asset_max']:.2f} s"
                 )
+        if not args.skip_real:
+            store = args.real_store
+            if store is None:
+                store = tmp / "real"
+                build_real_store(store)
+            report["real"] = real_benchmark(store, embedders, args.frames)
+            report["real"]["store"] = str(store)
+            t = time_command(["bank", "search", "dog"], env={"ZOOCTL_STORE": str(store)}, repeat=5)
+            report["real"]["search_dog_median_s"] = t
+            print(
+                f"whole `zooctl bank search dog` (stored, cached), {len(report['real']['labels'])} assets: {t:.2f} s (median of 5)"
+            )
+            semantic_report(report)
         if args.synthetic:
             dims = {"effnet": 1280, "silhouette": 576}
             root = tmp / "synthetic"

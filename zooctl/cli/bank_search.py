@@ -40,6 +40,13 @@ def search(
         help="Show per-embedder scores of the top results: distance, rank by that embedder alone, "
         "and its term of the fused score.",
     ),
+    semantic_weight: float = typer.Option(
+        None,
+        "--semantic-weight",
+        help="Weight of the semantic term: what the video shows (ImageNet classes) against each asset's "
+        "animal label (default: the one chosen leave-one-out; 0: appearance only).",
+        show_default=False,
+    ),
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     json_out: bool = JsonOpt,
 ) -> None:
@@ -64,6 +71,7 @@ def search(
         need_images=gallery is not None,
         aggregation=aggregation,
         fusion=fusion,
+        semantic_weight=semantic_weight,
     )
     if gallery is not None:
         from ..retrieval.gallery import save_gallery
@@ -81,9 +89,11 @@ def search(
         return
     for n in res.notes:
         err_console.print(f"[yellow]note:[/] {n}", highlight=False)
-    cols = [("rank", "right"), ("asset", "left"), ("score", "right")] + [(e, "right") for e in res.embedders]
+    cols = [("rank", "right"), ("asset", "left"), ("label", "left"), ("score", "right")]
+    cols += [(e, "right") for e in res.embedders]
     rows = [
-        [str(i + 1), m.name, f"{m.score:.3f}"] + [f"{m.distances[e]:.3f}" for e in res.embedders]
+        [str(i + 1), m.name, m.label or "-", f"{m.score:.3f}"]
+        + [f"{m.distances[e]:.3f}" for e in res.embedders]
         for i, m in enumerate(res.matches)
     ]
     print_table(

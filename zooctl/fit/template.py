@@ -26,8 +26,14 @@ def retrieve(
     exclude: set[str] | None = None,
     top: int = 5,
     device: str = "cpu",
+    trials: int = 3,
 ) -> list[dict[str, Any]]:
-    """Ranked candidates ``[{"name", "score", "distances"}]`` (best first, lower score is better)."""
+    """Ranked candidates ``[{"name", "score", "distances"}]`` (best first, lower score is better).
+
+    The best-scoring asset of the animal's family (its label shares the family, or the species,
+    of what the video shows: `zooctl.retrieval.semantic`) is moved up to the ``trials``-th place
+    when it ranks lower, so the template trials always try it. Labelled candidates carry their
+    ``label`` and, where it shares a taxon with the video's animal, ``shares`` ("family Canidae")."""
     try:
         from ..retrieval.index import enabled_embedders
         from ..retrieval.query import QueryFrames, crops_from_frames
@@ -39,16 +45,36 @@ def retrieve(
     images, crop_masks, chosen = crops_from_frames(frames, masks, 8, 224)
     query = QueryFrames(images, crop_masks, chosen, "fit")
     emb, _ = embed_query(query, enabled_embedders(), device)
-    res = score_bank(bank, emb, query.identities, exclude=exclude)
+    res = score_bank(bank, emb, query.identities, query.classes, exclude=exclude)
     if not res.matches:
         raise UsageError(
             "template retrieval found no candidate in the bank",
             hint="seed or fill the bank (`zooctl bank seed`, `zooctl bank add`), run `zooctl bank reindex`, or pass --template NAME",
         )
-    return [
-        {"name": m.name, "score": float(m.score), "distances": {k: float(v) for k, v in m.distances.items()}}
-        for m in res.matches[:top]
-    ]
+    ranked = promote_kin(res.matches, trials)
+    out = []
+    for m in ranked[: max(top, trials)]:
+        c = {
+            "name": m.name,
+            "score": float(m.score),
+            "distances": {k: float(v) for k, v in m.distances.items()},
+        }
+        if m.label is not None:
+            c["label"] = m.label
+        if m.taxon:
+            c["shares"] = f"{m.taxon[0]} {m.taxon[1]}"  # with what the video shows
+        out.append(c)
+    return out
+
+
+def promote_kin(matches: list[Any], trials: int) -> list[Any]:
+    """Search matches in order, with the best one of the video's family (its ``taxon`` shares the
+    species or the family) moved up to place ``trials`` when it ranks below it."""
+    ranked = list(matches)
+    kin = next((i for i, m in enumerate(ranked) if m.taxon and m.taxon[0] in ("species", "family")), None)
+    if kin is not None and kin >= trials > 0:
+        ranked.insert(trials - 1, ranked.pop(kin))
+    return ranked
 
 
 def choose_template(
@@ -58,8 +84,10 @@ def choose_template(
     masks: np.ndarray,
     exclude: set[str] | None = None,
     device: str = "cpu",
+    trials: int = 3,
 ) -> tuple[RiggedAsset, list[dict[str, Any]]]:
-    """(template asset, retrieval candidates) - candidates are empty when ``name`` was given."""
+    """(template asset, retrieval candidates) - candidates are empty when ``name`` was given.
+    ``trials``: how many candidates the template trials try (`retrieve`)."""
     if name is not None:
         return bank.get(name), []
     if len(bank) == 0:
@@ -67,7 +95,7 @@ def choose_template(
             "the bank is empty: there is no template to fit",
             hint="run `zooctl bank seed`, or add assets with `zooctl bank add`",
         )
-    cands = retrieve(bank, frames, masks, exclude=exclude, device=device)
+    cands = retrieve(bank, frames, masks, exclude=exclude, device=device, trials=trials)
     return bank.get(cands[0]["name"]), cands
 
 
@@ -85,7 +113,13 @@ def select_template(
     import time
 
     asset, candidates = choose_template(
-        bank, name, video.frames, video.masks, exclude=exclude, device=cfg.device
+        bank,
+        name,
+        video.frames,
+        video.masks,
+        exclude=exclude,
+        device=cfg.device,
+        trials=cfg.trials.candidates,
     )
     if len(candidates) < 2 or cfg.trials.candidates < 2 or not cfg.ablation.optimise:
         return asset, candidates, None, None

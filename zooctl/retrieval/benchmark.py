@@ -34,16 +34,22 @@ def loo_benchmark(
     device: str = "cpu",
     progress=None,
     queries: list[str] | None = None,
+    semantic_weights: list[float] | None = None,
 ) -> dict[str, Any]:
     """Leave-one-out retrieval over ``assets`` in a new bank at ``root``. See the module docstring.
 
     ``queries``: names of the assets to query (default: all); the rest are only bank content.
-    Query i of ``queries`` is rendered with the same seed whatever else the bank holds."""
+    Query i of ``queries`` is rendered with the same seed whatever else the bank holds.
+    ``semantic_weights``: also score the default search (every embedder, nearest, zsum) with the
+    semantic term at each of these weights (`zooctl.retrieval.semantic`); the assets are labelled
+    as `bank add` labels them (name, tags, else views)."""
     from ..store.bank import Bank
+    from .labels import label_asset
 
     bank = Bank(root)
     index_s = []
     for i, a in enumerate(assets):
+        label_asset(a)
         bank.add(a, replace=True)
         t = time.perf_counter()
         index_asset(bank, a, embedders, n_views=n_views, size=size, seed=seed, device=device)
@@ -51,11 +57,14 @@ def loo_benchmark(
         if progress:
             progress(f"indexed {a.name} ({index_s[-1]:.2f} s)", i + 1, len(assets))
     q_emb: dict[str, dict[str, np.ndarray]] = {}
+    q_classes: dict[str, np.ndarray] = {}
     names = [a.name for a in assets] if queries is None else list(queries)
     by_name = {a.name: a for a in assets}
     for i, a in enumerate(by_name[n] for n in names):
         q = render_query_video(a, n_frames=frames, size=size, seed=1000 + seed * 7919 + i, device=device)
         q_emb[a.name] = {e: embed_inputs(cached_embedder(e, device), q.images, q.masks) for e in embedders}
+        if semantic_weights:
+            q_classes[a.name] = cached_embedder("effnet", device).classify(q.images)
     results = []
     # Every embedder alone and every combination of them (7 sets for 3 embedders).
     sets = [list(c) for k in range(1, len(embedders) + 1) for c in itertools.combinations(embedders, k)]
@@ -64,7 +73,15 @@ def loo_benchmark(
             for fusion in FUSIONS if len(es) > 1 else ("zsum",):
                 r = leave_one_out(bank, assets, q_emb, es, aggregation=agg, fusion=fusion, queries=set(names))
                 results.append(r.to_json())
+    semantic = {}
+    for w in semantic_weights or []:
+        r = leave_one_out(
+            bank, assets, q_emb, embedders, queries=set(names), query_classes=q_classes, semantic_weight=w
+        )
+        semantic[str(w)] = r.to_json()
     return {
+        "semantic": semantic,
+        "labels": {s["name"]: s.get("label") for s in bank.list()},
         "assets": len(assets),
         "queries": len(names),
         "views": n_views,

@@ -136,11 +136,15 @@ def leave_one_out(
     fusion: str = "zsum",
     k: int = 5,
     queries: set[str] | None = None,
+    query_classes: dict[str, np.ndarray] | None = None,
+    semantic_weight: float | None = None,
 ) -> LooResult:
     """Score each asset's query against the bank minus that asset.
 
     ``query_embeddings[name][embedder]`` holds the (K, D) query embeddings of each asset;
-    ``queries``: the assets to query (default: all; the others only sit in the bank).
+    ``queries``: the assets to query (default: all; the others only sit in the bank);
+    ``query_classes[name]``: its (K, 1000) ImageNet probabilities, for the semantic term
+    (weight ``semantic_weight``; without them, appearance only).
     """
     from .search import score_bank
 
@@ -151,7 +155,17 @@ def leave_one_out(
         if plans[a.name] is None or (queries is not None and a.name not in queries):
             continue
         q = {e: query_embeddings[a.name][e] for e in embedders}
-        res = score_bank(bank, q, aggregation=aggregation, fusion=fusion, k=k, exclude={a.name})
+        classes = (query_classes or {}).get(a.name)
+        res = score_bank(
+            bank,
+            q,
+            classes=classes,
+            aggregation=aggregation,
+            fusion=fusion,
+            k=k,
+            exclude={a.name},
+            semantic_weight=semantic_weight,
+        )
         ranked = [m.name for m in res.matches]
         twins = [b.name for b in assets if b.name != a.name and skeleton[b.name] == skeleton[a.name]]
         rows.append(

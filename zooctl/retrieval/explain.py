@@ -15,11 +15,17 @@ def explain_table(res: SearchResult) -> tuple[list[tuple[str, str]], list[list[s
     distance, the asset's rank by that embedder alone and its term of the fused score."""
     cols = [("rank", "right"), ("asset", "left"), ("score", "right")]
     cols += [(f"{e}: dist #rank term", "right") for e in res.embedders]
+    sem = res.semantic_weight is not None
+    if sem:
+        cols += [("label", "left"), ("shares", "left"), ("semantic: agreement term", "right")]
     rows = []
     for i, m in enumerate(res.matches, 1):
         row = [str(i), m.name, f"{m.score:+.2f}"]
         for e in res.embedders:
             row.append(f"{m.distances[e]:.3f} #{m.ranks.get(e, '-')} {m.terms.get(e, float('nan')):+.2f}")
+        if sem:
+            shares = f"{m.taxon[0]} {m.taxon[1]}" if m.taxon else "-"
+            row += [m.label or "-", shares, f"{m.semantic or 0:.2f} {m.terms.get('semantic', 0.0):+.2f}"]
         rows.append(row)
     term = {"zsum": "z-score of the distance", "sum": "the distance", "rank": "rank - 1"}[res.fusion]
     title = (
@@ -27,6 +33,11 @@ def explain_table(res: SearchResult) -> tuple[list[tuple[str, str]], list[list[s
         f"that embedder alone, and its term of the {res.fusion} score ({term}; the terms add up to the "
         f"score; lower is better)"
     )
+    if sem:
+        title += (
+            f"; semantic: the asset's label, the taxon it shares with the video's most likely animal, "
+            f"the expected taxonomic agreement (1: same species, surely) and its term (-{res.semantic_weight:g} x it)"
+        )
     return cols, rows, title
 
 
@@ -35,11 +46,20 @@ def explain_lines(res: SearchResult) -> list[str]:
     if not res.matches:
         return []
     first = res.matches[0]
+    lines = []
+    if res.semantic_weight is not None:
+        seen = ", ".join(f"{c} {p:.2f}" for c, p in res.classes) or "no animal class"
+        lines.append(f"the video looks like (ImageNet classes, mean over its crops): {seen}.")
+        if first.taxon:
+            lines.append(f"#1 {first.name} ({first.label}) shares the {first.taxon[0]} {first.taxon[1]}.")
+        else:
+            lines.append(f"#1 {first.name} ({first.label or 'no label'}) shares no taxon with it.")
     ranks = ", ".join(f"{e} {_ordinal(first.ranks[e])}" for e in res.embedders if e in first.ranks)
-    lines = [f"#1 {first.name}: ranked {ranks} by the embedders alone."]
-    if len(res.matches) > 1 and len(res.embedders) > 1:
+    lines.append(f"#1 {first.name}: ranked {ranks} by the embedders alone.")
+    terms = [e for e in [*res.embedders, "semantic"] if e in first.terms]
+    if len(res.matches) > 1 and len(terms) > 1:
         second = res.matches[1]
-        diffs = {e: second.terms[e] - first.terms[e] for e in res.embedders if e in first.terms}
+        diffs = {e: second.terms[e] - first.terms[e] for e in terms}
         parts = ", ".join(
             f"{e} {d:+.2f} ({'for' if d >= 0 else 'against'} {first.name})"
             for e, d in sorted(diffs.items(), key=lambda kv: -kv[1])

@@ -23,7 +23,9 @@ DEFAULT_QUERY_FRAMES = 8
 class QueryFrames:
     """K query crops. images (K, S, S, 3) uint8; masks (K, S, S) bool or None; frames (K,) indices
     of the chosen frames in the decoded video; source: what was decoded; identities: {embedder:
-    `zooctl.embed.base.embedder_identity`} of the embedders that embedded it (set by the search)."""
+    `zooctl.embed.base.embedder_identity`} of the embedders that embedded it (set by the search);
+    classes: (K, 1000) ImageNet probabilities of the crops (set by the search when it embeds with
+    effnet; `zooctl.retrieval.semantic`), or None."""
 
     images: np.ndarray
     masks: np.ndarray | None
@@ -31,6 +33,7 @@ class QueryFrames:
     source: str
     notes: list[str] = field(default_factory=list)
     identities: dict[str, str] = field(default_factory=dict)
+    classes: np.ndarray | None = None
 
 
 def sample_indices(n: int, k: int) -> np.ndarray:

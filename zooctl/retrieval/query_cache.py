@@ -3,7 +3,8 @@ same video skips decoding, cropping, loading the embedders and importing torch.
 
 One file per sampling, ``videos/<name>.cache/query-k<K>-s<S>.npz`` (`VideoStore.cache_dir`, removed
 with the video): ``frames`` (K,) int64 chosen frame indices, ``emb/<embedder>`` (K, D) float32 per
-embedder, and ``meta`` (JSON): cache version, the video file's identity (inode, size, mtime: a
+embedder, ``classes`` (K, 1000) float32 ImageNet probabilities of the crops when effnet embedded
+them (`zooctl.retrieval.semantic`; absent in older caches), and ``meta`` (JSON): cache version, the video file's identity (inode, size, mtime: a
 re-added video is a new file), whether the crops had masks, the query notes, each embedder's
 identity (`zooctl.embed.base.embedder_identity`, so a search can tell embeddings of an older
 version of an embedder from the bank's). Anything unreadable or not matching is a miss, never an
@@ -38,6 +39,7 @@ class CachedQuery:
     notes: list[str]
     emb: dict[str, np.ndarray] = field(default_factory=dict)
     identities: dict[str, str] = field(default_factory=dict)
+    classes: np.ndarray | None = None
 
 
 def cache_path(videos, name: str, k: int, size: int) -> Path:
@@ -70,10 +72,13 @@ def read_cache(videos, name: str, k: int, size: int) -> CachedQuery | None:
                 if key.startswith("emb/")
             }
             frames = np.asarray(z["frames"], np.int64)
+            classes = np.asarray(z["classes"], np.float32) if "classes" in z.files else None
     except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile):  # damaged: a miss
         return None
     if frames.ndim != 1 or any(e.ndim != 2 or len(e) != len(frames) for e in emb.values()):
         return None
+    if classes is not None and (classes.ndim != 2 or len(classes) != len(frames)):
+        classes = None
     idents = meta.get("identities") if isinstance(meta.get("identities"), dict) else {}
     return CachedQuery(
         frames,
@@ -81,6 +86,7 @@ def read_cache(videos, name: str, k: int, size: int) -> CachedQuery | None:
         [str(n) for n in meta.get("notes", [])],
         emb,
         {str(k): str(v) for k, v in idents.items() if k in emb},
+        classes,
     )
 
 
@@ -103,6 +109,7 @@ def write_cache(videos, name: str, k: int, size: int, query: CachedQuery, identi
         meta=np.array(json.dumps(meta)),
         frames=np.asarray(query.frames, np.int64),
         **{f"emb/{e}": np.asarray(v, np.float32) for e, v in query.emb.items()},
+        **({} if query.classes is None else {"classes": np.asarray(query.classes, np.float32)}),
     )
     final = cache_path(videos, name, k, size)
     try:

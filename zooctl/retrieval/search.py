@@ -22,6 +22,15 @@ from . import query_cache
 from .index import cached_embedder, current_pack, embed_inputs, enabled_embedders, needs_masks
 from .query import DEFAULT_QUERY_FRAMES, QueryFrames, load_query, stored_query
 from .score import aggregate, best_views, fuse, fuse_terms, sum_terms
+from .semantic import (
+    SEMANTIC_EMBEDDER,
+    SEMANTIC_WEIGHT,
+    class_distribution,
+    entry_taxon,
+    matched_taxon,
+    semantic_scores,
+    top_classes,
+)
 
 DEFAULT_TOP = 5
 DEFAULT_SHORTLIST = 256
@@ -32,7 +41,10 @@ class Match:
     """One ranked asset: fused ``score`` (lower is better), per-embedder ``distances`` (the chosen
     aggregation of cosine distances), its ``best_view`` overall and each query frame's nearest view.
     Per embedder also its ``terms`` of the fused score (they add up to ``score``) and the asset's
-    ``ranks`` by that embedder alone among the scored candidates (1: best)."""
+    ``ranks`` by that embedder alone among the scored candidates (1: best). With the semantic term
+    (`zooctl.retrieval.semantic`): the asset's ``label``, its ``semantic`` score (expected taxonomic
+    agreement, 0..1; its term is ``terms["semantic"]``) and ``taxon``, what its label shares with
+    the query's most probable species ([rank, name]) or None."""
 
     name: str
     score: float
@@ -41,6 +53,9 @@ class Match:
     frame_views: list[int]
     terms: dict[str, float] = field(default_factory=dict)
     ranks: dict[str, int] = field(default_factory=dict)
+    label: str | None = None
+    semantic: float | None = None
+    taxon: list[str] | None = None
 
 
 @dataclass
@@ -51,6 +66,8 @@ class SearchResult:
     fusion: str
     candidates: int
     notes: list[str] = field(default_factory=list)
+    classes: list[tuple[str, float]] = field(default_factory=list)  # the query's top animal classes
+    semantic_weight: float | None = None  # None: no semantic term (no classes, or weight 0)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -59,6 +76,8 @@ class SearchResult:
             "fusion": self.fusion,
             "candidates": self.candidates,
             "notes": self.notes,
+            "classes": [{"class": c, "probability": p} for c, p in self.classes],
+            "semantic_weight": self.semantic_weight,
             "matches": [
                 {
                     "rank": i + 1,
@@ -69,6 +88,9 @@ class SearchResult:
                     "frame_views": m.frame_views,
                     "terms": m.terms,
                     "ranks": m.ranks,
+                    "label": m.label,
+                    "semantic": m.semantic,
+                    "taxon": m.taxon,
                 }
                 for i, m in enumerate(self.matches)
             ],
@@ -86,7 +108,10 @@ def embed_query(
         if needs_masks(emb) and query.masks is None:
             notes.append(f"{e}: skipped, the query has no masks")
             continue
-        out[e] = embed_inputs(emb, query.images, query.masks)
+        if e == SEMANTIC_EMBEDDER and hasattr(emb, "embed_and_classify") and len(query.images):
+            out[e], query.classes = emb.embed_and_classify(query.images)  # one pass for both
+        else:
+            out[e] = embed_inputs(emb, query.images, query.masks)
         query.identities[e] = embedder_identity(emb)
     return out, notes
 
@@ -174,6 +199,8 @@ def query_embeddings(
     identity = query_cache.video_identity(videos, name)
     hit = query_cache.read_cache(videos, name, k, size)
     fresh = refresh or set()
+    if hit is not None and hit.classes is None:  # a cache from before the semantic term: classify again
+        fresh = fresh | {SEMANTIC_EMBEDDER}
     cached = {e: hit.emb[e] for e in embedders if e in hit.emb and e not in fresh} if hit is not None else {}
     todo = [e for e in embedders if e not in cached]
     notes: list[str] = []
@@ -187,17 +214,20 @@ def query_embeddings(
         query = QueryFrames(np.zeros((0, size, size, 3), np.uint8), masks, hit.frames, f"stored video {name}")
         query.notes = list(hit.notes)
         query.identities = {e: hit.identities[e] for e in cached if e in hit.identities}
+        query.classes = hit.classes
         return query, cached, notes
     query = stored_query(videos, name, k, size)
     known = hit.emb if hit is not None else {}
     if hit is not None and not np.array_equal(hit.frames, query.frames):  # never mix two samplings
         known, cached, todo, notes = {}, {}, list(embedders), []
     new, new_notes = embed_query(query, todo, device)
+    if query.classes is None and known and SEMANTIC_EMBEDDER not in new:
+        query.classes = hit.classes
     idents = {**(hit.identities if known else {}), **query.identities}  # new embeddings, new identities
     query.identities = {e: idents[e] for e in (*cached, *new) if e in idents}
     if new:
         entry = query_cache.CachedQuery(
-            query.frames, query.masks is not None, query.notes, {**known, **new}, idents
+            query.frames, query.masks is not None, query.notes, {**known, **new}, idents, query.classes
         )
         query_cache.write_cache(videos, name, k, size, entry, identity)
     return (
@@ -208,11 +238,15 @@ def query_embeddings(
 
 
 def load_packs(
-    bank, embedders: list[str], identities: dict[str, str] | None = None
+    bank,
+    embedders: list[str],
+    identities: dict[str, str] | None = None,
+    entries: list[dict[str, Any]] | None = None,
 ) -> tuple[dict[str, Any], list[str]]:
     """The current pack of each embedder (one read of the bank index) and notes on missing views.
-    ``identities``: the query's embedder identities, checked against the views' (`check_identities`)."""
-    entries = bank.list()
+    ``identities``: the query's embedder identities, checked against the views' (`check_identities`);
+    ``entries``: `Bank.list()` when the caller has read it."""
+    entries = bank.list() if entries is None else entries
     packs = {}
     missing: dict[str, list[str]] = {}
     for e in embedders:
@@ -262,8 +296,21 @@ def score_packs(
     shortlist: int = DEFAULT_SHORTLIST,
     exclude: set[str] | None = None,
     weights: dict[str, float] | None = None,
+    dist: np.ndarray | None = None,
+    taxa: dict[str, Any] | None = None,
+    semantic_weight: float | None = None,
+    labels: dict[str, str] | None = None,
 ) -> SearchResult:
-    """Rank the assets every pack holds (minus ``exclude``) for the query embeddings {embedder: (K, D)}."""
+    """Rank the assets every pack holds (minus ``exclude``) for the query embeddings {embedder: (K, D)}.
+    ``dist``: the query's (398,) animal-class distribution and ``taxa`` {asset: its label's `Taxon`
+    or None} add the semantic term with ``semantic_weight`` (default `SEMANTIC_WEIGHT`; 0: off);
+    ``labels``: {asset: its label as stored}, shown in the matches."""
+    w_sem = SEMANTIC_WEIGHT if semantic_weight is None else float(semantic_weight)
+    use_sem = dist is not None and taxa is not None and w_sem > 0
+
+    def sem_of(names: list[str]) -> np.ndarray:
+        return semantic_scores(dist, [taxa.get(n) for n in names])
+
     first = packs[next(iter(query_emb))]
     common = set(first.names)
     for p in packs.values():
@@ -281,7 +328,8 @@ def score_packs(
             sims = query_emb[e].astype(np.float32) @ p.mean.T  # (K, A_e)
             rows = np.array([pos[n] for n in cand])
             coarse[e] = -sims.mean(0)[rows]
-        top = np.argpartition(fuse(coarse, fusion, weights), shortlist - 1)[:shortlist]
+        rough = fuse(coarse, fusion, weights) - (w_sem * sem_of(cand) if use_sem else 0.0)
+        top = np.argpartition(rough, shortlist - 1)[:shortlist]
         cand = sorted(cand[i] for i in top)
     # Stage 2: exact scores of the candidates: one (A*V, D) x (D, Q) float32 product per embedder.
     per_e: dict[str, np.ndarray] = {}
@@ -308,6 +356,9 @@ def score_packs(
         per_e[e] = aggregate(d, aggregation, k)
         views_best[e] = best_views(d)
     terms = fuse_terms(per_e, fusion, weights)
+    sem = sem_of(cand) if use_sem else None
+    if sem is not None:
+        terms["semantic"] = -w_sem * sem
     total = sum_terms(terms)
     ranked = np.argsort(total, kind="stable")
     ranks = {e: np.argsort(np.argsort(s, kind="stable"), kind="stable") + 1 for e, s in per_e.items()}
@@ -321,24 +372,48 @@ def score_packs(
             [int(x) for x in views_best[lead][1][i]],
             {e: float(t[i]) for e, t in terms.items()},
             {e: int(r[i]) for e, r in ranks.items()},
+            (labels or {}).get(cand[i]),
+            None if sem is None else float(sem[i]),
+            _taxon_json(dist, taxa.get(cand[i])) if use_sem else None,
         )
         for i in ranked
     ]
-    return SearchResult(matches, list(query_emb), aggregation, fusion, len(cand))
+    res = SearchResult(matches, list(query_emb), aggregation, fusion, len(cand))
+    if use_sem:
+        res.classes, res.semantic_weight = top_classes(dist), w_sem
+    return res
+
+
+def _taxon_json(dist: np.ndarray, taxon: Any) -> list[str] | None:
+    m = matched_taxon(dist, taxon)
+    return None if m is None else list(m)
 
 
 def score_bank(
-    bank, query_emb: dict[str, np.ndarray], identities: dict[str, str] | None = None, **options: Any
+    bank,
+    query_emb: dict[str, np.ndarray],
+    identities: dict[str, str] | None = None,
+    classes: np.ndarray | None = None,
+    **options: Any,
 ) -> SearchResult:
     """Rank every asset with views for all of ``query_emb``'s embedders. See the module docstring.
     ``identities``: the query's embedder identities (`QueryFrames.identities`); views of another
-    version of an embedder are refused with `EmbedderMismatch`."""
+    version of an embedder are refused with `EmbedderMismatch`. ``classes``: the query's (K, 1000)
+    ImageNet probabilities, for the semantic term (`zooctl.retrieval.semantic`)."""
     if not query_emb:
         raise UsageError(
             "no embedder could embed this query",
             hint="give masks for mask embedders, or choose another --embedder",
         )
-    packs, notes = load_packs(bank, list(query_emb), identities)
+    entries = bank.list()
+    packs, notes = load_packs(bank, list(query_emb), identities, entries)
+    labels = {e["name"]: e["label"] for e in entries if isinstance(e.get("label"), str)}
+    options = {"labels": labels, **options}
+    if classes is not None:
+        taxa = {e["name"]: entry_taxon(e) for e in entries}
+        options = {"dist": class_distribution(classes), "taxa": taxa, **options}
+        if not any(t is not None for t in taxa.values()):
+            notes.append("no asset in the bank has an animal label: `zooctl bank label NAME` infers one")
     res = score_packs(packs, query_emb, **options)
     res.notes = notes
     return res
@@ -394,7 +469,7 @@ def search_embedded(
     """Rank the bank for query embeddings {embedder: (K, D)}; keeps the ``top`` best matches."""
     if top < 1:
         raise UsageError(f"--top {top} must be at least 1")
-    res = score_bank(bank, q, query.identities, **options)
+    res = score_bank(bank, q, query.identities, query.classes, **options)
     res.matches = res.matches[:top]
     res.notes = query.notes + notes + res.notes
     return res
