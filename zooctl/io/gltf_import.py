@@ -463,8 +463,10 @@ def _check_invertible(path: Path, m: np.ndarray, names: list[str], what: str) ->
     """A rest-pose or bind matrix that cannot be inverted (a zero scale) is an input error."""
     if not len(m):
         return
-    sv = np.linalg.svd(m[:, :3, :3], compute_uv=False)
-    bad = ~np.all(np.isfinite(m), axis=(1, 2)) | (sv[:, -1] <= 1e-9 * np.maximum(sv[:, 0], 1e-30))
+    finite = np.all(np.isfinite(m), axis=(1, 2))
+    # LAPACK prints to stdout on a NaN ("On entry to DLASCL..."): only finite matrices go to the SVD
+    sv = np.linalg.svd(np.where(finite[:, None, None], m[:, :3, :3], np.eye(3)), compute_uv=False)
+    bad = ~finite | (sv[:, -1] <= 1e-9 * np.maximum(sv[:, 0], 1e-30))
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         raise InputError(
@@ -856,6 +858,7 @@ def _unique_names(names: list[str]) -> list[str]:
     return out
 
 
+@np.errstate(over="ignore", invalid="ignore")  # a huge scale overflows: `_check_invertible` says so
 def _world(local: np.ndarray, parent: np.ndarray) -> np.ndarray:
     """World transforms of a forest given by ``parent`` (acyclic, see `_hierarchy`), without
     recursion: a chain of thousands of nodes must not overflow the stack."""
