@@ -4,7 +4,9 @@
 animals when present, the hand-built two-bone rig always) with one random edit each: JSON fields
 (negative or huge counts and offsets, wrong types, missing keys, bad indices, NaN, cyclic parents,
 escaping URIs), the binary chunk (huge or NaN key times, bit flips, truncation) or the USD text
-(duplicate or reordered joints, bad sublayers, missing attributes, huge time samples).
+(duplicate or reordered joints, bad sublayers, missing attributes, huge time samples); or the
+file itself: a FIFO, socket or device (its own or its buffer's), a sparse 16 GB file, a buffer
+declaring a terabyte.
 
 `run(cases, store, ...)` imports each one with `bank add` into a scratch store, in a worker process
 (fast: the library in-process) and, for some, the real CLI in a subprocess, and classifies the
@@ -391,6 +393,70 @@ def _uri_case(rng, folder: Path, i: int) -> Case:
     return Case(f"{i:04d}_uri_{target}", f"uri_{target}", path, must_fail=escapes)
 
 
+# -- sizes declared in files, and files that are not files ---------------------------------------
+
+BIG = 16 * 1024**3  # a sparse file's size: no disk taken, gigabytes to whoever reads it whole
+
+
+def _special(p: Path, how: str) -> str:
+    """Make ``p`` a FIFO, a socket or a device (a link to /dev/zero without root); returns what."""
+    import socket
+
+    if how == "socket" and len(str(p)) < 100:  # AF_UNIX paths are short
+        s = socket.socket(socket.AF_UNIX)
+        s.bind(str(p))
+        s.close()
+        return how
+    if how == "device":
+        try:
+            os.mknod(p, 0o600 | 0o020000, os.makedev(1, 5))  # /dev/zero's own node
+            return how
+        except PermissionError:
+            how = "dev_zero"
+    if how == "dev_zero":
+        p.symlink_to("/dev/zero")
+        return how
+    os.mkfifo(p)
+    return "fifo"
+
+
+SIZE_KINDS = ["special_model", "special_buffer", "sparse_model", "sparse_buffer", "sparse_gltf", "length"]
+SPECIALS = ["fifo", "socket", "device", "dev_zero"]
+
+
+def size_case(rng, folder: Path, i: int, kind: str | None = None, how: str | None = None) -> Case:
+    """A model that must be refused unread: it is (or its buffer is) a FIFO, a socket or a device
+    (``how``), a sparse 16 GB file, or it declares a buffer of a terabyte (``kind``: one of
+    `SIZE_KINDS`; random when None)."""
+    doc, binary = tiny_gltf()
+    kind = _pick(rng, SIZE_KINDS) if kind is None else kind
+    folder.mkdir(parents=True)
+    how = _pick(rng, SPECIALS) if how is None else how
+    if kind == "special_model":
+        path = folder / "m.glb"
+        how = _special(path, how)
+        return Case(f"{i:04d}_{kind}_{how}", kind, path, must_fail=True)
+    path = folder / ("m.glb" if kind == "sparse_model" else "m.gltf")
+    if kind in ("sparse_model", "sparse_gltf"):
+        path.write_bytes(glb_bytes(doc, binary) if kind == "sparse_model" else json.dumps(doc).encode())
+        with open(path, "r+b") as f:
+            f.truncate(BIG)
+        return Case(f"{i:04d}_{kind}", kind, path, must_fail=True)
+    doc["buffers"][0]["uri"] = "m.bin"
+    name = kind
+    if kind == "special_buffer":
+        name = f"{kind}_{_special(folder / 'm.bin', how)}"
+    else:
+        (folder / "m.bin").write_bytes(binary)
+        if kind == "sparse_buffer":
+            with open(folder / "m.bin", "r+b") as f:
+                f.truncate(BIG)
+        else:
+            doc["buffers"][0]["byteLength"] = _pick(rng, [2**40, 2**34, 10**18])
+    path.write_text(json.dumps(doc))
+    return Case(f"{i:04d}_{name}", kind, path, must_fail=True)
+
+
 # -- USD mutations ----------------------------------------------------------------------------
 
 
@@ -511,8 +577,9 @@ def _usd_mutation(rng, text: str, folder: Path) -> tuple[str, str]:
 def mutants(workdir: Path, n: int, seed: int = 18) -> list[Case]:
     """Write ``n`` mutated files under ``workdir`` (each in its own folder) and return them.
 
-    The mix: 55% glTF/GLB JSON or binary edits, 15% GLB container damage, 10% URI edits of a
-    .gltf with external files, 20% USD edits (glTF only when pxr is missing)."""
+    The mix: 50% glTF/GLB JSON or binary edits, 15% GLB container damage, 10% URI edits of a
+    .gltf with external files, 20% USD edits (glTF only when pxr is missing), 5% models that are
+    (or whose buffer is) a FIFO, socket, device or sparse 16 GB file, or declare a huge buffer."""
     rng = np.random.default_rng(seed)
     workdir.mkdir(parents=True, exist_ok=True)
     (workdir / "secret.bin").write_bytes(_secret_png())
@@ -524,6 +591,9 @@ def mutants(workdir: Path, n: int, seed: int = 18) -> list[Case]:
         folder = workdir / f"m{i:04d}"
         if r < 0.10:
             cases.append(_uri_case(rng, folder, i))
+            continue
+        if r >= 0.95:
+            cases.append(size_case(rng, folder, i))
             continue
         folder.mkdir(parents=True)
         if r < 0.30 and usd:

@@ -3,12 +3,13 @@ generated from it with a fixed seed, and a runner that puts the usual commands t
 
 Each state is a copy of the base store with one or two damages (deleted, truncated or garbage
 indexes, index entries missing fields, damaged asset files, cards, view sidecars, packs, video
-files and query caches, stale temporaries, unreadable files, read-only folders). The commands of
+files and query caches, stale temporaries, unreadable files, read-only folders, HDF5 files and
+indexes declaring gigabytes they do not hold, FIFOs, sockets and links to /dev/zero). The commands of
 `COMMANDS` run in one child process per state (in-process `zooctl.cli.main.run`, so a state costs
 one interpreter start); the parent kills a child that runs past 60 s a command. A state passes when
 
 - every command ends in success or in one clear ``error:`` line (exit 1 or 2; no traceback, no
-  "internal failure", no crash), within 60 s;
+  "internal failure", no crash), within 60 s and 2 GB;
 - every stored item file the damage did not touch (asset files, cards, view sidecars, video
   files) is byte-identical afterwards, except the one `bank rm` removes;
 - after a successful `bank repair` / `video repair`, the bank and the videos list every item whose
@@ -33,6 +34,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
 HANG_S = 60.0
+MAX_RSS_KB = 2 * 1024 * 1024  # one command's peak, with the default read limits
 VIDEO = "clip"
 VICTIM_INDEX = -1  # `bank rm` removes the last asset of the base store
 NEW_NAME = "fuzznew"
@@ -318,6 +320,80 @@ def _d_lock(root, base, rng, st):
     return f"lock file {how}"
 
 
+def _declare_huge(path: Path, key: str, shape: tuple[int, ...], dtype: str = "f4", **kw) -> None:
+    """Replace dataset ``key`` of an HDF5 file with one that declares ``shape`` but stores
+    nothing (unwritten chunks): a small file that reads as gigabytes."""
+    import h5py
+
+    with h5py.File(path, "r+") as f:
+        if key in f:
+            del f[key]
+        if "external" in kw:
+            f.create_dataset(key, shape=shape, dtype=dtype, **kw)
+        else:
+            f.create_dataset(key, shape=shape, dtype=dtype, chunks=(1, *shape[1:]))
+
+
+def _sparse(p: Path, size: int) -> None:
+    with open(p, "r+b" if p.exists() else "wb") as f:
+        f.truncate(size)  # holes: no disk, and gigabytes to whoever reads it whole
+
+
+def _d_bomb(root, base, rng, st):
+    """A file whose declared size is a memory bomb: an HDF5 dataset's shape, a sparse index."""
+    a = rng.choice(base["assets"])
+    options = ["asset_vertices", "asset_clip", "asset_external", "views_embeddings", "bank_index"]
+    if base["video"]:
+        options += ["video_masks", "video_flow", "video_index"]
+    how = rng.choice(options)
+    if how.startswith("asset_"):
+        rel = f"bank/assets/{a}.h5"
+        if how == "asset_vertices":
+            _declare_huge(root / rel, "mesh/vertices", (300_000_000, 3))
+        elif how == "asset_clip":
+            _declare_huge(root / rel, "clips/0/rotations", (2_000_000, 200, 4))
+        else:  # data in another file: /etc/passwd read as vertices
+            _declare_huge(root / rel, "mesh/vertices", (4, 3), external=[("/etc/passwd", 0, 48)])
+    elif how == "views_embeddings":
+        rel = f"bank/views/{base['assets'][0]}.h5"
+        _declare_huge(root / rel, "embeddings/silhouette", (50_000_000, 512), "f2")
+    elif how == "video_masks":
+        rel = f"videos/{VIDEO}.h5"
+        _declare_huge(root / rel, "masks", (20000, 480, 854), "u1")
+    elif how == "video_flow":
+        rel = f"videos/{VIDEO}.h5"
+        _declare_huge(root / rel, "flow/forward", (20000, 480, 854, 2), "f2")
+    else:
+        rel = "bank/index.json" if how == "bank_index" else "videos/index.json"
+        _sparse(root / rel, 4 * 1024**3)
+    st.touched.add(rel)
+    return f"{rel}: {how.replace('_', ' ')} declared huge"
+
+
+def _d_special(root, base, rng, st):
+    """A stored file replaced by a FIFO, a socket or a link to /dev/zero: readers must not block."""
+    import socket
+
+    options = ["bank/index.json"] + [r for a in base["assets"] for r in _asset_files(base, a)]
+    if base["video"]:
+        options += ["videos/index.json", f"videos/{VIDEO}.h5"]
+    rel = rng.choice([r for r in options if (root / r).exists()])
+    p = root / rel
+    p.unlink()
+    how = rng.choice(["fifo", "socket", "dev_zero"])
+    if how == "socket" and len(str(p)) < 100:
+        s = socket.socket(socket.AF_UNIX)
+        s.bind(str(p))
+        s.close()
+    elif how == "dev_zero":
+        p.symlink_to("/dev/zero")
+    else:
+        how = "fifo"
+        os.mkfifo(p)
+    st.touched.add(rel)
+    return f"{rel} is a {how}"
+
+
 DAMAGES: dict[str, Callable] = {
     "bank-index": _d_bank_index,
     "video-index": _d_video_index,
@@ -330,6 +406,8 @@ DAMAGES: dict[str, Callable] = {
     "unreadable": _d_unreadable,
     "readonly": _d_readonly,
     "lock": _d_lock,
+    "bomb": _d_bomb,
+    "special": _d_special,
 }
 KINDS = [*DAMAGES, "mixed"]
 
@@ -373,13 +451,21 @@ DRIVER = r"""
 import contextlib, io, json, sys, time
 from zooctl.cli.main import run
 store, cmds = sys.argv[1], json.loads(sys.argv[2])
+def peak_kb():
+    with open("/proc/self/status") as f:
+        return next((int(ln.split()[1]) for ln in f if ln.startswith("VmHWM:")), 0)
 for args in cmds:
     print("START", json.dumps(args), flush=True)
     out, err = io.StringIO(), io.StringIO()
+    try:  # restart the peak-RSS count: each command's own peak
+        open("/proc/self/clear_refs", "w").write("5")
+    except OSError:
+        pass
     t = time.perf_counter()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         code = run(["--store", store, *args])
     res = {"args": args, "code": code, "s": round(time.perf_counter() - t, 3), "err": err.getvalue()}
+    res["peak_kb"] = peak_kb()
     if args[-1] == "--json" and code == 0:
         res["json"] = json.loads(out.getvalue())
     print("DONE", json.dumps(res), flush=True)
@@ -492,6 +578,8 @@ def run_state(
             rec["problems"].append(f"{' '.join(res['args'])}: {problem}")
         if res["s"] > HANG_S:
             rec["problems"].append(f"{name}: took {res['s']} s")
+        if res.get("peak_kb", 0) > MAX_RSS_KB:
+            rec["problems"].append(f"{' '.join(res['args'])}: peak memory {res['peak_kb'] // 1024} MB")
         rec["outcomes"][" ".join(res["args"])] = "ok" if res["code"] == 0 else "error"
         if res["code"] != 0:
             rec.setdefault("errors", {})[" ".join(res["args"])] = res["err"].strip().splitlines()[0][:300]

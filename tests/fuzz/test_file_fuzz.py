@@ -9,6 +9,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # file_mutants, however pytest imports us
 import file_mutants as fm  # noqa: E402
+import numpy as np  # noqa: E402
 
 from zooctl.store.bank import Bank  # noqa: E402
 
@@ -25,6 +26,7 @@ def test_mutated_files_import_cleanly(tmp_path):
     cases = fm.mutants(tmp_path / "files", QUICK_LIBRARY, seed=18)
     kinds = {c.kind for c in cases}
     assert len(kinds) >= 20 and {"key_times", "glb_truncate", "uri_buffer"} <= kinds, kinds
+    assert kinds & set(fm.SIZE_KINDS), kinds  # FIFOs, devices, sparse files, declared sizes
     store = tmp_path / "store"
     base = fm.make_store(store)
     lib = fm.run_library(cases, store)
@@ -38,6 +40,23 @@ def test_mutated_files_import_cleanly(tmp_path):
     # the stored asset is still there and whole
     assert Bank.open(store).list()[0]["name"] == base
     assert Bank.open(store).get(base).num_vertices == 4
+
+
+def test_special_and_huge_files_are_refused_unread(tmp_path):
+    """Every class of file that would block or bomb: each a clear error, at once, in little memory."""
+    rng = np.random.default_rng(0)
+    cases = [
+        fm.size_case(rng, tmp_path / "files" / f"{kind}-{how}", i, kind, how)
+        for i, (kind, how) in enumerate(
+            [(k, h) for k in fm.SIZE_KINDS if k.startswith("special") for h in fm.SPECIALS]
+            + [(k, None) for k in fm.SIZE_KINDS if not k.startswith("special")]
+        )
+    ]
+    store = tmp_path / "store"
+    fm.make_store(store)
+    outcomes = fm.run_library(cases, store) + fm.run_cli(cases[:2], store)
+    assert all(o.status == "error" for o in outcomes), _report(outcomes)  # a hang is "hang"
+    assert max(o.peak_kb for o in outcomes) < fm.MAX_RSS_KB
 
 
 def test_the_fuzz_catches_what_it_looks_for(tmp_path):
