@@ -18,29 +18,38 @@ def run_view(
     host: str,
     port: int,
     no_browser: bool,
+    bench: Path | None = None,
 ) -> None:
     from zooctl.cli._common import console, store_root
 
-    if bank == (fit is not None):
+    if (fit is not None) + bank + (bench is not None) != 1:
         raise UsageError(
-            "give a FIT to view, or --bank for the bank gallery", hint="`zooctl fits list` names the fits"
+            "give a FIT to view, or --bank for the bank gallery, or --bench DIR for a benchmark's table",
+            hint="`zooctl fits list` names the fits",
         )
     if tags and not bank:
         raise UsageError("--tag filters the bank gallery: use it with --bank")
     store = store_root()
+    what = f"fit {fit}" if fit else "the bank gallery" if bank else f"the benchmark table of {bench}"
     if export is not None:
-        index = _build(store, fit, tags, Path(export))
+        index = _build(store, fit, tags, Path(export), bench)
         console.print(f"wrote {index} (open it in a browser; it works from disk)", highlight=False)
         return
     with tempfile.TemporaryDirectory(prefix="zooctl-view-") as d:
-        _build(store, fit, tags, Path(d))
-        _serve(Path(d), host, port, no_browser, f"fit {fit}" if fit else "the bank gallery")
+        _build(store, fit, tags, Path(d), bench)
+        _serve(Path(d), host, port, no_browser, what)
 
 
-def _build(store: Path, fit: str | None, tags: list[str], out: Path) -> Path:
+def _build(store: Path, fit: str | None, tags: list[str], out: Path, bench: Path | None = None) -> Path:
     from .site import check_out_dir
 
     check_out_dir(out)
+    if bench is not None:
+        from .bench_site import bench_fits, write_bench_site
+
+        rows = bench_fits(store, bench)
+        with _progress() as bar:
+            return write_bench_site(store, bench, rows, out, bar)
     if fit is not None:
         from .fit_data import load_fit_view
         from .site import write_fit_site

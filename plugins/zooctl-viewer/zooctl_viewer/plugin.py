@@ -15,6 +15,11 @@ def register_commands(cli):
     def view(
         fit: str = typer.Argument(None, help="Fit to show (a name from `zooctl fits list`)."),
         bank: bool = typer.Option(False, "--bank", help="Show the bank as a gallery instead of a fit."),
+        bench: Path = typer.Option(
+            None,
+            "--bench",
+            help="Show the benchmark table of `zooctl bench run DIR` (this benchmark folder), each row opening its fit.",
+        ),
         tag: list[str] = typer.Option(
             None, "--tag", help="With --bank: only assets with this tag (repeat for several)."
         ),
@@ -29,7 +34,7 @@ def register_commands(cli):
     ) -> None:
         """Look at a fit in 3D in a browser: the character beside its video, masks and silhouette,
         frame slider, skeleton, the input camera and free views, retrieval and metrics. --bank
-        shows the bank as a gallery."""
+        shows the bank as a gallery, --bench DIR a benchmark's table."""
         from .command import run_view
 
-        run_view(fit, bank, tag or [], export, host, port, no_browser)
+        run_view(fit, bank, tag or [], export, host, port, no_browser, bench)

@@ -36,11 +36,11 @@ def check_out_dir(out: Path) -> None:
         )
 
 
-def static_files(out: Path, page: str) -> None:
-    """Copy the script of ``page`` (``fit`` or ``bank``), the shared script and style, and the
-    vendored three.js (with its licence) into ``out``."""
+def static_files(out: Path) -> None:
+    """Copy the pages' scripts (a benchmark table's fit pages use the fit script from its
+    folder), the shared script and style, and the vendored three.js (with its licence) into ``out``."""
     root = resources.files("zooctl_viewer") / "static"
-    for rel in ("viewer.css", "common.js", f"{page}.js"):
+    for rel in ("viewer.css", "common.js", "fit.js", "bank.js", "bench.js"):
         write_bytes_atomic(out / rel, (root / rel).read_bytes())
     for rel in ("three.bundle.js", "three.LICENSE", "VERSION"):
         write_bytes_atomic(out / "vendor" / rel, (root / "vendor" / rel).read_bytes())
@@ -52,20 +52,28 @@ def write_data(out: Path, data: dict[str, Any]) -> None:
     write_bytes_atomic(out / "data.js", text.encode())
 
 
-def start_site(out: Path, page: str, meta: dict[str, Any]) -> None:
+def start_site(out: Path, page: str, meta: dict[str, Any], up: str = "") -> None:
     """Claim ``out`` for a viewer site (the marker that lets a later export replace it), then copy
-    the static files of ``page``."""
+    the static files of ``page``; with ``up`` (a page nested in another site, e.g. ``"../../"``)
+    the page uses the enclosing site's scripts instead (`write_index`), only its own are copied."""
     check_out_dir(out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "index.html").unlink(missing_ok=True)  # until this export is complete
     write_bytes_atomic(out / MARKER, json.dumps(meta, indent=2).encode())
-    static_files(out, page)
+    if not up:
+        static_files(out)
 
 
-def write_index(out: Path, page: str) -> Path:
-    """``index.html``, ``page``'s HTML: written last, so a folder with an index is a complete site."""
+def write_index(out: Path, page: str, up: str = "") -> Path:
+    """``index.html``, ``page``'s HTML: written last, so a folder with an index is a complete site.
+    ``up``: the relative path to the enclosing site that holds the scripts (see `start_site`)."""
     root = resources.files("zooctl_viewer") / "static"
-    write_bytes_atomic(out / "index.html", (root / f"{page}.html").read_bytes())
+    html = (root / f"{page}.html").read_text()
+    if up:
+        for name in ("vendor/three.bundle.js", "common.js", f"{page}.js"):
+            html = html.replace(f'<script src="{name}">', f'<script src="{up}{name}">')
+        html = html.replace('href="viewer.css"', f'href="{up}viewer.css"')
+    write_bytes_atomic(out / "index.html", html.encode())
     return out / "index.html"
 
 
@@ -101,11 +109,12 @@ def remove_stale(folder: Path, keep: set[str]) -> None:
                 p.unlink()
 
 
-def write_fit_site(view: Any, out: Path, progress: Any = None) -> Path:
+def write_fit_site(view: Any, out: Path, progress: Any = None, up: str = "", back: str | None = None) -> Path:
     """The fit viewer for a `zooctl_viewer.fit_data.FitView` in ``out``; returns ``out/index.html``.
-    ``progress(done, total)`` after each frame."""
+    ``progress(done, total)`` after each frame. ``up``: nested in another site (`start_site`);
+    ``back``: a link the page shows to where it was opened from."""
     T = len(view.frames)
-    start_site(out, "fit", {"kind": "fit", "name": view.name, "frames": T})
+    start_site(out, "fit", {"kind": "fit", "name": view.name, "frames": T}, up)
     names = [f"{i:05d}" for i in range(T)]
     for i, n in enumerate(names):
         write_bytes_atomic(out / "frames" / f"{n}.jpg", jpeg(view.frames[i]))
@@ -133,9 +142,10 @@ def write_fit_site(view: Any, out: Path, progress: Any = None) -> Path:
             "camera": view.camera,
             "record": _jsonable(view.record),
             "glb": base64.b64encode(view.glb).decode("ascii"),
+            "back": back,
         },
     )
-    return write_index(out, "fit")
+    return write_index(out, "fit", up)
 
 
 def _jsonable(obj: Any) -> Any:

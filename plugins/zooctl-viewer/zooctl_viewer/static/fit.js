@@ -10,6 +10,7 @@
   // --- page text ----------------------------------------------------------------------------
   document.title = "zooctl view " + D.name;
   $("title").textContent = "fit " + D.name;
+  if (D.back) { $("back").href = D.back; $("back").hidden = false; }
   const wall = R.timings && R.timings.total_wall;
   $("subtitle").textContent = [
     "video " + (R.video || R.source), T + " frames at " + ZV.fmt(D.fps, 1) + " fps", W + "x" + H,
@@ -17,7 +18,7 @@
     wall ? "fitted in " + Math.round(wall) + " s" : null,
   ].filter(Boolean).join(" \u00b7 ");
   $("camera-note").textContent = "Input view: the fitted camera (" + D.camera.source + "), focal " +
-    ZV.fmt(D.camera.fx, 1) + " px. Drag to orbit (switches to free view), scroll to zoom.";
+    ZV.fmt(D.camera.fx, 1) + " px. Drag to orbit (switches to the free view, where the orange frustum is the input camera), scroll to zoom.";
   for (const s of ["stage3d", "stage2d"]) $(s).style.aspectRatio = W + " / " + H;
   fillMetrics();
   fillRetrieval();
@@ -46,15 +47,15 @@
   let mode = "input", dirty = true;
 
   // The input camera's pinhole (focal lengths, principal point) as an off-centre frustum.
-  function inputProjection(near, far) {
+  function inputProjection(cam, near, far) {
     const c = D.camera;
-    inputCam.near = near; inputCam.far = far;
-    inputCam.projectionMatrix.makePerspective(
+    cam.near = near; cam.far = far;
+    cam.projectionMatrix.makePerspective(
       -near * c.cx / c.fx, near * (W - c.cx) / c.fx, near * c.cy / c.fy, -near * (H - c.cy) / c.fy, near, far);
-    inputCam.projectionMatrixInverse.copy(inputCam.projectionMatrix).invert();
+    cam.projectionMatrixInverse.copy(cam.projectionMatrix).invert();
   }
 
-  let model = null, mixer = null, action = null, skeleton = null, grid = null, frame = 0;
+  let model = null, mixer = null, action = null, skeleton = null, frustum = null, frame = 0;
 
   function setFrame(i) {
     frame = Math.max(0, Math.min(T - 1, i | 0));
@@ -72,7 +73,7 @@
     mode = next;
     $("view-input").classList.toggle("on", mode === "input");
     $("view-free").classList.toggle("on", mode === "free");
-    if (grid) grid.visible = mode === "free";
+    if (frustum) frustum.visible = mode === "free";
     if (mode === "input") syncFreeToInput();
     dirty = true;
   }
@@ -175,11 +176,19 @@
     const box = ZV.posedBox(model);
     const size = box.getSize(new THREE.Vector3()).length();
     const dist = box.getCenter(new THREE.Vector3()).distanceTo(inputCam.position);
-    inputProjection(Math.max(dist - 4 * size, dist / 1000), dist + 20 * size);
-    grid = new THREE.GridHelper(size * 4, 20, 0x555c66, 0x3a4049);
-    grid.position.set(box.getCenter(new THREE.Vector3()).x, box.min.y, box.getCenter(new THREE.Vector3()).z);
-    grid.visible = false;
-    scene.add(grid);
+    inputProjection(inputCam, Math.max(dist - 4 * size, dist / 1000), dist + 20 * size);
+    // In the free view, the input camera's frustum up to the animal shows where the video was filmed from.
+    const proxy = new THREE.PerspectiveCamera();
+    proxy.matrixAutoUpdate = false;
+    proxy.matrix.copy(c2w);
+    proxy.updateMatrixWorld(true);
+    inputProjection(proxy, dist / 20, dist);
+    frustum = new THREE.CameraHelper(proxy);
+    frustum.setColors(new THREE.Color(0xffaa33), new THREE.Color(0xffaa33), new THREE.Color(0xffaa33),
+                      new THREE.Color(0xffdd88), new THREE.Color(0x888888));
+    frustum.update();
+    frustum.visible = false;
+    scene.add(frustum);
     syncFreeToInput();
     resize();
   }).catch(function (err) { ZV.fail("could not read the fit's GLB: " + err); });
