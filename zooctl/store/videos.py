@@ -143,16 +143,6 @@ def boxes_of(masks: np.ndarray) -> np.ndarray:
 # -- the HDF5 file -----------------------------------------------------------------------------------
 
 
-def write_video_h5(path: Path, rec: VideoRecord) -> None:
-    """Write ``rec`` to ``path`` (a temporary: callers publish it). Layout: schemas/video_h5.schema.json.
-
-    Built in memory first: a full disk is then one clean `NoSpaceError`, not a failure inside HDF5."""
-    rec.validate()
-    image = h5_image(lambda f: _fill_video(f, rec))
-    with writing(f"writing {path}"):
-        Path(path).write_bytes(image)
-
-
 def _fill_video(f: Any, rec: VideoRecord) -> None:
     t, h, w = rec.frames.shape[:3]
     g = f.create_group("flow")
@@ -243,9 +233,9 @@ class _KeepingFile(io.RawIOBase):
 
 
 class VideoWriter:
-    """A video's HDF5 file written as it is made, to a temporary beside its final path (layout as
-    `write_video_h5`): frames and flow a few at a time as they are decoded and computed, the masks
-    once made, the attributes last; memory holds a few frames whatever the length.
+    """A video's HDF5 file written as it is made, to a temporary beside its final path (the layout
+    `VideoStore.add` writes): frames and flow a few at a time as they are decoded and computed, the
+    masks once made, the attributes last; memory holds a few frames whatever the length.
 
     `VideoStore.add_written` publishes the finished file; ``discard()`` (safe to call again, and
     after a failure) closes and removes it. ``frames`` is the frames dataset for reading back.
