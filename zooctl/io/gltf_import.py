@@ -45,7 +45,6 @@ _COMPONENT = {
     5126: np.float32,
 }
 _NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
-MAX_INFLUENCES = 8
 READ_FACTOR = 4  # a file's readers may take its accessors' elements this many times --max-elements
 
 
