@@ -175,6 +175,25 @@ def test_only_surface_in_front_gets_weight(scene):
     assert (w[shown] > 0).mean() > 0.9
 
 
+def test_symmetry_is_judged_on_the_reference_shape(scene):
+    """A fit bends the template (displacements, stretched bones): the mirror side is found on the
+    template's shape, which has the character's vertices, not on the bent one."""
+    a, truth, cam, _, _, _ = scene
+    v = a.vertices.astype(np.float64)
+    side, length = int(np.argmin(np.ptp(v, 0))), int(np.argmax(np.ptp(v, 0)))
+    centre = 0.5 * (v[:, side].max() + v[:, side].min())
+    v[v[:, side] > centre, length] += 0.1 * np.ptp(v[:, length])  # one side moved forward
+    bent = dataclasses.replace(a, vertices=v.astype(np.float32))
+    frames, masks, _ = render_unlit(bent, cam, truth)
+    _, own = bake(bent, cam, frames, masks)
+    out, ref = bake(bent, cam, frames, masks, reference=a.vertices)
+    assert own["mirrored"] == 0 and ref["mirrored"] > 0.2
+    from zooctl.errors import InputError
+
+    with pytest.raises(InputError, match="reference shape"):
+        bake(bent, cam, frames, masks, reference=a.vertices[:-1])
+
+
 def test_a_uv_texture_is_baked_where_the_uvs_allow(scene):
     a, truth, cam, frames, masks, fids = scene
     atlas = per_face_atlas(a)

@@ -530,7 +530,7 @@ def write_outputs(
     if result.config.texture:
         if reporter is not None:
             reporter.message("baking the video's colours onto the character")
-        asset, texture = bake_colours(asset, cam, result.video)
+        asset, texture = bake_colours(asset, cam, result.video, result.template)
         result.timings["texture"] = texture.pop("seconds")
     fits.save_character(name, asset)  # with its baked colours: `fits export` writes them again
     files: dict[str, str] = {}

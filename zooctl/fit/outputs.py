@@ -55,13 +55,17 @@ def write_usd(asset: RiggedAsset, camera, path: Path) -> Path:
     return path
 
 
-def bake_colours(asset: RiggedAsset, camera, video) -> tuple[RiggedAsset, dict[str, Any]]:
+def bake_colours(
+    asset: RiggedAsset, camera, video, template: RiggedAsset | None = None
+) -> tuple[RiggedAsset, dict[str, Any]]:
     """The character wearing the colours of ``video`` (a `FitVideo`: its frames inside its masks),
     seen through the fit's ``camera`` at the input resolution, and what the bake did
-    (`zooctl.fit.texture.bake`)."""
+    (`zooctl.fit.texture.bake`). The unseen side is filled judging symmetry on ``template``'s
+    shape when it has the character's vertices (the fit bends the template's symmetry)."""
     from .texture import bake
 
-    return bake(asset, camera, video.frames, video.masks)
+    same = template is not None and template.vertices.shape == asset.vertices.shape
+    return bake(asset, camera, video.frames, video.masks, reference=template.vertices if same else None)
 
 
 def write_glb(asset: RiggedAsset, path: Path) -> Path:

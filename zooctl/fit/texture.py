@@ -12,9 +12,10 @@ animal's, so colours at the mask's edge are often background, and full weight st
 fraction of the mask's size inside it. Colours are averaged in linear RGB.
 
 A sample seen too little (less weight than half a frontal view) is blended with a fill colour:
-that of its mirror image across the character's symmetry plane when the mesh is symmetric and
-the mirror image was seen, else that of the nearest seen sample (rest pose, straight-line
-distance).
+that of its mirror image across the symmetry plane when the mesh is symmetric and the mirror image
+was seen, else that of the nearest seen sample (straight-line distance). Both are judged on a
+reference shape with the character's vertices: the template's (a fit keeps its topology), whose
+symmetry the fit's displacements and stretched bones may have bent, else the character's own.
 
 Where the character has UVs that lie in the unit square without overlapping, the samples are the
 texels of a square texture (PNG, sRGB; texels off every triangle take the nearest baked colour so
@@ -34,6 +35,7 @@ import numpy as np
 import torch
 
 from ..asset import RiggedAsset
+from ..errors import InputError
 
 TEXTURE_SIZE = 512
 EDGE_FRACTION = 0.03  # of the mask's bounding-box diagonal: where a pixel gets full weight
@@ -232,7 +234,6 @@ def fill_unseen(
 def symmetry_plane(vertices: np.ndarray) -> tuple[np.ndarray, float] | None:
     """The mesh's mirror plane (unit normal, offset) when it is symmetric enough to copy colours
     across, else None."""
-    from ..errors import InputError
     from ..rig.priors import find_symmetry_plane
 
     try:
@@ -272,10 +273,13 @@ def bake(
     masks: np.ndarray,
     clip: str = "fit",
     texture_size: int = TEXTURE_SIZE,
+    reference: np.ndarray | None = None,
 ) -> tuple[RiggedAsset, dict[str, Any]]:
     """``asset`` wearing the colours of ``frames`` (T, H, W, 3) uint8 sRGB inside ``masks``
     (T, H, W) bool, seen through ``camera`` (one camera at the frames' size) with its clip
-    ``clip`` (one sample per frame): a UV texture or vertex colours (module docstring). Returns
+    ``clip`` (one sample per frame): a UV texture or vertex colours (module docstring);
+    ``reference`` (V, 3): the shape symmetry and nearness are judged on (default: the asset's
+    bind-pose vertices). Returns
     the new asset (the input one, unchanged, when no frame saw it) and what the bake did:
     mode (``texture``, ``vertex`` or ``none``), the fractions of the surface seen, glimpsed and
     filled from its mirror image, and the seconds it took."""
@@ -285,14 +289,18 @@ def bake(
     if samples is None:
         samples = corner_samples(asset.faces)
     sum_wc, sum_w = observe(asset, camera, frames, masks, samples, clip)
+    shape = asset.vertices if reference is None else np.asarray(reference)
+    if shape.shape != asset.vertices.shape:
+        raise InputError(f"the reference shape has {len(shape)} vertices, the character {asset.num_vertices}")
+    shape = shape.astype(np.float64)
     if mode == "vertex":
         V = asset.num_vertices
         sum_wc = np.stack([np.bincount(samples.vertex, sum_wc[:, c], V) for c in range(3)], 1)
         sum_w = np.bincount(samples.vertex, sum_w, V)
-        points = asset.vertices.astype(np.float64)
+        points = shape
     else:
-        points = samples.points(asset.vertices.astype(np.float64), asset.faces)
-    filled = fill_unseen(points, sum_wc, sum_w, symmetry_plane(asset.vertices))
+        points = samples.points(shape, asset.faces)
+    filled = fill_unseen(points, sum_wc, sum_w, symmetry_plane(shape))
     info: dict[str, Any] = {"mode": mode, "frames": int(len(frames))}
     if filled is None:
         info["mode"] = "none"
