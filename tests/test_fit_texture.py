@@ -441,3 +441,15 @@ def test_fit_bakes_by_default_and_no_texture_keeps_the_templates_colours(small_v
     assert rec["texture"] is None and "texture" not in rec["timings"] and rec["config"]["texture"] is False
     plain = fits.character("plain")
     assert np.array_equal(plain.vertex_colors, template.vertex_colors)
+
+
+def test_uvs_without_a_texture_survive_import(scene, tmp_path):
+    """A template with UVs but no texture keeps its UVs through glTF, so a fit can bake into them."""
+    from zooctl.io.gltf_export import save_glb
+    from zooctl.io.gltf_import import load_gltf
+
+    atlas = dataclasses.replace(per_face_atlas(scene[0]), texture_png=None)
+    back = load_gltf(save_glb(atlas, tmp_path / "uv.glb"), "uv")
+    assert back.texture_png is None and back.uvs is not None
+    assert np.allclose(back.uvs, atlas.uvs, atol=1e-6)
+    assert uv_samples(back.uvs, back.faces, 64) is not None

@@ -14,7 +14,7 @@ What becomes of a file:
 - Each animation becomes a `Clip` sampled at ``fps`` (LINEAR with slerp for rotations, STEP,
   CUBICSPLINE); channels on nodes outside the skeleton and morph-target weights are ignored.
 - Vertex colours come from COLOR_0 times the material's baseColorFactor; a single shared
-  baseColorTexture is kept with TEXCOORD_0.
+  baseColorTexture is kept with TEXCOORD_0, and so is TEXCOORD_0 without any texture.
 """
 
 from __future__ import annotations
@@ -656,6 +656,8 @@ def _load(path: Path, name: str, fps: float) -> RiggedAsset:
         texture = _texture_png(doc, distinct_tex.pop(), warnings)
         if texture is None:
             uv_all = None
+    elif not distinct_tex and all(u is not None for u in parts.uvs):
+        uv_all = np.concatenate(parts.uvs).astype(np.float32)  # no texture: a fit can bake one
 
     clips = _clips(doc, nodes, node_to_joint, rest, order, fps)
     asset = RiggedAsset(
