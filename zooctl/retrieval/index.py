@@ -15,12 +15,11 @@ from typing import Any
 
 import numpy as np
 
-from ..embed.base import DEFAULT_EMBEDDERS, Embedder, embedder_identity, get_embedder
+from ..embed.base import DEFAULT_EMBEDDERS, Embedder, embedder_identity
 from ..errors import StoreError, UsageError
 from ..store import views_h5
+from .embedder_cache import cached_embedder
 from .views import DEFAULT_SIZE, DEFAULT_VIEWS, ViewSet, render_views
-
-_EMBEDDERS: dict[tuple[str, str, tuple], Embedder] = {}
 
 
 def enabled_embedders() -> list[str]:
@@ -28,14 +27,6 @@ def enabled_embedders() -> list[str]:
     v = os.environ.get("ZOOCTL_EMBEDDERS")
     names = [s.strip() for s in v.split(",") if s.strip()] if v is not None else list(DEFAULT_EMBEDDERS)
     return list(dict.fromkeys(names))
-
-
-def cached_embedder(name: str, device: str = "cpu", **options: Any) -> Embedder:
-    """Build an embedder once per process (loading weights is the slow part of a small `bank add`)."""
-    key = (name, device, tuple(sorted(options.items())))
-    if key not in _EMBEDDERS:
-        _EMBEDDERS[key] = get_embedder(name, device=device, **options)
-    return _EMBEDDERS[key]
 
 
 MASK_KINDS = ("mask", "rgb+mask")

@@ -68,7 +68,7 @@ def classify_stored_views(bank, name: str, device: str = "cpu") -> np.ndarray | 
     """(1000,) mean ImageNet probabilities of an asset's stored views, or None without views."""
     from ..errors import StoreError
     from ..store import views_h5
-    from .index import cached_embedder
+    from .embedder_cache import cached_embedder
 
     try:
         sv = views_h5.read_views(views_h5.views_path(bank.root, name), images=True, embedders=[])
