@@ -683,23 +683,12 @@ def _load(path: Path, name: str, fps: float) -> RiggedAsset:
             "generator": str(doc.json.get("asset", {}).get("generator", "")),
             "license": str(doc.json.get("asset", {}).get("copyright", "")),
             "import_warnings": warnings,
+            **_label_extras(doc.json),
         },
     )
     return asset
 
 
-MAX_REPAIRED_FRACTION = 0.05
-
-
-def _repair_unweighted(
-    path: Path, v: np.ndarray, jj: np.ndarray, ww: np.ndarray, warnings: list[str]
-) -> np.ndarray:
-            **_label_extras(doc.json),
-    """Vertices whose weights are all NaN or all zero get the weights of their nearest weighted
-    vertex: real exporters leave a handful of these (Quaternius' Wasp has 6). More than 5% of a
-    primitive, or NaN mixed into otherwise valid rows, is an error."""
-    finite = np.isfinite(ww)
-    row_bad = ~finite.all(1)
 def _label_extras(doc: dict) -> dict[str, str]:
     """The animal label a zooctl export wrote into the asset's extras, so a round trip keeps it."""
     extras = doc.get("asset", {}).get("extras")
@@ -709,6 +698,17 @@ def _label_extras(doc: dict) -> dict[str, str]:
     )
 
 
+MAX_REPAIRED_FRACTION = 0.05
+
+
+def _repair_unweighted(
+    path: Path, v: np.ndarray, jj: np.ndarray, ww: np.ndarray, warnings: list[str]
+) -> np.ndarray:
+    """Vertices whose weights are all NaN or all zero get the weights of their nearest weighted
+    vertex: real exporters leave a handful of these (Quaternius' Wasp has 6). More than 5% of a
+    primitive, or NaN mixed into otherwise valid rows, is an error."""
+    finite = np.isfinite(ww)
+    row_bad = ~finite.all(1)
     if np.any(row_bad & finite.any(1)):
         raise InputError(
             f"{path}: skin weights contain NaN or infinity", hint="fix the weights in the source file"
