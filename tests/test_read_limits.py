@@ -151,10 +151,18 @@ def test_a_stored_record_or_config_that_is_a_fifo_is_refused(tmp_path):
     prior = tmp_path / "prior"
     prior.mkdir()
     _fifo(prior / "config.json")
-    r = library_call(
-        f"from zooctl.store.motion_store import load_prior_dir; load_prior_dir(Path({str(prior)!r}))"
-    )
-    one_clear_line(r, "holds no readable motion prior", "a FIFO", code=1)
+    load = f"from zooctl.store.motion_store import load_prior_dir; load_prior_dir(Path({str(prior)!r}))"
+    one_clear_line(library_call(load), "holds no readable motion prior", "a FIFO", code=1)
+    (prior / "config.json").unlink()
+    (prior / "config.json").write_text(json.dumps({"plugin": "pca", "model": {}}))
+    _fifo(prior / "pca.npz")  # the PCA prior's weights
+    one_clear_line(library_call(load), "pca.npz is a FIFO", code=1)
+    cache = store / "videos" / "v.cache"
+    cache.mkdir(parents=True)
+    _fifo(cache / "query-k4-s128.npz")  # a FIFO as `bank search`'s query cache: a cache miss
+    call = f"from zooctl.retrieval.query_cache import read_cache; from zooctl.store.videos import VideoStore; print(read_cache(VideoStore.open({str(store)!r}), 'v', 4, 128))"
+    r = library_call(call)
+    assert (r.code, r.out) == (0, "None\n"), r
 
 
 def test_a_fifo_as_mask_source_is_refused(tmp_path):

@@ -33,6 +33,9 @@ def kind_of(mode: int) -> str:
 class NotRegularFileError(OSError):
     """Something other than a regular file where a file's bytes are expected."""
 
+    def __str__(self) -> str:
+        return f"{self.filename} is {self.strerror}"
+
 
 class TooLargeError(OSError):
     """A file over a read limit: ``strerror`` says by how much, `hint` what to do."""
@@ -44,6 +47,9 @@ class TooLargeError(OSError):
         )
         self.hint = read_hint(limit, size)
 
+    def __str__(self) -> str:
+        return f"{self.filename} is {self.strerror}"
+
 
 def read_regular(path: str | Path, limit: str = "max_json_mb") -> bytes:
     """The bytes of the regular file ``path``, at most read limit ``limit`` of them.
@@ -51,7 +57,15 @@ def read_regular(path: str | Path, limit: str = "max_json_mb") -> bytes:
     Raises `NotRegularFileError` for a FIFO, socket, device or directory (never blocks on one),
     `TooLargeError` for a file over the limit (without reading it), and the usual OSErrors
     (FileNotFoundError, PermissionError)."""
-    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    except OSError as exc:  # a socket cannot be opened at all (ENXIO): say what it is
+        mode = os.stat(path).st_mode if exc.errno == errno.ENXIO else stat.S_IFREG
+        if not stat.S_ISREG(mode):
+            raise NotRegularFileError(
+                errno.EINVAL, f"{kind_of(mode)}, not a regular file", str(path)
+            ) from None
+        raise
     try:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):

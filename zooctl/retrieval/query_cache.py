@@ -61,8 +61,11 @@ def _expected_meta(videos, name: str) -> dict:
 
 def read_cache(videos, name: str, k: int, size: int) -> CachedQuery | None:
     """The cached query of ``name`` at this sampling, or None (absent, stale or unreadable)."""
+    path = cache_path(videos, name, k, size)
+    if not path.is_file():  # absent, or a FIFO or device (np.load would block on it)
+        return None
     try:
-        with np.load(cache_path(videos, name, k, size), allow_pickle=False) as z:
+        with np.load(path, allow_pickle=False) as z:
             meta = json.loads(str(z["meta"]))
             if {key: meta.get(key) for key in ("version", "margin", "video")} != _expected_meta(videos, name):
                 return None

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import NotFoundError, StoreError
+from ..files import regular_size
 from ..names import check_name
 from .fs import _pid_alive, fsync_dir, read_regular, store_lock, writing
 from .indexed import NamedStore
@@ -33,7 +34,20 @@ def load_prior_dir(path: Path, device: str = "cpu") -> Any:
         raise StoreError(
             f"{path} holds no readable motion prior: {exc}", hint="give a folder made by `zooctl motion train`"
         ) from None
+    _check_regular(Path(path))
     return _create(cfg, Path(path), device)
+
+
+def _check_regular(folder: Path) -> None:
+    """Every file of a prior folder is a regular one: its plugin's loader (torch, numpy) would block
+    on a FIFO in place of its weights, and read a link to /dev/zero without end."""
+    for p in folder.iterdir():
+        if p.is_dir():
+            continue
+        try:
+            regular_size(p, "the motion prior file", None, StoreError)
+        except FileNotFoundError:  # a dangling link: the loader says what is missing
+            continue
 
 
 def _create(cfg: dict[str, Any], path: Path, device: str) -> Any:
