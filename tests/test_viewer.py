@@ -384,3 +384,33 @@ def test_bench_table_opens_each_fit(fit, browser, tmp_path):
     assert browser.errors() == []
     r = zooctl("view", "--bench", str(tmp_path / "nothing"), "--export", str(tmp_path / "x"), store=store)
     assert r.code != 0 and "holds no benchmark videos" in r.err
+
+
+def test_animate_folder_beside_the_real_clip(fit, browser, tmp_path):
+    """`animate`'s samples (a PCA prior: seconds to train) beside the character's own clip."""
+    store, _ = fit
+    r = zooctl("motion", "train", "--assets", "quadruped", "--kind", "pca", "--name", "pca", store=store)
+    assert r.code == 0, r.err
+    folder = tmp_path / "anim"
+    args = ["animate", "quadruped", "--sample", "2", "--frames", "20", "--prior", "pca", "--no-preview"]
+    r = zooctl(*args, "--formats", "glb", "--out", str(folder), store=store)
+    assert r.code == 0, r.err
+    out = tmp_path / "anim-view"
+    r = zooctl("view", "--animate", str(folder), "--export", str(out), store=store)
+    assert r.code == 0, r.err
+    _open(browser, (out / "index.html").as_uri())
+    titles = browser.evaluate(
+        "Array.from(document.querySelectorAll('#panels strong')).map(e => e.textContent)"
+    )
+    assert titles[0].startswith("real: ") and titles[1:] == ["quadruped_sample00", "quadruped_sample01"]
+    browser.evaluate("zooctlShow(0.0)")
+    browser.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))", True)
+    before = [browser.screenshot(f"[data-panel='{i}'] canvas") for i in range(3)]
+    assert all(_drawn(b).mean() > 0.005 for b in before), "a panel draws no character"
+    browser.evaluate("zooctlShow(0.4)")
+    browser.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))", True)
+    after = [browser.screenshot(f"[data-panel='{i}'] canvas") for i in range(3)]
+    assert all((_drawn(a) != _drawn(b)).mean() > 0.0005 for a, b in zip(after, before, strict=True))
+    assert browser.errors() == []
+    r = zooctl("view", "--animate", str(tmp_path), "--export", str(tmp_path / "x"), store=store)
+    assert r.code != 0 and "holds no animate.json" in r.err

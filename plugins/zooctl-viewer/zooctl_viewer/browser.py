@@ -13,6 +13,7 @@ import io
 import json
 import os
 import shutil
+import signal
 import socket
 import struct
 import subprocess
@@ -138,7 +139,7 @@ class Chromium:
         if exe is None:
             raise BrowserError("no chromium executable (apt-get install chromium, or set ZOOCTL_CHROMIUM)")
         self.timeout = timeout
-        self.profile = tempfile.TemporaryDirectory(prefix="zooctl-chromium-")
+        self.profile = tempfile.TemporaryDirectory(prefix="zooctl-chromium-", ignore_cleanup_errors=True)
         self.proc = subprocess.Popen(
             [
                 exe,
@@ -150,6 +151,7 @@ class Chromium:
             ],
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
+            start_new_session=True,  # its own process group: close() ends its helper processes too
         )
         self.events: list[dict[str, Any]] = []
         self._id = 0
@@ -268,6 +270,10 @@ class Chromium:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
+        try:  # helpers (renderer, GPU process) left in the group this browser was started in
+            os.killpg(self.proc.pid, signal.SIGTERM)
+        except (ProcessLookupError, PermissionError):
+            pass
         self.profile.cleanup()
 
     def __enter__(self) -> Chromium:

@@ -19,31 +19,52 @@ def run_view(
     port: int,
     no_browser: bool,
     bench: Path | None = None,
+    animate: Path | None = None,
 ) -> None:
     from zooctl.cli._common import console, store_root
 
-    if (fit is not None) + bank + (bench is not None) != 1:
+    if (fit is not None) + bank + (bench is not None) + (animate is not None) != 1:
         raise UsageError(
-            "give a FIT to view, or --bank for the bank gallery, or --bench DIR for a benchmark's table",
+            "give a FIT to view, or --bank for the bank gallery, --bench DIR for a benchmark's table, "
+            "or --animate DIR for sampled motions",
             hint="`zooctl fits list` names the fits",
         )
     if tags and not bank:
         raise UsageError("--tag filters the bank gallery: use it with --bank")
     store = store_root()
-    what = f"fit {fit}" if fit else "the bank gallery" if bank else f"the benchmark table of {bench}"
+    what = (
+        f"fit {fit}"
+        if fit
+        else "the bank gallery"
+        if bank
+        else f"the benchmark table of {bench}"
+        if bench
+        else f"the motions in {animate}"
+    )
     if export is not None:
-        index = _build(store, fit, tags, Path(export), bench)
+        index = _build(store, fit, tags, Path(export), bench, animate)
         console.print(f"wrote {index} (open it in a browser; it works from disk)", highlight=False)
         return
     with tempfile.TemporaryDirectory(prefix="zooctl-view-") as d:
-        _build(store, fit, tags, Path(d), bench)
+        _build(store, fit, tags, Path(d), bench, animate)
         _serve(Path(d), host, port, no_browser, what)
 
 
-def _build(store: Path, fit: str | None, tags: list[str], out: Path, bench: Path | None = None) -> Path:
+def _build(
+    store: Path,
+    fit: str | None,
+    tags: list[str],
+    out: Path,
+    bench: Path | None = None,
+    animate: Path | None = None,
+) -> Path:
     from .site import check_out_dir
 
     check_out_dir(out)
+    if animate is not None:
+        from .animate_site import load_animate, write_animate_site
+
+        return write_animate_site(load_animate(store, animate), out)
     if bench is not None:
         from .bench_site import bench_fits, write_bench_site
 

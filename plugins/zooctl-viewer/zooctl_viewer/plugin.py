@@ -20,6 +20,11 @@ def register_commands(cli):
             "--bench",
             help="Show the benchmark table of `zooctl bench run DIR` (this benchmark folder), each row opening its fit.",
         ),
+        animate: Path = typer.Option(
+            None,
+            "--animate",
+            help="Show the motions `zooctl animate` sampled into this folder beside the character's real clip.",
+        ),
         tag: list[str] = typer.Option(
             None, "--tag", help="With --bank: only assets with this tag (repeat for several)."
         ),
@@ -34,7 +39,7 @@ def register_commands(cli):
     ) -> None:
         """Look at a fit in 3D in a browser: the character beside its video, masks and silhouette,
         frame slider, skeleton, the input camera and free views, retrieval and metrics. --bank
-        shows the bank as a gallery, --bench DIR a benchmark's table."""
+        shows the bank as a gallery, --bench DIR a benchmark's table, --animate DIR sampled motions."""
         from .command import run_view
 
-        run_view(fit, bank, tag or [], export, host, port, no_browser, bench)
+        run_view(fit, bank, tag or [], export, host, port, no_browser, bench, animate)

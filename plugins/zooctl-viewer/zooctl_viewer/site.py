@@ -40,7 +40,7 @@ def static_files(out: Path) -> None:
     """Copy the pages' scripts (a benchmark table's fit pages use the fit script from its
     folder), the shared script and style, and the vendored three.js (with its licence) into ``out``."""
     root = resources.files("zooctl_viewer") / "static"
-    for rel in ("viewer.css", "common.js", "fit.js", "bank.js", "bench.js"):
+    for rel in ("viewer.css", "common.js", "fit.js", "bank.js", "bench.js", "animate.js"):
         write_bytes_atomic(out / rel, (root / rel).read_bytes())
     for rel in ("three.bundle.js", "three.LICENSE", "VERSION"):
         write_bytes_atomic(out / "vendor" / rel, (root / "vendor" / rel).read_bytes())

@@ -1,6 +1,7 @@
 // The fit page: the fitted character in 3D beside the input video, one frame slider for both.
 "use strict";
 (function () {
+  performance.mark("zooctl:scripts-loaded");  // three.js, the data and this script are parsed
   const D = window.ZOOCTL_VIEW;
   if (!D || D.kind !== "fit") { ZV.fail("data.js is missing or is not a fit's data"); return; }
   const R = D.record;
@@ -135,7 +136,7 @@
     if (dirty && model) {
       renderer.render(scene, mode === "input" ? inputCam : freeCam);
       dirty = false;
-      if (!window.ZOOCTL_FIRST_FRAME_MS) firstFrameDrawn();
+      if (!window.ZOOCTL_FIRST_FRAME_MS) { performance.mark("zooctl:first-render"); firstFrameDrawn(); }
     }
     requestAnimationFrame(tick);
   }
@@ -160,6 +161,7 @@
   window.zooctlShow = function (i, view) { setPlaying(false); setMode(view || mode); setFrame(i); };
 
   ZV.parseGLB(D.glb).then(function (gltf) {
+    performance.mark("zooctl:glb-parsed");
     model = gltf.scene;
     ZV.prepareModel(model);
     scene.add(model);
