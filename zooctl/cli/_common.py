@@ -12,6 +12,19 @@ from typing import Any
 import typer
 from rich.console import Console
 
+
+def _own_suggestions() -> dict[str, Any]:
+    """click >= 8.2 says "Did you mean 'list'?" itself; typer's own suggestion would say it twice."""
+    import inspect
+
+    import click
+
+    supports = "suggest_commands" in inspect.signature(typer.Typer).parameters
+    return {"suggest_commands": False} if supports and hasattr(click.exceptions, "NoSuchCommand") else {}
+
+
+APP_OPTS = _own_suggestions()
+
 console = Console()
 err_console = Console(stderr=True)
 

@@ -8,6 +8,7 @@ import typer
 
 from . import batch_opts
 from ._common import (
+    APP_OPTS,
     JsonOpt,
     add_rm_command,
     add_upkeep_commands,
@@ -22,7 +23,9 @@ from ._common import (
 )
 
 app = typer.Typer(
-    help="Manage the bank of rigged, animated assets (templates for fitting).", no_args_is_help=True
+    **APP_OPTS,
+    help="Manage the bank of rigged, animated assets (templates for fitting).",
+    no_args_is_help=True,
 )
 
 

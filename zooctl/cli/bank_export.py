@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import typer
 
 from ._common import JsonOpt, console, print_json, store_root
@@ -28,8 +26,11 @@ def export(
     all_clips: bool = typer.Option(
         False, "--all-clips", help="Export every clip (the default when no --clip is given)."
     ),
-    output: Path = typer.Option(
-        None, "--output", "-o", help="File or existing folder. Default: NAME.suffix here."
+    output: str = typer.Option(
+        None,
+        "--output",
+        "-o",
+        help="File, or folder (an existing one, or any path ending in /). Default: NAME.suffix here.",
     ),
     camera: bool = typer.Option(
         False, "--camera", help="USD only: add a camera (/Camera) framing the clips."

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import typer
 
-from ._common import ArticulationOpt, JsonOpt, console, print_json
+from ._common import APP_OPTS, ArticulationOpt, JsonOpt, console, print_json
 
-app = typer.Typer(help="Benchmark renderers and the articulation model.", no_args_is_help=True)
+app = typer.Typer(**APP_OPTS, help="Benchmark renderers and the articulation model.", no_args_is_help=True)
 
 
 @app.command("render")

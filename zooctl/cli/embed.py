@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from ._common import JsonOpt, console, print_json, store_root
+from ._common import APP_OPTS, JsonOpt, console, print_json, store_root
 
 RANDOMIZE_HELP = (
     "Domain randomisation of the training animals: any hue, flat facets half of the time, colour noise."
@@ -17,7 +17,7 @@ BANK_HELP = (
     "body plan where a tag names one, e.g. --tag biped-dinosaur) mixed with the procedural ones."
 )
 
-app = typer.Typer(help="Train retrieval embedders.", no_args_is_help=True)
+app = typer.Typer(**APP_OPTS, help="Train retrieval embedders.", no_args_is_help=True)
 
 
 @app.command("train")

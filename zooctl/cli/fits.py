@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import typer
 
-from ._common import JsonOpt, console, print_json, print_skipped, print_table, store_root
+from ._common import APP_OPTS, JsonOpt, console, print_json, print_skipped, print_table, store_root
 
-app = typer.Typer(help="List, show, export and remove fits.", no_args_is_help=True)
+app = typer.Typer(**APP_OPTS, help="List, show, export and remove fits.", no_args_is_help=True)
 
 
 def _fits():
@@ -73,10 +71,10 @@ def show(name: str = typer.Argument(...), json_out: bool = JsonOpt) -> None:
 @app.command("export")
 def export(
     name: str = typer.Argument(...),
-    out: Path = typer.Option(
+    out: str = typer.Option(
         ...,
         "--out",
-        help="File to write (its suffix picks the format unless --format), or an existing folder.",
+        help="File to write (its suffix picks the format unless --format), or a folder (an existing one, or any path ending in /).",
     ),
     fmt: str = typer.Option(
         None, "--format", help="Any registered exporter's format: usd, usda, usdz, glb, bvh, a plugin's."

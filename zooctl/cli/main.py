@@ -12,13 +12,14 @@ from rich.markup import escape
 
 from .. import __version__
 from ..errors import ZooctlError
-from ._common import err_console, state
+from ._common import APP_OPTS, err_console, state
 
 # Before torch is imported anywhere: a spinning OpenMP pool slows every render on a busy machine
 # (BENCHMARKS.md, "Differentiable renderers"); passive waiting costs nothing when idle.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 app = typer.Typer(
+    **APP_OPTS,
     name="zooctl",
     help="Rigged 3D characters from casual animal videos, and new motions for them.",
     no_args_is_help=True,

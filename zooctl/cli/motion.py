@@ -7,9 +7,11 @@ import time
 import typer
 
 from ..motion.temperature import default_temperature, draws_diversely
-from ._common import JsonOpt, console, err_console, print_json, print_table, store_root
+from ._common import APP_OPTS, JsonOpt, console, err_console, print_json, print_table, store_root
 
-app = typer.Typer(help="Train and manage generative motion priors (Ponymation).", no_args_is_help=True)
+app = typer.Typer(
+    **APP_OPTS, help="Train and manage generative motion priors (Ponymation).", no_args_is_help=True
+)
 
 
 def _store():

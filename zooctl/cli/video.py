@@ -7,10 +7,21 @@ from pathlib import Path
 import typer
 
 from . import _common
-from ._common import JsonOpt, console, err_console, print_json, print_table, stage_progress, store_root
+from ._common import (
+    APP_OPTS,
+    JsonOpt,
+    console,
+    err_console,
+    print_json,
+    print_table,
+    stage_progress,
+    store_root,
+)
 
 app = typer.Typer(
-    help="Turn videos into frames, masks and optical flow, stored once for every fit.", no_args_is_help=True
+    **APP_OPTS,
+    help="Turn videos into frames, masks and optical flow, stored once for every fit.",
+    no_args_is_help=True,
 )
 
 

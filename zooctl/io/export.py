@@ -33,16 +33,18 @@ def _exporter_for_suffix(suffix: str) -> tuple[ExporterSpec, str] | None:
 
 
 def resolve_export(
-    path: Path | None, fmt: str | None, name: str, default_format: str | None = None
+    path: str | Path | None, fmt: str | None, name: str, default_format: str | None = None
 ) -> tuple[ExporterSpec, str, Path]:
     """(exporter, format, file path) for ``-o path`` and ``--format fmt``; each defaults from the
-    other (module docstring), then ``default_format``. Raises `UsageError` saying what to change."""
+    other (module docstring), then ``default_format``. A ``path`` string ending in a slash names a
+    folder even before it exists. Raises `UsageError` saying what to change."""
     from ..plugins import get_registry
 
+    slash = isinstance(path, str) and path.endswith(("/", os.sep))
     path = None if path is None else Path(path)
     if path is not None:
         check_not_special(path)  # before a suffix is added: `-o /dev/full` is not /dev/full.usdz
-    is_dir = path is not None and path.is_dir()
+    is_dir = path is not None and (slash or path.is_dir())
     if fmt is None and path is not None and path.suffix and not is_dir:
         found = _exporter_for_suffix(path.suffix)
         if found is None:
