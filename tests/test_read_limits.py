@@ -263,6 +263,9 @@ def test_a_video_file_declaring_huge_masks_is_refused(tmp_path):
         f"from zooctl.store.videos import VideoStore; VideoStore.open({str(root)!r}).get('clip')"
     )
     one_clear_line(r, "clip.h5 declares arrays of 7,8", "over the read limit", code=1)
+    # the limit is on what one read takes: the frames alone are still there to read
+    frames = f"from zooctl.store.videos import VideoStore; print(len(VideoStore.open({str(root)!r}).get('clip', ('frames',)).frames))"
+    assert library_call(frames).out == "6\n"
 
 
 def test_a_sparse_index_is_refused_and_repair_rebuilds_it(bank_store):

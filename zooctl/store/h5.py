@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import os
 import stat
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -18,26 +18,25 @@ from ..limits import check_read
 T = TypeVar("T")
 
 
-def open_h5(path: Path, what: str, hint: str) -> Any:
+def open_h5(path: Path, what: str, hint: str, parts: Iterable[str] | None = None) -> Any:
     """``path`` opened read-only with h5py, once it is known to be safe to read: a regular file
-    (a FIFO would block the HDF5 library forever) within the array read limit, whose datasets
-    declare no more than that limit in all and keep their data inside the file (no external or
-    virtual storage, which could name any other file). Anything else is one `StoreError` naming
-    ``what`` ("asset file") with ``hint``."""
+    (a FIFO would block the HDF5 library forever) whose datasets keep their data inside the file
+    (no external or virtual storage, which could name any other file) and, of them, those under
+    ``parts`` (names of datasets or groups, all of them when None: what the caller reads whole)
+    declare no more than the array read limit. Anything else is one `StoreError` naming ``what``
+    ("asset file") with ``hint``."""
     import h5py
 
     try:
         st = os.stat(path)
         if not stat.S_ISREG(st.st_mode):
             raise StoreError(f"{what} {path} is {kind_of(st.st_mode)}, not a regular file", hint=hint)
-        check_read(f"{what} {path} is", st.st_size, "max_array_mb", StoreError)
         f = h5py.File(path, "r")
     except OSError as exc:
         raise StoreError(f"{what} {path} is unreadable: {exc}", hint=hint) from None
     try:
-        check_read(
-            f"{what} {path} declares arrays of", declared_bytes(f, path, what), "max_array_mb", StoreError
-        )
+        total = declared_bytes(f, path, what, parts)
+        check_read(f"{what} {path} declares arrays of", total, "max_array_mb", StoreError)
     except StoreError:
         f.close()
         raise
@@ -47,12 +46,14 @@ def open_h5(path: Path, what: str, hint: str) -> Any:
     return f
 
 
-def declared_bytes(f: Any, path: Path, what: str) -> int:
-    """The bytes the datasets of the open file ``f`` take once read, as their shapes and dtypes
-    declare them (variable-length data counts its pointers; the file's size bounds the rest)."""
+def declared_bytes(f: Any, path: Path, what: str, parts: Iterable[str] | None = None) -> int:
+    """The bytes the datasets under ``parts`` (None: all) of the open file ``f`` take once read,
+    as their shapes and dtypes declare them (variable-length data counts its pointers). Refuses a
+    dataset with its data in other files, wherever it is."""
     import h5py
 
     total = 0
+    under = None if parts is None else tuple(parts)
 
     def visit(name: str, obj: Any) -> None:
         nonlocal total
@@ -62,19 +63,23 @@ def declared_bytes(f: Any, path: Path, what: str) -> int:
                     f"{what} {path}: dataset {name} keeps its data in other files, which zooctl never writes",
                     hint="the file is not one zooctl wrote; remove it",
                 )
-            total += math.prod(obj.shape or ()) * obj.dtype.itemsize
+            if under is None or any(name == p or name.startswith(p + "/") for p in under):
+                total += math.prod(obj.shape or ()) * obj.dtype.itemsize
 
     f.visititems(visit)
     return total
 
 
-def read_h5(path: Path, what: str, hint: str, read: Callable[[Any], T]) -> T:
-    """``read(h5py.File)`` on ``path`` opened for reading (`open_h5`: checked first).
+def read_h5(
+    path: Path, what: str, hint: str, read: Callable[[Any], T], parts: Iterable[str] | None = None
+) -> T:
+    """``read(h5py.File)`` on ``path`` opened for reading (`open_h5`: checked first; ``parts``:
+    the datasets or groups ``read`` reads whole, None: all).
 
     A file that cannot be opened, or whose content ``read`` trips over (a missing group, a bad
     dtype), is one `StoreError` naming ``what`` ("asset file") and the ``hint``; a `StoreError`
     that ``read`` raises itself passes through as it is."""
-    with open_h5(path, what, hint) as f:
+    with open_h5(path, what, hint, parts) as f:
         try:
             return read(f)
         except (OSError, KeyError, ValueError, TypeError, AttributeError) as exc:  # damaged inside

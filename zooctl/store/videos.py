@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import math
 import shutil
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -31,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import StoreError
+from ..limits import check_read
 from ..names import check_name
 from .fs import h5_image, temp_path, writing
 from .h5 import open_h5, read_h5
@@ -370,7 +372,8 @@ class VideoWriter:
 def read_video_h5(path: Path, what: tuple[str, ...] = ("frames", "masks", "flow")) -> VideoRecord:
     """Read a stored video; leave out parts with ``what`` (missing parts come back as empty arrays)."""
     hint = "remove it with `zooctl video rm` and add it again"
-    return read_h5(path, "the video file", hint, lambda f: _read_video(f, path, what))
+    parts = ["source_indices", *(p for p in ("frames", "masks", "flow") if p in what)]
+    return read_h5(path, "the video file", hint, lambda f: _read_video(f, path, what), parts)
 
 
 def _read_video(f: Any, path: Path, what: tuple[str, ...]) -> VideoRecord:
@@ -444,10 +447,13 @@ class VideoStore(IndexedStore):
         self.summary(name)
         hint = "remove it with `zooctl video rm` and add it again"
         try:
-            with open_h5(self.path(name), "the video file", hint) as f:
+            with open_h5(self.path(name), "the video file", hint, ["boxes"]) as f:
                 fd, md = f["frames"], f["masks"]
                 _check_frames_masks(self.path(name), fd.shape, md.shape, f["boxes"].shape, hint)
                 idx = np.unique(np.asarray(pick(f["boxes"][()]), np.int64))
+                frame_bytes = math.prod(fd.shape[1:]) * fd.dtype.itemsize + math.prod(md.shape[1:])
+                what = f"the video file {self.path(name)}: {len(idx)} of its frames declare"
+                check_read(what, len(idx) * frame_bytes, "max_array_mb", StoreError)
                 if len(idx) == 0:
                     _, h, w, _ = fd.shape
                     return idx, np.zeros((0, h, w, 3), np.uint8), np.zeros((0, h, w), bool)
