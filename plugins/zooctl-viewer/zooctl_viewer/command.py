@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 import tempfile
 import webbrowser
 from contextlib import contextmanager
@@ -130,9 +131,16 @@ def _serve(site: Path, host: str, port: int, no_browser: bool, what: str) -> Non
     console.file.flush()
     if not no_browser:
         webbrowser.open(url)
+    # A `kill` (SIGTERM) stops it as Ctrl-C does, so the temporary site is removed either way.
+    previous = signal.signal(signal.SIGTERM, _interrupt)
     try:
         server.serve_forever()
     except KeyboardInterrupt:
         console.print("stopped")
     finally:
+        signal.signal(signal.SIGTERM, previous)
         server.server_close()
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt

@@ -35,8 +35,18 @@ window.ZV = (function () {
   }
 
   // Skinned meshes move far from their rest-pose bounds (the fit's root motion): never cull them.
+  // Lambert shading (zooctl's previews shade the same way) instead of the GLB's PBR material: its
+  // shader compiles and draws several times faster where WebGL runs on the CPU (BENCHMARKS.md).
   function prepareModel(root) {
-    root.traverse(function (o) { if (o.isMesh) o.frustumCulled = false; });
+    root.traverse(function (o) {
+      if (!o.isMesh) return;
+      o.frustumCulled = false;
+      const m = o.material;
+      if (m && m.isMeshStandardMaterial) {
+        o.material = new THREE.MeshLambertMaterial({ color: m.color, map: m.map, vertexColors: m.vertexColors, side: m.side });
+        m.dispose();
+      }
+    });
   }
 
   // The posed (skinned) bounding box of every mesh under root, in world space.

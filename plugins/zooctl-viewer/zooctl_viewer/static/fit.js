@@ -21,6 +21,8 @@
   $("camera-note").textContent = "Input view: the fitted camera (" + D.camera.source + "), focal " +
     ZV.fmt(D.camera.fx, 1) + " px. Drag to orbit (switches to the free view, where the orange frustum is the input camera), scroll to zoom.";
   for (const s of ["stage3d", "stage2d"]) $(s).style.aspectRatio = W + " / " + H;
+  $("frame").src = D.frame_files[0];  // loads while three.js reads the GLB
+  $("overlay").src = D.overlay_files[0];
   fillMetrics();
   fillRetrieval();
   fillNotes();
