@@ -1,14 +1,22 @@
 """Video preprocessing benchmarks: segmentation quality (J) on DAVIS and throughput (frames/s).
 
-    .venv/bin/python bench/video.py                      # both parts, all three sequences
-    .venv/bin/python bench/video.py --part quality       # mean region IoU (J): no box, first-frame box
+    .venv/bin/python bench/video.py                      # quality and throughput
+    .venv/bin/python bench/video.py --part quality       # J per video, grid chosen leave-one-out
     .venv/bin/python bench/video.py --part throughput --repeats 3
     .venv/bin/python bench/video.py --part quality --seg-option key_every=5 --flow-size 480  # variants
 
-Quality: each shared DAVIS sequence (``../shared/data/videos/{blackswan,dog,cows}``) is decoded at
-the default size (854 px, DAVIS's own 480p) and segmented by `grabcut` twice: (a) with no box (its
-localiser finds the animal) and (b) with only the box of the first ground-truth mask. J is the mean over frames of |mask & truth| / |mask | truth| (all
-frames, the first included, as DAVIS reports it). Throughput: frames per second of decode (JPEG
+Quality: the seven shared real videos (``../shared/data/videos``; blackswan, dog and cows are the
+ones the segmenter was developed on) are decoded at the default size (854 px, DAVIS's own 480p) and
+segmented by `grabcut` with no box, as `video add` does (its localiser finds the animal), at its
+defaults and at each value of a small grid of settings that were chosen by looking at videos
+(``--grid``; each varied alone), and each setting is also chosen leave-one-video-out: picked on six
+videos, scored on the seventh (`bench/video_quality.py`, `zooctl.video.mask_quality`). J is the
+mean over frames of |mask & truth| / |mask | truth| (all frames, the first included, as DAVIS
+reports it; a frame where both are empty counts 1). ``--box``: also with only the box of the
+first ground-truth mask. Then the composited set (rendered animals over painted-out DAVIS
+backgrounds). Written to ``--out``: the table (quality.md), quality.json, a J-per-frame plot and an
+overlay sheet per video; flow and masks are cached (``--cache``) by frames, settings and source.
+Throughput: frames per second of decode (JPEG
 folder and H.264 file), DIS flow (forward + backward + occlusion check), segmentation, and writing
 the HDF5 store, at 480p and at 256 px, and of a whole `video add` of the JPEG folder (decode, flow,
 no-box masks, store: stages overlap there), with its CPU seconds; each is the median of ``--repeats`` runs.
@@ -28,8 +36,11 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+from video_quality import GRID, Cache  # noqa: E402  (bench/ is on the path when run as a script)
+
 VIDEOS = REPO.parent / "shared" / "data" / "videos"
-SEQUENCES = ("blackswan", "dog", "cows")
+SEQUENCES = ("blackswan", "dog", "cows", "bear", "elephant", "dog-agility", "mallard-water")
+BACKGROUNDS = ("blackswan", "dog", "cows")  # the composited set's background videos
 
 
 def _dis(preset: str):
@@ -56,56 +67,34 @@ def load_truth(seq: str, frames_shape) -> np.ndarray:
     )
 
 
-def quality(sequences, max_size: int, preset: str) -> dict:
-    """J per sequence with (a) no box (the localiser seeds) and (b) the first true mask's box;
-    ``add_fps``: frames per second of decode + flow + no-box masks, what `video add` does."""
-    from zooctl.plugins import get_registry
+def quality(sequences, max_size: int, preset: str, out: Path, cache, grid: dict, box: bool) -> dict:
+    """J per video with no box (the localiser seeds, as `video add` does) at the segmenter's
+    defaults and at each grid setting, chosen leave-one-video-out (`video_quality`); with ``box``
+    also at the defaults given the first true mask's box."""
+    from video_quality import leave_one_out_table, run_real, segment_video
+
     from zooctl.video import cues
     from zooctl.video.decode import decode
-    from zooctl.video.flow import compute_video_flow
 
-    out: dict = {"no_box": {}, "box": {}}
-    for seq in sequences:
-        t0 = time.perf_counter()
+    def load(seq):
         dv = decode(VIDEOS / seq, max_size=max_size)
-        t1 = time.perf_counter()
-        vf = compute_video_flow(_dis(preset), dv.frames)
-        t2 = time.perf_counter()
-        truth = load_truth(seq, dv.frames.shape)
-        for mode, box in (("no_box", None), ("box", cues.box_of(truth[0]))):
-            seg = get_registry().get("segmenter", "grabcut").create(**SEG_OPTIONS)
-            t3 = time.perf_counter()
-            masks = seg.segment(dv.frames, box=box, flow=vf)
-            t4 = time.perf_counter()
-            j = [float((m & g).sum() / max((m | g).sum(), 1)) for m, g in zip(masks, truth)]
-            how = seg.report.get("seeding", [])
-            r = {
-                "frames": len(j),
-                "J": float(np.mean(j)),
-                "J_min": float(np.min(j)),
-                "segment_s": t4 - t3,
-                "seed_frame": seg.report.get("seed_frame"),
-                "re_seeded": how.count("re-seeded"),
-                "empty": how.count("empty"),
-                "classes": [c["name"] for c in seg.report.get("animal_classes", [])],
-            }
-            if mode == "no_box":
-                r["add_fps"] = len(j) / (t1 - t0 + t2 - t1 + t4 - t3)
-                r["decode_s"], r["flow_s"] = t1 - t0, t2 - t1
-            out[mode][seq] = r
-            if _OVERLAYS is not None:
-                _overlay(_OVERLAYS / f"{seq}_{mode}.png", dv.frames, masks, truth)
-            print(
-                f"  {seq:10s} {mode:6s} J={r['J']:.3f} (min {r['J_min']:.3f}) {len(j)} frames, "
-                f"segment {t4 - t3:.1f}s, seed frame {r['seed_frame']}, {r['re_seeded']} re-seeded, "
-                f"{r['empty']} empty, saw {', '.join(r['classes'])}"
-                + (f"; decode+flow+masks {r['add_fps']:.1f} frames/s" if mode == "no_box" else ""),
-                file=sys.stderr,
-                flush=True,
+        return dv.frames, load_truth(seq, dv.frames.shape)
+
+    report = run_real(sequences, load, cache, SEG_OPTIONS, grid, preset, FLOW_SIZE, out)
+    if len(sequences) >= 2:
+        table, report["leave_one_out"] = leave_one_out_table(report)
+        (out / "quality.md").write_text(table)
+        print(table, file=sys.stderr)
+    if box:
+        report["box"] = {}
+        for seq in sequences:
+            frames, truth = load(seq)
+            _, r = segment_video(
+                seq, frames, truth, cache, SEG_OPTIONS, {}, preset, FLOW_SIZE, box=cues.box_of(truth[0])
             )
-    for mode in ("no_box", "box"):
-        out[mode]["mean_J"] = float(np.mean([out[mode][s]["J"] for s in sequences]))
-    return out
+            report["box"][seq] = r
+            print(f"  {seq:14s} first-frame box J={r['J']:.3f} (min {r['J_min']:.3f})", file=sys.stderr)
+    return report
 
 
 def composited_set(assets, frames: int, size: int, tmp: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -138,7 +127,7 @@ def composited_set(assets, frames: int, size: int, tmp: Path) -> dict[str, tuple
     )
     out = {}
     for k, a in enumerate(assets):
-        seq = SEQUENCES[k % len(SEQUENCES)]
+        seq = BACKGROUNDS[k % len(BACKGROUNDS)]
         dv = decode(VIDEOS / seq, max_size=427, max_frames=frames)
         truth = load_truth(seq, dv.frames.shape)
         with np.load(tmp / "made" / a / "video.npz") as z:
@@ -156,53 +145,38 @@ def composited_set(assets, frames: int, size: int, tmp: Path) -> dict[str, tuple
     return out
 
 
-def composited_quality(assets, frames: int, size: int, preset: str) -> dict:
-    """J per composited video, no box and first-frame box (see `composited_set`)."""
-    from zooctl.plugins import get_registry
-    from zooctl.video import cues
-    from zooctl.video.flow import compute_video_flow
+def composited_quality(assets, frames: int, size: int, preset: str, out: Path, cache, box: bool) -> dict:
+    """J per composited video (see `composited_set`) at the defaults, no box (and with ``box``
+    the first true mask's box); curves and overlays beside the real videos'."""
+    from video_quality import curve_plot, overlay_sheet, segment_video
 
-    out: dict = {"no_box": {}, "box": {}}
+    from zooctl.video import cues
+
+    res: dict = {"no_box": {}, "box": {}}
     with tempfile.TemporaryDirectory() as tmp:
         videos = composited_set(assets, frames, size, Path(tmp))
     for name, (rgb, truth) in videos.items():
-        vf = compute_video_flow(_dis(preset), rgb)
-        for mode, box in (("no_box", None), ("box", cues.box_of(truth[0]))):
-            seg = get_registry().get("segmenter", "grabcut").create(**SEG_OPTIONS)
-            masks = seg.segment(rgb, box=box, flow=vf)
-            j = [float((m & g).sum() / max((m | g).sum(), 1)) for m, g in zip(masks, truth)]
-            out[mode][name] = {"frames": len(j), "J": float(np.mean(j)), "J_min": float(np.min(j))}
+        for mode in ("no_box", "box") if box else ("no_box",):
+            hint = cues.box_of(truth[0]) if mode == "box" else None
+            masks, r = segment_video(name, rgb, truth, cache, SEG_OPTIONS, {}, preset, FLOW_SIZE, box=hint)
+            res[mode][name] = r
             print(
-                f"  {name:16s} {mode:6s} J={np.mean(j):.3f} (min {np.min(j):.3f}), "
-                f"saw {', '.join(c['name'] for c in seg.report.get('animal_classes', []))}",
+                f"  {name:16s} {mode:6s} J={r['J']:.3f} (min {r['J_min']:.3f}), saw {', '.join(r['classes'])}",
                 file=sys.stderr,
                 flush=True,
             )
-            if _OVERLAYS is not None:
-                _overlay(_OVERLAYS / f"{name.replace('/', '_')}_{mode}.png", rgb, masks, truth)
+            if mode == "no_box":
+                stem = "composited_" + name.replace("/", "_")
+                overlay_sheet(out / "overlays" / f"{stem}.png", rgb, masks, truth, r["per_frame"], width=320)
+                curve_plot(out / "curves" / f"{stem}.png", name, {"default": r["per_frame"]}, r)
     for mode in ("no_box", "box"):
-        out[mode]["mean_J"] = float(np.mean([v["J"] for k, v in out[mode].items()]))
-    return out
+        if res[mode]:
+            res[mode]["mean_J"] = float(np.mean([v["J"] for v in res[mode].values()]))
+    return res
 
 
-_OVERLAYS: Path | None = None
 FLOW_SIZE: int | None = None  # --flow-size: longest side DIS works at (None: its default)
 SEG_OPTIONS: dict = {}  # --seg-option: the grabcut options measured (defaults when empty)
-
-
-def _overlay(path: Path, frames, masks, truth) -> None:
-    """Six frames: the mask tinted green, the truth outlined red."""
-    import cv2
-
-    tiles = []
-    for i in np.linspace(0, len(frames) - 1, 6).astype(int):
-        f = frames[i].copy()
-        f[masks[i]] = (0.5 * f[masks[i]] + [0, 120, 0]).astype(np.uint8)
-        c, _ = cv2.findContours(truth[i].astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-        cv2.drawContours(f, c, -1, (255, 0, 0), 1)
-        tiles.append(f)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    cv2.imwrite(str(path), np.vstack([np.hstack(tiles[:3]), np.hstack(tiles[3:])])[..., ::-1])
 
 
 def _median_fps(fn, n_frames: int, repeats: int) -> float:
@@ -302,6 +276,13 @@ def throughput_at(
     return r
 
 
+def _value(text: str):
+    try:
+        return json.loads(text)  # numbers, true/false
+    except json.JSONDecodeError:
+        return text
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--part", choices=("all", "quality", "throughput"), default="all")
@@ -319,7 +300,28 @@ def main() -> None:
         help="animals_pack assets rendered over DAVIS backgrounds ('' to skip)",
     )
     ap.add_argument("--composited-frames", type=int, default=30)
-    ap.add_argument("--overlays", type=Path, default=None, help="write mask overlay PNGs here")
+    ap.add_argument(
+        "--out",
+        type=Path,
+        default=REPO / "bench" / "out" / "video_quality",
+        help="quality part: table, JSON, J curves and overlay sheets go here",
+    )
+    ap.add_argument(
+        "--cache",
+        default=str(REPO / "bench" / "out" / "video_cache"),
+        help="flow and masks cached here, keyed by frames, settings and source ('' for none)",
+    )
+    ap.add_argument(
+        "--grid",
+        action="append",
+        default=None,
+        metavar="K=V1,V2,..",
+        help="grabcut setting and the values chosen among leave-one-video-out (repeatable; "
+        "default: "
+        + "; ".join(f"{k}={','.join(map(str, v))}" for k, v in GRID.items())
+        + "; 'none': no grid)",
+    )
+    ap.add_argument("--box", action="store_true", help="quality part: also the first true mask's box")
     ap.add_argument(
         "--seg-option", action="append", default=[], metavar="K=V", help="grabcut option to measure"
     )
@@ -330,36 +332,43 @@ def main() -> None:
         help="longest side DIS flow works at (0: full size; default: DISFlow's)",
     )
     args = ap.parse_args()
-    global _OVERLAYS, FLOW_SIZE
+    global FLOW_SIZE
     FLOW_SIZE = args.flow_size
     for kv in args.seg_option:
         k, _, v = kv.partition("=")
-        try:
-            SEG_OPTIONS[k] = json.loads(v)  # numbers, true/false
-        except json.JSONDecodeError:
-            SEG_OPTIONS[k] = v
-    _OVERLAYS = args.overlays
+        SEG_OPTIONS[k] = _value(v)
+    grid = dict(GRID)
+    if args.grid is not None:
+        grid = {}
+        for kv in args.grid:
+            if kv != "none":
+                k, _, vs = kv.partition("=")
+                grid[k] = tuple(_value(v) for v in vs.split(","))
+    cache = Cache(Path(args.cache) if args.cache else None)
     if not VIDEOS.is_dir():
         sys.exit(f"shared DAVIS videos not found at {VIDEOS}")
     report = {"machine": machine(), "command": " ".join(["python", "bench/video.py", *sys.argv[1:]])}
     print(f"machine: {report['machine']}", file=sys.stderr)
     if args.part in ("all", "quality"):
+        args.out.mkdir(parents=True, exist_ok=True)
         if args.sequences:
-            print("quality (grabcut: no box, then a first-frame box):", file=sys.stderr)
-            report["quality"] = q = quality(args.sequences.split(","), args.max_size, args.preset)
-            print(
-                f"  mean J: no box {q['no_box']['mean_J']:.3f}, first-frame box {q['box']['mean_J']:.3f}",
-                file=sys.stderr,
+            print("quality (grabcut, no box; each grid setting varied alone):", file=sys.stderr)
+            report["quality"] = quality(
+                args.sequences.split(","), args.max_size, args.preset, args.out, cache, grid, args.box
             )
         if args.composited:
             print("quality on rendered animals over painted-out DAVIS backgrounds:", file=sys.stderr)
             report["composited"] = c = composited_quality(
-                args.composited.split(","), args.composited_frames, 320, args.preset
+                args.composited.split(","),
+                args.composited_frames,
+                320,
+                args.preset,
+                args.out,
+                cache,
+                args.box,
             )
-            print(
-                f"  mean J: no box {c['no_box']['mean_J']:.3f}, first-frame box {c['box']['mean_J']:.3f}",
-                file=sys.stderr,
-            )
+            print(f"  mean J, no box: {c['no_box']['mean_J']:.3f}", file=sys.stderr)
+        (args.out / "quality.json").write_text(json.dumps(report, indent=1))
     if args.part in ("all", "throughput"):
         print(f"throughput ({args.throughput_sequence}, median of {args.repeats}):", file=sys.stderr)
         report["throughput"] = throughput(
