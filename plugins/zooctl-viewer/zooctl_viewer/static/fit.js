@@ -228,23 +228,26 @@
   function fillRetrieval() {
     const cands = R.retrieval || [];
     $("template").textContent = cands.length
-      ? "Template " + R.template + ", chosen from " + cands.length + " retrieved candidates (score: embedding distance, lower is closer; trial IoU: mask IoU after a short trial fit, higher is better)."
+      ? "Template " + R.template + ", chosen from " + cands.length + " retrieved candidates, ranked by retrieval's score (the embedders' distances fused; lower ranks first) and tried by a short trial fit each (trial IoU: its mask IoU, the best goes on)."
       : "Template " + R.template + " was given (--template): no retrieval ran.";
     if (!cands.length) return;
     const t = $("retrieval");
-    t.appendChild(ZV.el("tr", {}, [ZV.el("th", { text: "candidate" }), ZV.el("th", { text: "score" }), ZV.el("th", { text: "trial IoU" })]));
+    t.appendChild(ZV.el("tr", {}, [ZV.el("th", { text: "candidate" }), ZV.el("th", { text: "score" }),
+      ZV.el("th", { text: "trial IoU" }), ZV.el("th", { text: "embedder distances" })]));
     cands.forEach(function (c) {
+      const dist = Object.keys(c.distances || {}).map(function (k) { return k + " " + ZV.fmt(c.distances[k]); }).join(", ");
       t.appendChild(ZV.el("tr", { class: c.name === R.template ? "chosen" : "" }, [
         ZV.el("td", { text: c.name + (c.name === R.template ? " (chosen)" : "") }),
         ZV.el("td", { class: "num", text: ZV.fmt(c.score) }),
         ZV.el("td", { class: "num", text: ZV.fmt(c.trial_iou) }),
+        ZV.el("td", { class: "small", text: dist }),
       ]));
     });
   }
 
   function fillNotes() {
     const notes = (R.notes || []).slice();
-    if (R.mask_source) notes.push("masks: " + R.mask_source);
+    if (R.mask_source) notes.push("mask source: " + R.mask_source + (R.stored_video ? " (stored video " + R.stored_video + ")" : ""));
     if (!notes.length) notes.push("none");
     notes.forEach(function (n) { $("notes").appendChild(ZV.el("li", { text: n })); });
   }
