@@ -4,6 +4,7 @@
     .venv/bin/python bench/video.py --part quality       # J per video, grid chosen leave-one-out
     .venv/bin/python bench/video.py --part throughput --repeats 3
     .venv/bin/python bench/video.py --part quality --seg-option key_every=5 --flow-size 480  # variants
+    .venv/bin/python bench/video.py --part length --lengths 5,20,60 --repeats 1   # `video add` by length
 
 Quality: the seven shared real videos (``../shared/data/videos``; blackswan, dog and cows are the
 ones the segmenter was developed on) are decoded at the default size (854 px, DAVIS's own 480p) and
@@ -20,6 +21,9 @@ Throughput: frames per second of decode (JPEG
 folder and H.264 file), DIS flow (forward + backward + occlusion check), segmentation, and writing
 the HDF5 store, at 480p and at 256 px, and of a whole `video add` of the JPEG folder (decode, flow,
 no-box masks, store: stages overlap there), with its CPU seconds; each is the median of ``--repeats`` runs.
+Length: `zooctl video add` with the defaults of 1080p 30 fps clips of 5, 20 and 60 s made from the
+DAVIS dog (upscaled and looped with OpenCV, in the temp folder), each in a child process: wall and
+CPU seconds, peak memory (the child's ru_maxrss) and the frames its frame budget kept.
 """
 
 from __future__ import annotations
@@ -276,6 +280,106 @@ def throughput_at(
     return r
 
 
+def make_clip(path: Path, seconds: float, seq: str = "dog", fps: float = 30.0, size=(1920, 1080)) -> Path:
+    """A ``seconds``-long 1080p clip at ``fps``: the shared DAVIS frames of ``seq`` upscaled with
+    OpenCV and looped back and forth (no jump at the loop), written with OpenCV's MPEG-4 encoder."""
+    import cv2
+
+    from zooctl.video.decode import image_files
+
+    if path.exists():
+        return path
+    files = image_files(VIDEOS / seq / "JPEGImages")
+    frames = [cv2.resize(cv2.imread(str(f)), size, interpolation=cv2.INTER_CUBIC) for f in files]
+    order = list(range(len(frames))) + list(range(len(frames) - 2, 0, -1))
+    tmp = path.with_suffix(".part.mp4")
+    out = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), fps, size)
+    for i in range(int(round(seconds * fps))):
+        out.write(frames[order[i % len(order)]])
+    out.release()
+    tmp.replace(path)
+    return path
+
+
+def run_child(args: list[str], env: dict | None = None, cwd: Path | None = None) -> dict:
+    """Run ``args`` in a child process: its wall seconds, CPU seconds and peak RSS (ru_maxrss)."""
+    import os
+    import subprocess
+
+    t0 = time.perf_counter()
+    p = subprocess.Popen(
+        args, cwd=cwd, env={**os.environ, **(env or {})}, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    _, status, ru = os.wait4(p.pid, 0)
+    wall = time.perf_counter() - t0
+    out, err = p.stdout.read().decode(), p.stderr.read().decode()
+    p.returncode = os.waitstatus_to_exitcode(status)
+    if p.returncode:
+        raise RuntimeError(f"{' '.join(args)} failed ({p.returncode}): {err[-2000:]}")
+    return {
+        "wall_s": wall,
+        "cpu_s": ru.ru_utime + ru.ru_stime,
+        "peak_mb": ru.ru_maxrss / 1024,
+        "out": out,
+        "err": err,
+    }
+
+
+def length_sweep(lengths, repeats: int, extra: list[str], source_tree: Path | None) -> dict:
+    """`zooctl video add CLIP` of 1080p 30 fps clips of each length (seconds), with the defaults
+    (plus ``extra`` options): wall time, CPU time, peak memory of the process, frames kept; the
+    median of ``repeats`` runs each. ``source_tree``: run another checkout's zooctl (a baseline)."""
+    import os
+    import shutil
+
+    tmp = Path(tempfile.gettempdir()) / "zooctl-bench-video-length"
+    tmp.mkdir(exist_ok=True)
+    env = {"PYTHONPATH": str(source_tree or REPO), "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "2")}
+    out = {}
+    for seconds in lengths:
+        clip = make_clip(tmp / f"dog_{seconds:g}s_1080p30.mp4", seconds)
+        runs = []
+        for _ in range(repeats):
+            store = tmp / f"store-{seconds:g}s"
+            shutil.rmtree(store, ignore_errors=True)
+            cmd = [
+                sys.executable,
+                "-m",
+                "zooctl",
+                "--store",
+                str(store),
+                "video",
+                "add",
+                str(clip),
+                "--json",
+                *extra,
+            ]
+            try:
+                r = run_child(cmd, env, cwd=source_tree or REPO)  # `-m` imports from the cwd first
+            except RuntimeError as exc:
+                runs.append({"error": str(exc).splitlines()[-1][:300]})
+                break
+            summary = json.loads(r.pop("out"))
+            r.pop("err")
+            runs.append({**r, "frames": summary["frames"], "fps": summary["fps"]})
+        ok = [r for r in runs if "error" not in r]
+        if not ok:
+            out[f"{seconds:g}s"] = runs[0]
+            print(f"  {seconds:g} s: {runs[0]['error']}", file=sys.stderr, flush=True)
+            continue
+        med = {k: statistics.median(r[k] for r in ok) for k in ("wall_s", "cpu_s", "peak_mb")}
+        med.update(frames=ok[0]["frames"], fps=ok[0]["fps"], runs=len(ok))
+        med["wall_s_per_frame"] = med["wall_s"] / med["frames"]
+        out[f"{seconds:g}s"] = med
+        print(
+            f"  {seconds:g} s clip: kept {med['frames']} frames at {med['fps']:g} fps, wall {med['wall_s']:.1f} s "
+            f"({med['wall_s_per_frame']:.2f} s/frame), CPU {med['cpu_s']:.1f} s, peak {med['peak_mb']:.0f} MB",
+            file=sys.stderr,
+            flush=True,
+        )
+    return out
+
+
 def _value(text: str):
     try:
         return json.loads(text)  # numbers, true/false
@@ -285,7 +389,18 @@ def _value(text: str):
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--part", choices=("all", "quality", "throughput"), default="all")
+    ap.add_argument("--part", choices=("all", "quality", "throughput", "length"), default="all")
+    ap.add_argument("--lengths", default="5,20,60", help="clip lengths in seconds for --part length")
+    ap.add_argument(
+        "--add-option",
+        action="append",
+        default=[],
+        metavar="OPT",
+        help="extra `video add` option (length part)",
+    )
+    ap.add_argument(
+        "--baseline", type=Path, default=None, help="another checkout's tree to time (length part)"
+    )
     ap.add_argument("--sequences", default=",".join(SEQUENCES), help="DAVIS sequences ('' to skip)")
     ap.add_argument(
         "--max-size", type=int, default=854, help="frame size for the quality part (854: DAVIS 480p)"
@@ -374,6 +489,10 @@ def main() -> None:
         report["throughput"] = throughput(
             args.throughput_sequence, (854, 256), args.repeats, args.preset, args.seg_frames
         )
+    if args.part == "length":
+        lengths = [float(x) for x in args.lengths.split(",")]
+        print(f"video add of 1080p 30 fps clips (median of {args.repeats}):", file=sys.stderr)
+        report["length"] = length_sweep(lengths, args.repeats, args.add_option, args.baseline)
     print(json.dumps(report, indent=1))
 
 
