@@ -116,11 +116,18 @@ def store_video(
         return name
     if reporter is not None:
         reporter.message(f"adding {path.name} to the video store as {name!r} (decode, flow, masks)")
-    return add_planned_video(path, store_root, masks, box, opts)
+    return add_planned_video(
+        path, store_root, masks, box, opts, None if reporter is None else reporter.message
+    )
 
 
 def add_planned_video(
-    path: Path, store_root: Path, masks: str | None, box: tuple[float, float, float, float] | None, opts: Any
+    path: Path,
+    store_root: Path,
+    masks: str | None,
+    box: tuple[float, float, float, float] | None,
+    opts: Any,
+    notify: Any = None,
 ) -> str:
     """Add the video at ``path`` as `plan_stored_video` planned (``opts``); returns its stored name.
     Another fit may have stored a video under that name since the plan (two fits of one file
@@ -129,7 +136,7 @@ def add_planned_video(
     from ..video.ingest import add_video
 
     try:
-        add_video(VideoStore.open(store_root), path, opts)
+        add_video(VideoStore.open(store_root), path, opts, notify=notify)  # told what the budget kept
         return opts.name
     except AlreadyExistsError:
         name, reused, opts = plan_stored_video(path, store_root, masks, box)
