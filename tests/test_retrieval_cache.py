@@ -168,9 +168,9 @@ def _use_silhouette(monkeypatch, blur: float):
     """Make the process's ``silhouette`` embedder another version of itself: same size (576),
     other embeddings (as other weights of the same network would be)."""
     from zooctl.embed.silhouette import SilhouetteEmbedder
-    from zooctl.retrieval import index
+    from zooctl.retrieval import embedder_cache
 
-    monkeypatch.setitem(index._EMBEDDERS, ("silhouette", "cpu", ()), SilhouetteEmbedder(blur=blur))
+    monkeypatch.setitem(embedder_cache._EMBEDDERS, ("silhouette", "cpu", ()), SilhouetteEmbedder(blur=blur))
 
 
 def test_views_record_identities_and_reindexing_one_embedder_keeps_the_others(store, monkeypatch):

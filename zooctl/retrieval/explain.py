@@ -36,7 +36,8 @@ def explain_table(res: SearchResult) -> tuple[list[tuple[str, str]], list[list[s
     if sem:
         title += (
             f"; semantic: the asset's label, the taxon it shares with the video's most likely animal, "
-            f"the expected taxonomic agreement (1: same species, surely) and its term (-{res.semantic_weight:g} x it)"
+            f"its taxonomic agreement with the video (relative to the best asset's, times how surely the classifier "
+            f"sees an animal: 0..1) and its term (-{res.semantic_weight:g} x it)"
         )
     return cols, rows, title
 

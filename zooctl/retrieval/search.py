@@ -28,6 +28,8 @@ from .semantic import (
     class_distribution,
     entry_taxon,
     matched_taxon,
+    query_taxon,
+    relative_scores,
     semantic_scores,
     top_classes,
 )
@@ -308,9 +310,6 @@ def score_packs(
     w_sem = SEMANTIC_WEIGHT if semantic_weight is None else float(semantic_weight)
     use_sem = dist is not None and taxa is not None and w_sem > 0
 
-    def sem_of(names: list[str]) -> np.ndarray:
-        return semantic_scores(dist, [taxa.get(n) for n in names])
-
     first = packs[next(iter(query_emb))]
     common = set(first.names)
     for p in packs.values():
@@ -320,6 +319,12 @@ def score_packs(
     if not common:
         raise UsageError("no asset has views for every chosen embedder", hint="run `zooctl bank reindex`")
     cand = sorted(common)
+    if use_sem:  # relative to the best any candidate reaches, so a shortlist does not change it
+        rel = dict(zip(cand, relative_scores(dist, semantic_scores(dist, [taxa.get(n) for n in cand]))))
+
+    def sem_of(names: list[str]) -> np.ndarray:
+        return np.array([rel[n] for n in names], np.float64)
+
     # Stage 1 (large banks): fused score of each asset's mean view embedding; keep the best.
     if len(cand) > shortlist:
         coarse = {}
@@ -357,6 +362,7 @@ def score_packs(
         views_best[e] = best_views(d)
     terms = fuse_terms(per_e, fusion, weights)
     sem = sem_of(cand) if use_sem else None
+    q_taxon = query_taxon(dist) if use_sem else None
     if sem is not None:
         terms["semantic"] = -w_sem * sem
     total = sum_terms(terms)
@@ -374,7 +380,7 @@ def score_packs(
             {e: int(r[i]) for e, r in ranks.items()},
             (labels or {}).get(cand[i]),
             None if sem is None else float(sem[i]),
-            _taxon_json(dist, taxa.get(cand[i])) if use_sem else None,
+            _taxon_json(dist, taxa.get(cand[i]), q_taxon) if use_sem else None,
         )
         for i in ranked
     ]
@@ -384,8 +390,8 @@ def score_packs(
     return res
 
 
-def _taxon_json(dist: np.ndarray, taxon: Any) -> list[str] | None:
-    m = matched_taxon(dist, taxon)
+def _taxon_json(dist: np.ndarray, taxon: Any, query: Any) -> list[str] | None:
+    m = matched_taxon(dist, taxon, query)
     return None if m is None else list(m)
 
 

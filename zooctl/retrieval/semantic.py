@@ -3,11 +3,14 @@ ImageNet head, against what each bank asset is (its label, placed in `zooctl.ret
 
 The query's class distribution is the mean of its crops' ImageNet probabilities over the 398 animal
 classes; it is not renormalised, so a query the classifier does not take for an animal (a stylised
-render, a blurred crop) has little mass and the term fades by itself: it is confidence-weighted.
-An asset's semantic score is the expected taxonomic agreement, ``sum_c p(c) * agreement(c, label)
-/ 4`` (1: the same species with certainty; `zooctl.retrieval.taxonomy.agreement`). An asset
-without a label scores 0 (it still competes on appearance). The fused search score adds
-``-weight * score``. Bank labels inferred from rendered views use the same head: the deepest rank
+render, a blurred crop) has little mass and the term fades: it is confidence-weighted.
+An asset's agreement is the expected taxonomic agreement, ``sum_c p(c) * agreement(c, label)
+/ 4`` (1: the same species with certainty; `zooctl.retrieval.taxonomy.agreement`); its semantic
+score is that relative to the best agreement any candidate reaches, times the query's
+`confidence`, the probability of its most probable family (`relative_scores`): the bank's closest
+animal scores the classifier's confidence whatever rank it shares (a bird for a swan when the bank
+has no duck), the others less; a render the classifier spreads over unrelated classes weighs little. An asset without a
+label scores 0 (it still competes on appearance). The fused search score adds ``-weight * score``. Bank labels inferred from rendered views use the same head: the deepest rank
 whose most probable taxon holds at least half the views' mean probability.
 """
 
@@ -19,11 +22,12 @@ from typing import Any
 
 import numpy as np
 
-from .taxonomy import ANIMAL_CLASSES, LEVELS, Taxon, agreement, load_taxonomy, shared_taxon
+from .taxonomy import ANIMAL_CLASSES, LEVELS, Taxon, load_taxonomy, shared_taxon
 
-# Fused-score weight of the semantic term (appearance terms are z-scores). Chosen leave-one-out
-# over the real videos and the rendered queries of `bench/retrieval.py`: see BENCHMARKS.md.
-SEMANTIC_WEIGHT = 2.0
+# Fused-score weight of the semantic term (appearance terms are z-scores): the weight chosen on the
+# real videos and the rendered leave-one-out queries of `bench/retrieval.py` together, with the
+# leave-one-out choice beside it in BENCHMARKS.md.
+SEMANTIC_WEIGHT = 4.0
 VIEW_LABEL_MASS = 0.5  # a majority of the views' probability, not a tuned threshold
 SEMANTIC_EMBEDDER = "effnet"  # the embedder whose network classifies the query
 
@@ -36,11 +40,24 @@ def class_distribution(probs: np.ndarray) -> np.ndarray:
     return p[:, :ANIMAL_CLASSES].mean(0)
 
 
+@lru_cache(maxsize=1)
+def _class_columns() -> dict[str, np.ndarray]:
+    """Body plan, order, family and species of the 398 classes, as arrays (vectorised agreement)."""
+    tax = load_taxonomy()
+    return {k: np.array([getattr(c, k) for c in tax.imagenet], object) for k in RANK_ATTRS}
+
+
+RANK_ATTRS = ("body_plan", "order", "family", "species")
+
+
 @lru_cache(maxsize=4096)
 def agreement_vector(taxon: Taxon) -> np.ndarray:
-    """(398,) agreement of every ImageNet animal class with ``taxon``, divided by 4 (0..1)."""
-    tax = load_taxonomy()
-    return np.array([agreement(c, taxon) for c in tax.imagenet], np.float64) / 4.0
+    """(398,) agreement of every ImageNet animal class with ``taxon``, divided by 4 (0..1): the
+    vectorised `agreement` (the ranks nest, so a class agrees one level per rank it shares)."""
+    cols = _class_columns()
+    same = {k: cols[k] == getattr(taxon, k) for k in RANK_ATTRS if getattr(taxon, k) is not None}
+    level = 1.0 + sum(same.get(k, False) for k in ("order", "family", "species"))
+    return np.where(same["body_plan"], level, 0.0).astype(np.float64) / 4.0
 
 
 @lru_cache(maxsize=4096)
@@ -66,6 +83,21 @@ def semantic_scores(dist: np.ndarray, taxa: Iterable[Taxon | None]) -> np.ndarra
     return np.array(out, np.float64)
 
 
+def confidence(dist: np.ndarray) -> float:
+    """How surely the classifier names the query's animal: the probability of its most probable
+    family (a real dog: its breeds add up; a stylised render: a little on many unrelated classes)."""
+    families = _class_columns()["family"]
+    _, idx = np.unique(families.astype(str), return_inverse=True)
+    return float(np.bincount(idx, weights=dist).max()) if dist.size else 0.0
+
+
+def relative_scores(dist: np.ndarray, scores: np.ndarray) -> np.ndarray:
+    """The semantic term's scores: each asset's expected agreement relative to the best any asset
+    reaches (1: as close as the bank comes to the query's animal), times the query's `confidence`."""
+    top = float(scores.max()) if len(scores) else 0.0
+    return scores * (confidence(dist) / top) if top > 0 else np.zeros_like(scores)
+
+
 def top_classes(dist: np.ndarray, n: int = 3) -> list[tuple[str, float]]:
     """The ``n`` most probable animal classes of a query distribution: (class name, probability)."""
     tax = load_taxonomy()
@@ -78,18 +110,18 @@ def query_taxon(dist: np.ndarray) -> Taxon | None:
     most probability (dog breeds or ducks spread over many classes), None with no animal mass."""
     if dist.size == 0 or float(dist.max()) <= 0:
         return None
-    tax = load_taxonomy()
-    fam: dict[str, float] = {}
-    for c, t in enumerate(tax.imagenet):
-        fam[t.family] = fam.get(t.family, 0.0) + float(dist[c])
-    best = max(fam, key=fam.__getitem__)
-    members = [c for c, t in enumerate(tax.imagenet) if t.family == best]
-    return tax.imagenet[max(members, key=lambda c: dist[c])]
+    families = _class_columns()["family"]
+    names, idx = np.unique(families.astype(str), return_inverse=True)
+    best = names[int(np.argmax(np.bincount(idx, weights=dist, minlength=len(names))))]
+    return load_taxonomy().imagenet[int(np.argmax(np.where(families == best, dist, -1.0)))]
 
 
-def matched_taxon(dist: np.ndarray, taxon: Taxon | None) -> tuple[str, str] | None:
-    """(rank, name) of what an asset's taxon shares with the query's most probable species."""
-    q = query_taxon(dist)
+def matched_taxon(
+    dist: np.ndarray, taxon: Taxon | None, query: Taxon | None = None
+) -> tuple[str, str] | None:
+    """(rank, name) of what an asset's taxon shares with the query's most probable animal
+    (``query``: `query_taxon(dist)` when the caller has it)."""
+    q = query_taxon(dist) if query is None else query
     return None if q is None or taxon is None else shared_taxon(q, taxon)
 
 
