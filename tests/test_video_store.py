@@ -133,6 +133,56 @@ def _record(t=12, h=40, w=56):
     )
 
 
+def test_a_file_written_a_chunk_at_a_time_equals_one_written_at_once(store, tmp_path):
+    """`VideoWriter` (what `video add` streams into) makes the file `add` makes from memory:
+    same arrays, same layout (schema-validated), published with its index entry."""
+    rec = _record()
+    one, streamed = VideoStore.open(tmp_path / "one"), VideoStore.open(store)
+    one.add(rec)
+    writer = streamed.begin_file("bg", (56, 40))
+    try:
+        for i in range(0, 12, 5):  # chunks that do not divide the clip
+            writer.add_frames(rec.frames[i : i + 5])
+        for i in range(0, 11, 4):
+            parts = (rec.flow_forward, rec.flow_backward, rec.occlusion_forward, rec.occlusion_backward)
+            writer.add_flow(*(p[i : i + 4] for p in parts))
+        for i, m in enumerate(rec.masks):
+            writer.set_mask(i, m)
+        summary = writer.finish(
+            "bg", rec.fps, rec.source, rec.source_indices, rec.segmenter, rec.flow_estimator
+        )
+        streamed.add_written("bg", writer, summary)
+    finally:
+        writer.discard()
+    a, b = one.get("bg"), streamed.get("bg")
+    for key in (
+        "frames",
+        "masks",
+        "flow_forward",
+        "flow_backward",
+        "occlusion_forward",
+        "occlusion_backward",
+    ):
+        assert np.array_equal(getattr(a, key), getattr(b, key)), key
+    assert a.segmenter == b.segmenter and a.source == b.source and a.fps == b.fps
+    assert describe_h5(one.path("bg")) == describe_h5(streamed.path("bg"))
+    validate(describe_h5(streamed.path("bg")), "video_h5.schema.json")
+    assert streamed.summary("bg")["bytes"] == streamed.path("bg").stat().st_size
+    assert not list((store / "videos").glob(".*.tmp*"))  # the temporary became the file
+
+
+def test_an_incomplete_written_file_is_refused_and_removed(store):
+    rec = _record()
+    vs = VideoStore.open(store)
+    writer = vs.begin_file("bg", (56, 40))
+    writer.add_frames(rec.frames)
+    with pytest.raises(ValueError, match="incomplete video file: 12 frames, 0 flow pairs"):
+        writer.finish("bg", rec.fps, rec.source, rec.source_indices, rec.segmenter, rec.flow_estimator)
+    writer.discard()
+    writer.discard()  # twice: no-op
+    assert vs.names() == [] and not list((store / "videos").iterdir())
+
+
 def save_blank_masks(folder: Path, n: int, shape) -> Path:
     folder.mkdir()
     for i in range(n):
