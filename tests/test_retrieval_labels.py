@@ -226,3 +226,17 @@ def test_stored_query_caches_its_classes(tmp_path):
     assert q3.images.shape[0] == 3 and np.allclose(q3.classes, q1.classes, atol=1e-5)
     np.testing.assert_allclose(e3["effnet"], e1["effnet"], atol=1e-5)
     assert query_cache.read_cache(videos, "seq", 3, 64).classes is not None
+
+
+def test_reindex_labels_an_asset_stored_before_labels(store, capsys, tmp_path, monkeypatch):
+    from zooctl.io.gltf_import import load_gltf
+    from zooctl.store.bank import Bank
+
+    bank = Bank(store)
+    bank.add(load_gltf(write_tiny_glb(tmp_path / "Wolf.glb"), "Wolf"))  # as an older zooctl stored it
+    assert "label" not in bank.summary("Wolf")
+    monkeypatch.setenv("ZOOCTL_EMBEDDERS", "silhouette")
+    r = run_inprocess(capsys, "bank", "reindex", "Wolf")
+    assert r.code == 0, r.err
+    entry = bank.summary("Wolf")
+    assert (entry["label"], entry["label_source"]) == ("grey wolf", "name") and "views" in entry

@@ -152,7 +152,7 @@ def store_views(bank, name: str, cv: ComputedViews, digest: str | None = None) -
     bank.update_summary(name, views=entry)
     from .labels import label_from_views
 
-    label_from_views(bank, name, cv.classes)  # an asset nothing else names: what its views show
+    label_from_views(bank, name, cv.classes)  # unlabelled (added before labels): name, tags or views
     return entry
 
 

@@ -54,13 +54,18 @@ def label_asset(asset, label: str | None = None) -> None:
 
 
 def label_from_views(bank, name: str, classes: np.ndarray | None) -> dict[str, Any] | None:
-    """Label a stored, unlabelled asset from its views' ImageNet probabilities; returns its new
-    index entry, or None when it has a label already or the views name no animal."""
+    """Label a stored, unlabelled asset (one of a bank made before labels, when `bank reindex`
+    renders it): from its name or tags, else its views' ImageNet probabilities. Returns its new
+    index entry, or None when it has a label already or nothing names an animal."""
     from .semantic import views_taxon
 
-    if classes is None or isinstance(bank.summary(name).get("label"), str):
+    entry = bank.summary(name)
+    if isinstance(entry.get("label"), str):
         return None
-    taxon = views_taxon(classes)
+    found = name_label(name, entry.get("tags", []))
+    if found is not None:
+        return bank.set_label(name, found[0].name, found[1])
+    taxon = None if classes is None else views_taxon(classes)
     return None if taxon is None else bank.set_label(name, taxon.name, "views")
 
 
