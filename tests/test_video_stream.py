@@ -215,3 +215,20 @@ def test_max_memory_bounds_the_frame_size_not_the_length(tmp_path):
     assert store.summary("long")["frames"] == 96
     with pytest.raises(InputError, match="frames of 128x96 need about .* GB to preprocess"):
         add_video(store, folder, AddOptions(name="big", max_memory_gb=0.002))
+
+
+def test_video_show_reads_a_stored_video_a_frame_at_a_time(tmp_path):
+    """`video show`'s statistics from the file, frame by frame, are those of the video in memory."""
+    from zooctl.store.h5 import read_h5
+    from zooctl.video.stats import stored_video_stats, video_stats
+
+    store = VideoStore.open(tmp_path / "store")
+    add_video(store, davis_folder(tmp_path / "clip", 11), AddOptions(name="v"))
+    whole = video_stats(store.get("v"))
+    streamed = read_h5(store.path("v"), "video", "", stored_video_stats)
+    fw, fs = whole.pop("flow"), streamed.pop("flow")
+    assert streamed == whole
+    assert fs["per_frame_mean_magnitude"] == fw["per_frame_mean_magnitude"]
+    for key in ("mean_magnitude", "max_magnitude", "occluded_fraction"):
+        assert fs[key] == pytest.approx(fw[key], rel=1e-5), key
+    assert abs(fs["p99_magnitude"] - fw["p99_magnitude"]) <= 2e-3

@@ -198,6 +198,16 @@ def list_(json_out: bool = JsonOpt) -> None:
     print_table(cols, table, title=f"{len(rows)} videos")
 
 
+def _read_stats(store, name: str, stats) -> dict:
+    """``stats(h5py.File)`` of a stored video; a damaged file is one clear error."""
+    from ..store.h5 import read_h5
+
+    store.summary(name)  # an unknown name: NotFoundError
+    return read_h5(
+        store.path(name), "the video file", "remove it with `zooctl video rm` and add it again", stats
+    )
+
+
 @app.command("show")
 def show(
     name: str = typer.Argument(..., help="Video name."),
@@ -207,12 +217,12 @@ def show(
     json_out: bool = JsonOpt,
 ) -> None:
     """Show a stored video: frames, fps, size, mask coverage per frame, flow statistics."""
-    from ..video.stats import seeding_lines, video_stats
+    from ..video.stats import seeding_lines, stored_video_stats
 
     store = _store()
-    rec = store.get(name, what=("masks", "flow") + (("frames",) if preview else ()))
-    info = {**store.summary(name), **video_stats(rec)}
+    info = {**store.summary(name), **_read_stats(store, name, stored_video_stats)}
     if preview:
+        rec = store.get(name, what=("masks", "flow", "frames"))
         with stage_progress(not json_out) as progress:
             from ..video.preview import write_preview
 
