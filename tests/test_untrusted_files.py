@@ -69,6 +69,7 @@ def test_fit_resume_does_not_unpickle_code(store, tmp_path, capsys):
 
 
 def test_a_real_fit_state_still_loads(store):
+    import numpy as np
     import torch
 
     from zooctl.store.fits import FitStore
@@ -94,13 +95,14 @@ def test_a_real_fit_state_still_loads(store):
         "scene": {"a": torch.ones(2)},
         "optimizer": opt.state_dict(),
         "history": {"stage1": [{"total": 1.0}]},
-        "camera_init": {"focal": 1.0, "views": [0.1, None]},
+        "camera_init": {"focal": np.float64(1.0), "views": [np.float32(0.1), None]},
         "config": {"preset": "fast"},
         "timings": {"stage1": 0.5},
     }
     fits.save_state("t", state)
     back = fits.load_state("t")
     assert back["iteration"] == 4 and torch.equal(back["scene"]["a"], torch.ones(2))
+    assert back["camera_init"]["focal"] == 1.0  # numpy scalars come back as plain numbers
 
 
 def test_motion_prior_weights_are_data_only(tmp_path):

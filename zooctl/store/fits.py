@@ -98,7 +98,7 @@ class FitStore(NamedStore):
         import torch
 
         buf = io.BytesIO()
-        torch.save(state, buf)
+        torch.save(_plain(state), buf)
         with store_lock(self.root):
             write_bytes_atomic(self.state_path(name), buf.getvalue())
 
@@ -218,6 +218,23 @@ def record_problem(name: str, record: Any) -> str | None:
     if iou is not None and (isinstance(iou, bool) or not isinstance(iou, (int, float))):
         return f"its mask IoU is a {type(iou).__name__}"
     return None
+
+
+def _plain(obj: Any) -> Any:
+    """``obj`` with numpy scalars and arrays as Python numbers and tensors: what
+    ``torch.load(weights_only=True)`` reads back without allowing any class."""
+    import numpy as np
+    import torch
+
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return torch.from_numpy(np.ascontiguousarray(obj))
+    if isinstance(obj, dict):
+        return {k: _plain(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return type(obj)(_plain(v) for v in obj)
+    return obj
 
 
 def rebase_paths(obj: Any, old: str, new: str) -> Any:
