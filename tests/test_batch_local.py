@@ -178,7 +178,12 @@ def test_a_video_stored_by_another_fit_during_the_batch_is_reused_or_kept(tmp_pa
     assert vs.names() == ["tubecam"] and fit_records(store)["tubecam"]["stored_video"] == "tubecam"
 
     vs.remove("tubecam")
-    items = plan_fits([str(folder)], store, tiny_config(), template="a0", out_root=tmp_path / "out2")
+    # the fit tubecam exists now: a batch refuses the name (the old fit untouched) unless --replace
+    again = plan_fits([str(folder)], store, tiny_config(), template="a0", out_root=tmp_path / "out2")
+    assert again[0].error is not None and "--replace" in again[0].error.hint
+    items = plan_fits(
+        [str(folder)], store, tiny_config(), template="a0", out_root=tmp_path / "out2", keep_existing=False
+    )
     assert store_video(Path(other), store, None) == "tubecam"  # another file of the same name
     report = run_batch(get_executor("local"), fit_task, items, commit_fit)
     assert report.count("done") == 1, report.to_json()
