@@ -74,6 +74,7 @@ def export(
     out: str = typer.Option(
         ...,
         "--out",
+        metavar="PATH",
         help="File to write (its suffix picks the format unless --format), or a folder (an existing one, or any path ending in /).",
     ),
     fmt: str = typer.Option(
