@@ -1,4 +1,4 @@
-"""Every relative link in README.md and docs/ leads somewhere: the file exists and, for
+"""Every relative link in README.md, BENCHMARKS.md and docs/ leads somewhere: the file exists and, for
 ``page.md#anchor``, the page has that heading (GitHub's anchor rules)."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import re
 
 from conftest import REPO
 
-PAGES = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
+PAGES = [REPO / "README.md", REPO / "BENCHMARKS.md", *sorted((REPO / "docs").glob("*.md"))]
 LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
 
 
