@@ -98,5 +98,9 @@ def test_cli_fit_joins_a_ray_cluster_by_address(tmp_path, store):
     assert rep["executor"] == "ray" and rep["done"] == 2
     r = zooctl(*args, "--executor", "ray", "--address", address, "--resume", "--json", store=store)
     assert r.code == 0 and r.json()["skipped"] == 2
-    r = zooctl(*args, "--executor", "ray", "--gpus-per-task", "1", "--address", address, store=store)
+    r = zooctl(*args, "--executor", "ray", "--address", address, store=store)  # the names are taken
+    assert r.code == 2 and "exists already" in r.err and "done already" not in r.err, r.err
+    r = zooctl(
+        *args, "--executor", "ray", "--gpus-per-task", "1", "--address", address, "--replace", store=store
+    )
     assert r.code == 2 and "has 0 GPUs" in r.err

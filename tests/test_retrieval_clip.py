@@ -125,7 +125,7 @@ def test_bad_or_missing_checkpoint_is_one_clear_error(checkpoint, tmp_path):
     lines = r.stdout.splitlines()
     assert len(lines) == 3, r.stderr
     assert lines[0].startswith("InputError") and "does not exist" in lines[0]
-    assert lines[1].startswith("InputError") and "not a PyTorch checkpoint" in lines[1]
+    assert lines[1].startswith("InputError") and "not a plain PyTorch checkpoint" in lines[1]
     assert lines[2].startswith("MissingDependencyError") and "ZOOCTL_CLIP_WEIGHTS" in lines[2]
 
 

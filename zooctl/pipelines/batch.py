@@ -130,7 +130,7 @@ def run_batch(
             todo.append(i)
     # Only a batch with work asks for slots: a cluster executor may connect (start Ray) to say.
     report = BatchReport(executor.name, executor.slots if todo else 0, [])
-    progress.start(len(items), len(items) - len(todo))
+    progress.start(len(items), sum(1 for r in results if r is not None and r.status == "skipped"))
     for r in results:
         if r is not None:
             progress.finished(r)
