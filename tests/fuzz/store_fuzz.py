@@ -394,6 +394,32 @@ def _d_special(root, base, rng, st):
     return f"{rel} is a {how}"
 
 
+class _Payload:
+    """Unpickled, this creates ``marker``: what a crafted store file would run."""
+
+    def __init__(self, marker: str):
+        self.marker = marker
+
+    def __reduce__(self):
+        return (os.mkdir, (self.marker,))
+
+
+def _d_pickle(root, base, rng, st):
+    """A pickle that runs code where the store keeps numpy data (the query cache) or where a
+    file is read as weights: the marker folder beside the store must never appear."""
+    import pickle
+
+    marker = root.parent / f"pwned-{st.seed}"
+    st.outside[str(marker)] = None
+    payload = pickle.dumps({"emb": _Payload(str(marker))}, protocol=2)
+    caches = sorted((root / "videos").glob("*.cache/*"))
+    if not caches:
+        return _d_asset(root, base, rng, st)
+    p = rng.choice(caches)
+    p.write_bytes(payload)
+    return f"{p.relative_to(root)} a pickle that runs code"
+
+
 DAMAGES: dict[str, Callable] = {
     "bank-index": _d_bank_index,
     "video-index": _d_video_index,
@@ -408,6 +434,7 @@ DAMAGES: dict[str, Callable] = {
     "lock": _d_lock,
     "bomb": _d_bomb,
     "special": _d_special,
+    "pickle": _d_pickle,
 }
 KINDS = [*DAMAGES, "mixed"]
 
@@ -590,9 +617,10 @@ def run_state(
         except OSError:
             pass
     for path, content in st.outside.items():
-        now = Path(path).read_bytes() if Path(path).exists() else None
+        q = Path(path)
+        now = (b"<a folder>" if q.is_dir() else q.read_bytes()) if q.exists() else None
         if now != content:
-            rec["problems"].append(f"a file outside the store was written through the lock: {path}")
+            rec["problems"].append(f"a path outside the store was written or created: {path}")
     after = hashes(root, keep)
     changed = [r for r in keep if before[r] != after[r]]
     if changed:
