@@ -387,8 +387,8 @@ def _read_video(f: Any, path: Path, what: tuple[str, ...]) -> VideoRecord:
         name=str(f.attrs["name"]),
         frames=f["frames"][()] if "frames" in what else np.zeros((0, 0, 0, 3), np.uint8),
         masks=f["masks"][()].astype(bool) if "masks" in what else np.zeros((0, 0, 0), bool),
-        flow_forward=f["flow/forward"][()].astype(np.float32) if fl else empty,
-        flow_backward=f["flow/backward"][()].astype(np.float32) if fl else empty,
+        flow_forward=f["flow/forward"].astype(np.float32)[()] if fl else empty,  # no float16 copy held
+        flow_backward=f["flow/backward"].astype(np.float32)[()] if fl else empty,
         occlusion_forward=f["flow/occlusion_forward"][()].astype(bool) if fl else empty,
         occlusion_backward=f["flow/occlusion_backward"][()].astype(bool) if fl else empty,
         fps=float(f.attrs["fps"]),
