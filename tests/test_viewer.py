@@ -414,3 +414,29 @@ def test_animate_folder_beside_the_real_clip(fit, browser, tmp_path):
     assert browser.errors() == []
     r = zooctl("view", "--animate", str(tmp_path), "--export", str(tmp_path / "x"), store=store)
     assert r.code != 0 and "holds no animate.json" in r.err
+
+
+def test_a_browser_that_hangs_up_mid_reply_prints_nothing(tmp_path, capsys):
+    """A reload or a closed tab while frames load breaks the connection: http.server printed a
+    BrokenPipeError traceback on the user's terminal for each one."""
+    import socket
+    import struct
+    import threading
+
+    from zooctl_viewer.serve import make_server
+
+    (tmp_path / "big.bin").write_bytes(b"x" * 20_000_000)
+    server = make_server(tmp_path, "127.0.0.1", 0)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        for _ in range(3):
+            s = socket.create_connection(("127.0.0.1", server.server_address[1]))
+            s.sendall(b"GET /big.bin HTTP/1.1\r\nHost: x\r\n\r\n")
+            s.recv(100)
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))  # a reset
+            s.close()
+        time.sleep(1.0)
+    finally:
+        server.shutdown()
+        server.server_close()
+    assert "Traceback" not in capsys.readouterr().err

@@ -92,8 +92,18 @@ def _root_command() -> click.Command:
 
     from zooctl.cli.main import _register_groups, app
 
-    _register_groups()  # the built-in groups only: no plugin is loaded
-    return typer.main.get_command(app)
+    _register_groups()  # the built-in groups only: no plugin is loaded here
+    root = typer.main.get_command(app)
+    # ... though a test that ran the CLI in this process may have added a plugin's command to `app`
+    builtin = {g.name for g in app.registered_groups} | {
+        c.name or c.callback.__name__
+        for c in app.registered_commands
+        if c.callback is not None and c.callback.__module__.startswith("zooctl.")
+    }
+    if isinstance(root, click.Group):
+        for name in [n for n in root.commands if n not in builtin]:
+            root.commands.pop(name)
+    return root
 
 
 def _walk(cmd: click.Command, path: list[str]):

@@ -23,15 +23,27 @@ class _Quiet(http.server.SimpleHTTPRequestHandler):
         super().end_headers()
 
 
+class _Server(http.server.ThreadingHTTPServer):
+    """A browser that closes a connection mid-reply (a reload, a tab closed while frames load) is
+    not an error worth a traceback on the user's terminal."""
+
+    def handle_error(self, request, client_address):
+        import sys
+
+        if isinstance(sys.exc_info()[1], ConnectionError):  # BrokenPipe, ConnectionReset, ...
+            return
+        super().handle_error(request, client_address)
+
+
 def make_server(site: Path, host: str, port: int) -> http.server.ThreadingHTTPServer:
     """A server of ``site`` bound to ``host:port`` (port 0: a free one). The default port falls back
     to a free one when taken; a port the user named does not."""
     handler = functools.partial(_Quiet, directory=str(site))
     try:
-        return http.server.ThreadingHTTPServer((host, port), handler)
+        return _Server((host, port), handler)
     except OSError as exc:
         if port == DEFAULT_PORT:
-            return http.server.ThreadingHTTPServer((host, 0), handler)
+            return _Server((host, 0), handler)
         raise UsageError(
             f"cannot serve on {host}:{port}: {exc.strerror or exc}",
             hint="choose another --port (0: any free one)",
