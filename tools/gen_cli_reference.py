@@ -75,6 +75,14 @@ ENVIRONMENT: dict[str, tuple[str, str]] = {
         "zooctl-clip",
         "The activation the CLIP weights were trained with (default `quick_gelu`).",
     ),
+    "ZOOCTL_VIEWER_CACHE": (
+        "zooctl-viewer",
+        "Where `zooctl view --bank` caches turntables and GLBs per asset (default `$XDG_CACHE_HOME/zooctl/viewer`).",
+    ),
+    "ZOOCTL_CHROMIUM": (
+        "zooctl-viewer",
+        "The Chromium executable the viewer's browser tests and benchmark drive (default `chromium` on PATH).",
+    ),
     "TORCH_EXTENSIONS_DIR": (
         "zooctl",
         "Where the compiled renderer kernels are cached (`$TORCH_EXTENSIONS_DIR/zooctl`; "
