@@ -82,7 +82,12 @@ def test_a_killed_add_is_reported_and_repair_renders_its_views(tmp_path, capsys,
     monkeypatch.setenv("ZOOCTL_EMBEDDERS", "silhouette")
     store, glb = tmp_path / "store", write_tiny_glb(tmp_path / "t.glb")
     bank = Bank(store)
-    assert run_inprocess(capsys, "--store", str(store), "bank", "add", str(glb), "--name", "done", "--views").code == 0
+    assert (
+        run_inprocess(
+            capsys, "--store", str(store), "bank", "add", str(glb), "--name", "done", "--views"
+        ).code
+        == 0
+    )
     r = run_inprocess(capsys, "--store", str(store), "bank", "add", str(glb), "--name", "plain", "--no-views")
     assert r.code == 0, r.err
     kill_once_indexed(store, glb, "killed")

@@ -222,7 +222,9 @@ def gltf_document(asset: RiggedAsset, clips: Sequence[str] | None = None) -> tup
         doc["samplers"] = [{"magFilter": 9729, "minFilter": 9987, "wrapS": 10497, "wrapT": 10497}]
         doc["textures"] = [{"source": 0, "sampler": 0}]
         pbr["baseColorTexture"] = {"index": 0, "texCoord": 0}
-    extras = {k: asset.meta[k] for k in ("license", "source", "tags", "meters_per_unit", "label") if k in asset.meta}
+    extras = {
+        k: asset.meta[k] for k in ("license", "source", "tags", "meters_per_unit", "label") if k in asset.meta
+    }
     if extras:
         doc["asset"]["extras"] = extras
 

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from .taxonomy import ANIMAL_CLASSES, LEVELS, Taxon, load_taxonomy, shared_taxon
+from .taxonomy import ANIMAL_CLASSES, Taxon, load_taxonomy, shared_taxon
 
 # Fused-score weight of the semantic term (appearance terms are z-scores): the weight chosen on the
 # real videos and the rendered leave-one-out queries of `bench/retrieval.py` together, with the
@@ -143,7 +143,3 @@ def views_taxon(probs: np.ndarray) -> Taxon | None:
         if mass[best] >= VIEW_LABEL_MASS:
             return tax.node(rank, best)
     return None
-
-
-def rank_name(level: int) -> str:
-    return {v: k for k, v in LEVELS.items()}.get(level, "none")

@@ -142,5 +142,5 @@ def _serve(site: Path, host: str, port: int, no_browser: bool, what: str) -> Non
         server.server_close()
 
 
-def _interrupt(signum, frame):
+def _interrupt(_signum, _frame):
     raise KeyboardInterrupt
