@@ -13,12 +13,10 @@ import time
 from pathlib import Path
 
 import jsonschema
-import numpy as np
 import pytest
 from cli_helpers import REPO, run_inprocess
 from gltf_builder import write_tiny_glb
-from PIL import Image
-from video_helpers import moving_object_video
+from video_helpers import moving_object_video, write_png_davis
 
 from zooctl.store.bank import Bank
 
@@ -68,14 +66,7 @@ sys.exit(run(["bank", "add", sys.argv[1], "--name", sys.argv[2], "--views"]))
 
 @pytest.fixture
 def query(tmp_path) -> Path:
-    frames, masks = moving_object_video(t=4, h=64, w=64)
-    root = tmp_path / "q"
-    for sub in ("JPEGImages", "Annotations"):
-        (root / sub).mkdir(parents=True)
-    for i, (f, m) in enumerate(zip(frames, masks)):
-        Image.fromarray(f).save(root / "JPEGImages" / f"{i:05d}.png")
-        Image.fromarray(m.astype(np.uint8) * 255).save(root / "Annotations" / f"{i:05d}.png")
-    return root
+    return write_png_davis(tmp_path / "q", *moving_object_video(t=4, h=64, w=64))
 
 
 def test_a_killed_add_is_reported_and_repair_renders_its_views(tmp_path, capsys, monkeypatch, query):

@@ -11,14 +11,14 @@ import warnings
 from pathlib import Path
 
 import h5py
-import numpy as np
 import pytest
 from cli_helpers import REPO, Result, run_inprocess
 from gltf_builder import write_tiny_glb
+from video_helpers import synthetic_video
 
 from zooctl.io.gltf_import import load_gltf
 from zooctl.store.bank import Bank
-from zooctl.store.videos import VideoRecord, VideoStore
+from zooctl.store.videos import VideoStore
 
 
 def cli(store: Path, *args: str, ulimit_kb: int | None = None, env: dict | None = None) -> Result:
@@ -42,30 +42,10 @@ def one_clear_line(r: Result, text: str, code: int | None = None) -> None:
     assert len(lines) - first <= 2, r.err  # the error and its hint, after any progress
 
 
-def small_video(name: str, t: int = 4, h: int = 24, w: int = 32) -> VideoRecord:
-    rng = np.random.default_rng(0)
-    masks = np.zeros((t, h, w), bool)
-    masks[:, 5:15, 8:20] = True
-    return VideoRecord(
-        name=name,
-        frames=rng.integers(0, 255, (t, h, w, 3), dtype=np.uint8),
-        masks=masks,
-        flow_forward=rng.normal(size=(t - 1, h, w, 2)).astype(np.float32),
-        flow_backward=rng.normal(size=(t - 1, h, w, 2)).astype(np.float32),
-        occlusion_forward=np.zeros((t - 1, h, w), bool),
-        occlusion_backward=np.zeros((t - 1, h, w), bool),
-        fps=30.0,
-        source={"path": "syn", "kind": "images", "sha256": "0" * 64},
-        source_indices=np.arange(t),
-        segmenter={"name": "masks"},
-        flow_estimator={"name": "dis"},
-    )
-
-
 @pytest.fixture
 def video_store(tmp_path) -> Path:
     root = tmp_path / "store"
-    VideoStore.open(root).add(small_video("v"))
+    VideoStore.open(root).add(synthetic_video("v"))
     return root
 
 
@@ -233,7 +213,7 @@ def test_repair_prints_no_raw_markup(tmp_path, capsys):
     assert "b" in r.err
     vs = VideoStore.open(store)
     for n in ("v", "w"):
-        vs.add(small_video(n))
+        vs.add(synthetic_video(n))
     vs.path("w").unlink()
     r = run_inprocess(capsys, "--store", str(store), "video", "repair")
     assert r.code == 0 and "dropped from the index" in r.err and "[/" not in r.err, r.err

@@ -10,15 +10,15 @@ import sys
 from pathlib import Path
 
 import jsonschema
-import numpy as np
 import pytest
 from cli_helpers import REPO, run_inprocess
 from gltf_builder import write_tiny_glb
+from video_helpers import synthetic_video
 
 from zooctl.errors import StoreError
 from zooctl.io.gltf_import import load_gltf
 from zooctl.store.bank import Bank
-from zooctl.store.videos import VideoRecord, VideoStore
+from zooctl.store.videos import VideoStore
 
 
 def validate(instance, name):
@@ -40,26 +40,6 @@ def tiny_bank(root: Path, names=("a", "b", "c")) -> Bank:
     for n in names:
         bank.add(load_gltf(write_tiny_glb(root.parent / f"{n}.glb"), n))
     return bank
-
-
-def synthetic_video(name: str, t: int = 4, h: int = 24, w: int = 32, seed: int = 0) -> VideoRecord:
-    rng = np.random.default_rng(seed)
-    masks = np.zeros((t, h, w), bool)
-    masks[:, 5:15, 8:20] = True
-    return VideoRecord(
-        name=name,
-        frames=rng.integers(0, 255, (t, h, w, 3), dtype=np.uint8),
-        masks=masks,
-        flow_forward=rng.normal(size=(t - 1, h, w, 2)).astype(np.float32),
-        flow_backward=rng.normal(size=(t - 1, h, w, 2)).astype(np.float32),
-        occlusion_forward=np.zeros((t - 1, h, w), bool),
-        occlusion_backward=np.zeros((t - 1, h, w), bool),
-        fps=30.0,
-        source={"path": "syn", "kind": "images", "sha256": "0" * 64},
-        source_indices=np.arange(t),
-        segmenter={"name": "masks"},
-        flow_estimator={"name": "dis"},
-    )
 
 
 DAMAGED = [

@@ -46,18 +46,57 @@ def iou(a: np.ndarray, b: np.ndarray) -> float:
 def stored_masked_video(tmp_path, name: str = "seq"):
     """A DAVIS-style folder of a 6-frame masked video at ``tmp_path/name`` and a store at
     ``tmp_path/store`` holding it under ``name``: (store root, folder)."""
-    from PIL import Image
-
     from zooctl.store.videos import VideoStore
     from zooctl.video.ingest import AddOptions, add_video
 
     frames, masks = moving_object_video(t=6, h=96, w=128)
-    folder = tmp_path / name
-    (folder / "JPEGImages").mkdir(parents=True)
-    (folder / "Annotations").mkdir()
-    for i, (f, m) in enumerate(zip(frames, masks)):
-        Image.fromarray(f).save(folder / "JPEGImages" / f"{i:05d}.png")
-        Image.fromarray(m.astype(np.uint8) * 255).save(folder / "Annotations" / f"{i:05d}.png")
+    folder = write_png_davis(tmp_path / name, frames, masks)
     root = tmp_path / "store"
     add_video(VideoStore.open(root), folder, AddOptions(name=name))
     return root, folder
+
+
+def write_png_davis(folder, frames: np.ndarray, masks: np.ndarray):
+    """Frames (T, H, W, 3) uint8 and masks (T, H, W) bool as a DAVIS-style folder of lossless PNGs
+    (JPEGImages/, Annotations/); returns ``folder``."""
+    from PIL import Image
+
+    for sub in ("JPEGImages", "Annotations"):
+        (folder / sub).mkdir(parents=True)
+    for i, (f, m) in enumerate(zip(frames, masks, strict=True)):
+        Image.fromarray(f).save(folder / "JPEGImages" / f"{i:05d}.png")
+        Image.fromarray(m.astype(np.uint8) * 255).save(folder / "Annotations" / f"{i:05d}.png")
+    return folder
+
+
+def synthetic_video(name: str, t: int = 4, h: int = 24, w: int = 32, seed: int = 0):
+    """A small stored-video record of random frames and flow with a box mask (no decoding)."""
+    from zooctl.store.videos import VideoRecord
+
+    rng = np.random.default_rng(seed)
+    masks = np.zeros((t, h, w), bool)
+    masks[:, 5:15, 8:20] = True
+    return VideoRecord(
+        name=name,
+        frames=rng.integers(0, 255, (t, h, w, 3), dtype=np.uint8),
+        masks=masks,
+        flow_forward=rng.normal(size=(t - 1, h, w, 2)).astype(np.float32),
+        flow_backward=rng.normal(size=(t - 1, h, w, 2)).astype(np.float32),
+        occlusion_forward=np.zeros((t - 1, h, w), bool),
+        occlusion_backward=np.zeros((t - 1, h, w), bool),
+        fps=30.0,
+        source={"path": "syn", "kind": "images", "sha256": "0" * 64},
+        source_indices=np.arange(t),
+        segmenter={"name": "masks"},
+        flow_estimator={"name": "dis"},
+    )
+
+
+VIDEO_ARRAYS = ("frames", "masks", "flow_forward", "flow_backward", "occlusion_forward", "occlusion_backward")
+
+
+def assert_same_video(a, b) -> None:
+    """Two stored-video records hold the same arrays, source, segmenter and frame rate."""
+    for key in VIDEO_ARRAYS:
+        assert np.array_equal(getattr(a, key), getattr(b, key)), key
+    assert a.source == b.source and a.segmenter == b.segmenter and a.fps == b.fps
