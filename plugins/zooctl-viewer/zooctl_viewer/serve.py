@@ -24,15 +24,19 @@ class _Quiet(http.server.SimpleHTTPRequestHandler):
 
 
 class _Server(http.server.ThreadingHTTPServer):
-    """A browser that closes a connection mid-reply (a reload, a tab closed while frames load) is
-    not an error worth a traceback on the user's terminal."""
+    """A browser that closes a connection mid-reply (a reload, a tab closed while frames load, the
+    server stopping under a load in flight) is not an error worth a traceback on the user's
+    terminal: socket errors pass in silence, anything else is one line."""
 
     def handle_error(self, request, client_address):
         import sys
 
-        if isinstance(sys.exc_info()[1], ConnectionError):  # BrokenPipe, ConnectionReset, ...
+        exc = sys.exc_info()[1]
+        if isinstance(exc, OSError):  # BrokenPipe, ConnectionReset, a socket closed at shutdown
             return
-        super().handle_error(request, client_address)
+        print(
+            f"viewer: a request from {client_address[0]} failed: {type(exc).__name__}: {exc}", file=sys.stderr
+        )
 
 
 def make_server(site: Path, host: str, port: int) -> http.server.ThreadingHTTPServer:
