@@ -43,3 +43,6 @@ _.clip_installed  # tests/test_retrieval_clip.py
 _.readable  # zooctl/store/videos.py
 _.writable
 _.seekable
+
+# socketserver calls it when a request handler thread raises.
+_.handle_error  # plugins/zooctl-viewer/zooctl_viewer/serve.py
