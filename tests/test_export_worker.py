@@ -12,7 +12,7 @@ import textwrap
 import pytest
 
 from zooctl.errors import UsageError
-from zooctl.io.export import export_asset, resolve_export
+from zooctl.io.asset_export import export_asset, resolve_export
 from zooctl.io.export_worker import ExportWorker
 from zooctl.procedural import build_animal
 

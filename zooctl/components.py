@@ -52,7 +52,7 @@ class ExporterSpec:
     suffix where the format has several), with the named ``clips`` (``None``: all clips).
     ``formats`` are the ``--format`` values it serves (``("usd", "usda", "usdz")``) and
     ``suffixes`` the file suffix of each, in the same order (default: ``"." + format``); every
-    export command resolves paths and formats through them (`zooctl.io.export.export_asset`).
+    export command resolves paths and formats through them (`zooctl.io.asset_export.export_asset`).
     ``preload()``, optional, imports what ``save`` needs (a heavy library) ahead of the first file:
     `zooctl.io.export_worker` calls it in its process while the command does other work.
     """

@@ -45,7 +45,7 @@ def register_exporters(register):
     ``save(asset, path, clips=None, **options)`` writes the asset (and the named clips, or all) to
     ``path``. It must write atomically: a temporary beside ``path``, then ``os.replace``. The
     spec's ``suffixes`` (one per format) let every export command resolve paths
-    (`zooctl.io.export.export_asset`).
+    (`zooctl.io.asset_export.export_asset`).
     """
 
 

@@ -1,4 +1,4 @@
-"""`zooctl bank export`: a bank asset through any registered exporter (`zooctl.io.export`)."""
+"""`zooctl bank export`: a bank asset through any registered exporter (`zooctl.io.asset_export`)."""
 
 from __future__ import annotations
 
@@ -41,7 +41,7 @@ def export(
     import time
 
     from ..errors import UsageError
-    from ..io.export import check_writable, export_asset, resolve_export
+    from ..io.asset_export import check_writable, export_asset, resolve_export
 
     if clip and all_clips:
         raise UsageError("--clip and --all-clips cannot be used together", hint="drop one of them")

@@ -82,7 +82,7 @@ def export(
     ),
 ) -> None:
     """Export a fitted character (rig, skin and the per-frame animation) through an exporter."""
-    from ..io.export import check_writable, export_asset, resolve_export
+    from ..io.asset_export import check_writable, export_asset, resolve_export
 
     _, fmt, path = resolve_export(out, fmt, name)
     check_writable(path)

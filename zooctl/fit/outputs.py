@@ -70,7 +70,7 @@ def bake_colours(
 
 def write_glb(asset: RiggedAsset, path: Path) -> Path:
     """The fitted character as glTF binary, through the registered ``glb`` exporter."""
-    from ..io.export import export_asset
+    from ..io.asset_export import export_asset
 
     return export_asset(asset, Path(path), "glb", ["fit"])
 

@@ -122,7 +122,7 @@ class ExportWorker:
 
 def write_jobs(asset: Any, jobs: list[Job]) -> float:
     """Write every job with `write_export`; returns the seconds it took."""
-    from .export import write_export
+    from .asset_export import write_export
 
     t0 = time.perf_counter()
     for spec, path, clips in jobs:

@@ -95,7 +95,7 @@ def sample_and_export(
 ) -> dict[str, Any]:
     """Sample ``opts.sample`` motions for ``asset``, write one file per motion and format, the
     preview video and contact sheet, and ``animate.json``; returns that manifest."""
-    from ..io.export import resolve_export
+    from ..io.asset_export import resolve_export
     from ..io.export_worker import ExportWorker
     from ..store.fs import write_bytes_atomic
     from ..store.motion_store import MotionStore
