@@ -274,7 +274,7 @@ def export(
     json_out: bool = JsonOpt,
 ) -> None:
     """Export frames (JPEG), masks (PNG) or flow (.npy per direction and occlusion PNGs) to a folder."""
-    from ..video.export import export_video
+    from ..video.folder_export import export_video
 
     written = export_video(_store(), name, what, out)
     if json_out:
