@@ -15,7 +15,7 @@ import torch
 
 from zooctl.render import _kernels
 from zooctl.render.camera import look_at
-from zooctl.render.raster import FlowRenderer, interpolate, rasterize
+from zooctl.render.raster import RasterFlow, interpolate, rasterize
 from zooctl.render.soft import SoftSilhouette, _SoftSilhouetteKernel
 from zooctl.render.splat import SplatSilhouette, _SplatSilhouetteKernel, subdivision_barycentrics
 from zooctl.render.windows import face_windows, project_faces
@@ -113,7 +113,7 @@ def test_raster_and_flow_kernels_match_pytorch(dtype):
         verts.grad, cam.intrinsics.grad = None, None
         ctx = _kernels.disabled() if not use_kernels else torch.enable_grad()
         with ctx:
-            out = FlowRenderer()(verts, faces, cam, moved + (verts - verts.detach()))
+            out = RasterFlow()(verts, faces, cam, moved + (verts - verts.detach()))
             pos = interpolate(verts, faces, rasterize(verts, faces, cam))
         (out["flow"].square().sum() + out["depth"].sum() + out["bary"].sum() + pos.sum()).backward()
         outs[use_kernels] = (out, pos.detach(), verts.grad.clone(), cam.intrinsics.grad.clone())
@@ -134,7 +134,7 @@ def test_results_do_not_depend_on_the_thread_count():
         torch.set_num_threads(threads)
         verts.grad = None
         sil = SoftSilhouette((40, 48))(verts, faces, cam)
-        flow = FlowRenderer()(verts, faces, cam, verts + 0.1)["flow"]
+        flow = RasterFlow()(verts, faces, cam, verts + 0.1)["flow"]
         (sil.sum() + flow.sum()).backward()
         runs.append((sil.detach(), flow.detach(), verts.grad.clone()))
     for other in runs[1:]:
@@ -172,7 +172,7 @@ def test_raster_kernels_gradcheck():
 
     def fn(v, k):
         c = type(cam)(k, cam.rotation, cam.translation, cam.height, cam.width)
-        out = FlowRenderer()(v, faces, c, moved + v)
+        out = RasterFlow()(v, faces, c, moved + v)
         return out["flow"], out["depth"], out["bary"]
 
     assert torch.autograd.gradcheck(fn, (verts, cam.intrinsics))
@@ -261,7 +261,7 @@ def test_bad_face_indices_are_an_input_error_not_a_memory_error():
     cam = look_at([0.0, 0.0, 4.0], [0.0, 0.0, 0.0], 16, 16)
     bad = faces.clone()
     bad[3, 1] = verts.shape[1]
-    for render in (SoftSilhouette(16), SplatSilhouette(16), lambda v, f, c: FlowRenderer()(v, f, c, v)):
+    for render in (SoftSilhouette(16), SplatSilhouette(16), lambda v, f, c: RasterFlow()(v, f, c, v)):
         with pytest.raises(InputError, match="faces index vertices"):
             render(verts, bad, cam)
     with pytest.raises(InputError, match="faces must be"):

@@ -4,7 +4,7 @@ import numpy as np
 import torch
 
 from zooctl.render.camera import look_at
-from zooctl.render.raster import FlowRenderer, interpolate, rasterize
+from zooctl.render.raster import RasterFlow, interpolate, rasterize
 from zooctl.rig.rotations import axis_angle_to_quat, quat_to_matrix
 
 
@@ -54,7 +54,7 @@ def test_flow_of_a_rigid_motion_matches_the_analytic_flow():
     R = quat_to_matrix(axis_angle_to_quat(torch.tensor([0.05, -0.08, 0.1], dtype=torch.float64)))
     T = torch.tensor([0.06, -0.04, 0.1], dtype=torch.float64)
     moved = verts @ R.T + T
-    out = FlowRenderer()(verts[None], faces, cam, moved[None])
+    out = RasterFlow()(verts[None], faces, cam, moved[None])
     m = out["mask"][0]
     assert m.sum() > 1000
     # Analytic: the ray through each pixel hits the (planar) surface at a known point X; it moves to R X + T.

@@ -212,7 +212,7 @@ def make_video(
     from ..io.video import write_mp4
     from ..render.camera import Camera
     from ..render.preview import fit_camera, orbit_camera
-    from ..render.raster import FlowRenderer
+    from ..render.raster import RasterFlow
 
     if frames < 1 or size < 16:
         raise UsageError("--frames must be >= 1 and --size >= 16")
@@ -264,7 +264,7 @@ def make_video(
     view_t = np.stack([[c.translation[0].numpy() for c in v] for v in views]).astype(np.float64)
     flow = np.zeros((max(frames - 1, 0), size, size, 2), np.float16)
     valid = np.zeros((max(frames - 1, 0), size, size), bool)
-    fr = FlowRenderer()
+    fr = RasterFlow()
     B = 8
     with torch.no_grad():
         for s0 in range(0, frames - 1, B):

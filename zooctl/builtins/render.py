@@ -2,28 +2,31 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..components import ComponentSpec
 from ..plugins import hookimpl
 
+if TYPE_CHECKING:  # torch loads when a renderer is built, not when the plugin registers
+    from ..render.base import FlowRenderer, SilhouetteRenderer
 
-def _soft(image_size: Any, device: str = "cpu", **options: Any) -> Any:
+
+def _soft(image_size: Any, device: str = "cpu", **options: Any) -> SilhouetteRenderer:
     from ..render.soft import SoftSilhouette
 
     return SoftSilhouette(image_size, device=device, **options)
 
 
-def _fast(image_size: Any, device: str = "cpu", **options: Any) -> Any:
+def _fast(image_size: Any, device: str = "cpu", **options: Any) -> SilhouetteRenderer:
     from ..render.splat import SplatSilhouette
 
     return SplatSilhouette(image_size, device=device, **options)
 
 
-def _flow(image_size: Any = None, device: str = "cpu", **options: Any) -> Any:
-    from ..render.raster import FlowRenderer
+def _flow(image_size: Any = None, device: str = "cpu", **options: Any) -> FlowRenderer:
+    from ..render.raster import RasterFlow
 
-    return FlowRenderer(image_size, device=device, **options)
+    return RasterFlow(image_size, device=device, **options)
 
 
 @hookimpl

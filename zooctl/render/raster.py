@@ -5,7 +5,7 @@ choice) and then recomputes that face's perspective-correct barycentrics *with* 
 respect to the vertices, so anything interpolated from them (depth, attributes, flow) is
 differentiable almost everywhere, as in nvdiffrast / PyTorch3D.
 
-Flow. `FlowRenderer` renders the optical flow between two posed meshes with the same topology:
+Flow. `RasterFlow` renders the optical flow between two posed meshes with the same topology:
 the surface point seen at pixel p at time t is ``X_t = sum_i b_i v_i^t`` (perspective-correct
 barycentrics b), the same material point at t+1 is ``X_{t+1} = sum_i b_i v_i^{t+1}``, and the
 flow is ``project_{t+1}(X_{t+1}) - p``. This is the exact flow for motions that are affine per
@@ -202,7 +202,7 @@ def interpolate(attributes: Tensor, faces: Tensor, frags: Fragments) -> Tensor:
 
 
 class _FlowProjectKernel(torch.autograd.Function):
-    """CPU kernel of FlowRenderer's projection: pts (B*H*W, 3), intrinsics (B, 4) -> flow (B*H*W, 2)."""
+    """CPU kernel of RasterFlow's projection: pts (B*H*W, 3), intrinsics (B, 4) -> flow (B*H*W, 2)."""
 
     @staticmethod
     def forward(ctx, pts: Tensor, intrinsics: Tensor, face_ids: Tensor, height: int, width: int) -> Tensor:  # type: ignore[override]
@@ -226,7 +226,7 @@ class _FlowProjectKernel(torch.autograd.Function):
         return g_pts, g_intr, None, None, None
 
 
-class FlowRenderer(nn.Module):
+class RasterFlow(nn.Module):
     """Optical flow of a surface moving from ``vertices`` to ``vertices_next`` (module docstring).
 
     forward(vertices (B, V, 3), faces (F, 3), camera, vertices_next (B, V, 3), camera_next=None)

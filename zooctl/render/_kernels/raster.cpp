@@ -189,7 +189,7 @@ void interpolate_backward(const T* attr, const int64_t* faces, const int64_t* fi
   });
 }
 
-// FlowRenderer's projection: pts (B*H*W, 3) camera-frame points at t+1, intrinsics (B, 4) =
+// RasterFlow's projection: pts (B*H*W, 3) camera-frame points at t+1, intrinsics (B, 4) =
 // fx, fy, cx, cy -> flow (B*H*W, 2) = project(pts) - pixel centre where face_ids >= 0, else 0.
 // Backward: grad_pts (B*H*W, 3) and grad_intr (B, 4) (both written here); images in parallel.
 template <typename T>
