@@ -129,7 +129,7 @@ def bank_site(store: Path, work: Path, tiles: int) -> Path:
 
     from zooctl_viewer.gallery import load_gallery, write_bank_site
 
-    from zooctl.pipelines.ingest import seed_starter
+    from zooctl.pipelines.bank_import import seed_starter
     from zooctl.store.bank import Bank
 
     seed_starter(Bank.open(store), views=False)  # the gallery needs no retrieval views

@@ -115,7 +115,7 @@ def test_a_killed_add_is_reported_and_repair_renders_its_views(tmp_path, capsys,
 
 def test_a_finished_add_leaves_no_pending_mark(tmp_path, monkeypatch):
     monkeypatch.setenv("ZOOCTL_EMBEDDERS", "silhouette")
-    from zooctl.pipelines.ingest import add_files
+    from zooctl.pipelines.bank_import import add_files
 
     store, glb = tmp_path / "store", write_tiny_glb(tmp_path / "t.glb")
     bank = Bank(store)

@@ -209,7 +209,7 @@ def test_seeded_starter_animals_get_views(store, capsys):
 
 
 def test_seed_starter_reports_view_progress(store):
-    from zooctl.pipelines.ingest import seed_starter
+    from zooctl.pipelines.bank_import import seed_starter
     from zooctl.store.bank import Bank
 
     calls = []

@@ -219,7 +219,7 @@ def test_a_waiting_writer_says_who_holds_the_lock_and_gives_up(tmp_path):
 
 
 def test_repair_keeps_retrieval_views_that_belong_to_the_asset(tmp_path, monkeypatch):
-    from zooctl.pipelines.ingest import add_files
+    from zooctl.pipelines.bank_import import add_files
 
     monkeypatch.setenv("ZOOCTL_EMBEDDERS", "silhouette")
     root = tmp_path / "store"

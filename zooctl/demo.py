@@ -26,7 +26,7 @@ def main(argv: list[str] | None = None) -> int:
     from .fit.config import preset
     from .fit.job import fit_job
     from .paths import default_store
-    from .pipelines.ingest import seed_starter
+    from .pipelines.bank_import import seed_starter
     from .store.bank import Bank
 
     ap = argparse.ArgumentParser(prog="python -m zooctl.demo", description=__doc__.splitlines()[0])

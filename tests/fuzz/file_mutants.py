@@ -670,7 +670,7 @@ def _worker() -> None:
     )  # a runaway case dies, not the machine
     resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
     from zooctl.errors import ZooctlError
-    from zooctl.pipelines.ingest import add_files
+    from zooctl.pipelines.bank_import import add_files
     from zooctl.store.bank import Bank
 
     for line in sys.stdin:

@@ -54,7 +54,7 @@ PERMISSIONS_APPLY = os.geteuid() != 0 or bool(NO_OVERRIDE)
 def build_base(root: Path, assets: list[Path], video_dir: Path | None, views: int = 2) -> dict:
     """Add ``assets`` (the first ``views`` with silhouette retrieval views), one short video, and
     run one search so packs and the query cache exist. Returns {"assets": [...], "video": bool}."""
-    from zooctl.pipelines.ingest import add_files
+    from zooctl.pipelines.bank_import import add_files
     from zooctl.store.bank import Bank
     from zooctl.store.videos import VideoStore
 

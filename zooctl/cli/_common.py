@@ -138,7 +138,7 @@ def print_skipped(skipped: dict[str, str], what: str) -> None:
 
 def print_repair(report: dict[str, Any], items: str) -> None:
     """What `bank repair` / `video repair` did (`zooctl.store.indexed.IndexedStore.repair`, and
-    for the bank `zooctl.pipelines.ingest.repair_bank`)."""
+    for the bank `zooctl.pipelines.bank_import.repair_bank`)."""
     from rich.markup import escape
 
     n = len(report["indexed"])

@@ -91,7 +91,7 @@ def add(
 
     from ..errors import UsageError
     from ..limits import import_limits, limits_with
-    from ..pipelines.ingest import add_files
+    from ..pipelines.bank_import import add_files
 
     limits = dict(
         max_clip_seconds=max_clip_seconds,
@@ -294,7 +294,7 @@ def migrate(json_out: bool = JsonOpt) -> None:
 
 
 def _repair(bank):
-    from ..pipelines.ingest import repair_bank
+    from ..pipelines.bank_import import repair_bank
 
     return repair_bank(bank)
 

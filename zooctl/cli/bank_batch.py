@@ -31,8 +31,8 @@ def add_many(
     limits: dict | None = None,
     label: str | None = None,
 ) -> None:
+    from ..pipelines.bank_import import _views_default
     from ..pipelines.batch_bank import bank_task, commit_bank, plan_add, skip_stored
-    from ..pipelines.ingest import _views_default
     from ..store.bank import Bank
 
     bank = Bank.open(store_root())

@@ -42,7 +42,7 @@ def seed(
         from ..errors import UsageError
 
         raise UsageError(f"--random {random} must be 0 or more")
-    from ..pipelines.ingest import seed_starter
+    from ..pipelines.bank_import import seed_starter
     from .bank_export import _bank
 
     bank = _bank()

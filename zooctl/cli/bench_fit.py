@@ -22,7 +22,7 @@ def _assets(bank_path: Path | None, names: list[str] | None):
         return [(n, (lambda n=n: bank.get(n))) for n in chosen]
     if bank_path.is_dir():
         from ..names import sanitize_name
-        from ..pipelines.ingest import import_file
+        from ..pipelines.bank_import import import_file
 
         files = sorted(p for p in bank_path.rglob("*") if p.suffix.lower() in (".glb", ".gltf"))
         if names:

@@ -106,7 +106,7 @@ def bank_task(task: BankTask, report) -> dict[str, Any]:
     from ..retrieval.index import compute_views
     from ..retrieval.views import DEFAULT_SIZE, DEFAULT_VIEWS
     from ..store import views_h5
-    from .ingest import import_file
+    from .bank_import import import_file
 
     bank, summary, digest = Bank.open(Path(task.store)), None, None
     if task.path is not None:
