@@ -100,7 +100,7 @@ def add(
         max_elements=max_elements,
     )
     if batch.executor is not None or resume:  # a batch: import and views in workers, stored here
-        from .bank_batch import add_many
+        from .bank_many import add_many
 
         opts = dict(
             name=name, tags=tag, license=license, replace=replace, views=views, resume=resume, label=label

@@ -143,7 +143,7 @@ def reindex(
         have = views_entries(bank)
         targets = [n for n in targets if n not in have or not set(embs) <= set(have[n].get("embedders", {}))]
     if batch.executor is not None:  # a batch: render and embed in workers, stored here
-        from .bank_batch import reindex_many
+        from .bank_many import reindex_many
 
         return reindex_many(targets, embs, views, size, device, json_out=json_out, batch=batch)
     report, failed = [], []

@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from ..fit.config import PRESETS
-from . import batch_opts, fit_batch
+from . import batch_opts, fit_many
 from ._common import ArticulationOpt, RendererOpt, console, err_console, print_json, store_root
 
 PRESET_ITERS = {name: make().stage2.iters for name, make in PRESETS.items()}
@@ -156,9 +156,9 @@ def fit(
     if max_frames is not None:
         cfg.max_frames = max_frames
     cfg.validate()
-    if fit_batch.wants_batch(videos, batch.executor):
+    if fit_many.wants_batch(videos, batch.executor):
         opts = dict(template=template, masks=masks, box=box, out=out, name=name, cameras=cameras)
-        return fit_batch.fit_many(
+        return fit_many.fit_many(
             videos, cfg, resume=resume, replace=replace, json_out=json_out, batch=batch, **opts
         )
     video = videos[0]
