@@ -103,8 +103,8 @@ def test_reanimation_uses_the_scale_of_the_frame_it_starts_from(tmp_path):
 
     from zooctl.fit.config import FitConfig
     from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.metrics import evaluate_fit
     from zooctl.fit.run import fit_video
-    from zooctl.metrics import evaluate_fit
 
     asset = tube_asset(bones=3, name="tube")
     video = load_fit_video(make_video(asset, tmp_path / "v", frames=4, size=32, seed=0))
@@ -130,7 +130,7 @@ def test_novel_view_iou_scores_the_truth_high_and_a_mirror_low(tmp_path):
     """Projected through the held-out cameras, the true shape (placed in the input camera's frame)
     matches the held-out masks; the same shape mirrored in depth, which the input view cannot tell
     apart, does not."""
-    from zooctl.metrics import novel_view_iou
+    from zooctl.fit.metrics import novel_view_iou
 
     res = _fit_tiny(tmp_path)
     gt = res.video.gt

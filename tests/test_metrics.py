@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from zooctl.metrics import chamfer, scale_line_search, skinning_iou, surface_samples, voxelize
+from zooctl.fit.metrics import chamfer, scale_line_search, skinning_iou, surface_samples, voxelize
 from zooctl.rig.synthetic import uv_sphere
 
 

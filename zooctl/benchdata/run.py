@@ -283,7 +283,7 @@ def markdown_table(res: dict[str, Any]) -> str:
         lines.append(f"Config overrides: {json.dumps(res['overrides'], sort_keys=True)}.")
     lines.append(
         "Novel-view IoU: mask IoU from held-out cameras (+90 deg azimuth, +35 deg elevation) after "
-        "mIoU's alignment (`zooctl.metrics`); n/a for videos made without them."
+        "mIoU's alignment (`zooctl.fit.metrics`); n/a for videos made without them."
     )
     lines += ["", head, "|" + "---|" * 10]
 

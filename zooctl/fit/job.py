@@ -572,7 +572,7 @@ def write_outputs(
         "mask_iou_model": _nanmean(model_iou),
     }
     if result.video.gt:
-        from ..metrics import evaluate_fit
+        from .metrics import evaluate_fit
 
         try:
             metrics.update(

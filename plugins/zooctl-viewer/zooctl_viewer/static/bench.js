@@ -4,7 +4,7 @@
   const D = window.ZOOCTL_VIEW;
   if (!D || D.kind !== "bench") { ZV.fail("data.js is missing or is not a benchmark's data"); return; }
   const $ = function (id) { return document.getElementById(id); };
-  // Which way is better, from CASA's metrics (zooctl/metrics): IoUs up, distances down.
+  // Which way is better, from CASA's metrics (zooctl/fit/metrics.py): IoUs up, distances down.
   const HIGHER = { mask_iou: true, novel_view_iou: true, miou: true, skinning: true };
   const LABELS = { mask_iou: "mask IoU", novel_view_iou: "novel-view IoU", miou: "mIoU", mcham: "Chamfer",
                    joint: "CD-J2J", skinning: "skinning IoU", reanimation: "re-animation", wall_s: "wall s" };
