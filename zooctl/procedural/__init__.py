@@ -16,24 +16,22 @@ import numpy as np
 
 from ..asset import RiggedAsset
 from ..errors import InputError
+from .arthropods import CRAB, INSECT, SPIDER, build_crab, build_insect, build_spider
 from .body import Body, BodyParams, assemble
-from .plans import (
+from .vertebrates import (
     BIPED,
     BIRD,
+    DINOSAUR,
     FISH,
-    INSECT,
     QUADRUPED,
     SNAKE,
-    SPIDER,
     build_biped,
     build_bird,
+    build_dinosaur,
     build_fish,
-    build_insect,
     build_quadruped,
     build_snake,
-    build_spider,
 )
-from .plans_extra import CRAB, DINOSAUR, build_crab, build_dinosaur
 
 __all__ = ["PLANS", "VARIANTS", "BodyParams", "build_animal", "starter_assets", "seed_bank"]
 

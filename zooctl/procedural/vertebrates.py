@@ -1,9 +1,10 @@
-"""The body plans: quadruped, biped, bird, fish, snake, insect and spider (the biped dinosaur and
-the crab are in `zooctl.procedural.plans_extra`).
+"""The vertebrate body plans: quadruped, biped, bird, fish, snake and the level biped dinosaur
+(the arthropods are in `zooctl.procedural.arthropods`).
 
 Each ``build_<plan>(params, palette)`` lays out joints and parts for the given proportions in the
 model convention (Y up, -Z forward, feet on y = 0, the animal's right towards +X) and attaches the
-plan's clips. ``palette`` is (main colour, secondary colour, belly colour), linear RGB.
+plan's clips. ``palette`` is (main colour, secondary colour, belly colour), linear RGB; the shared
+pieces (axes, eyes) are in `zooctl.procedural.plan_parts`.
 """
 
 from __future__ import annotations
@@ -13,48 +14,8 @@ import numpy as np
 from .body import Body, BodyParams, blob_part, limb_part
 from .mesh import Part, polyline
 from .motion import ClipBuilder, Limb, bob, gait, sway
+from .plan_parts import SIDES, X, Y, Z, eyes, unit, v
 from .skeleton import SkeletonBuilder
-
-X = (1.0, 0.0, 0.0)
-Y = (0.0, 1.0, 0.0)
-Z = (0.0, 0.0, 1.0)
-EYE = np.array([0.03, 0.03, 0.035])
-SIDES = (("l", -1.0), ("r", 1.0))
-
-
-def v(x: float, y: float, z: float) -> np.ndarray:
-    return np.array([x, y, z], dtype=np.float64)
-
-
-def unit(a: np.ndarray | tuple[float, ...]) -> np.ndarray:
-    a = np.asarray(a, dtype=np.float64)
-    return a / np.linalg.norm(a)
-
-
-def eyes(center: np.ndarray, across: float, radius: float, joint: str) -> list[Part]:
-    """A pair of small dark eyes at ``center`` +- ``across`` on x, rigid to ``joint``."""
-    return [
-        blob_part(
-            f"eye_{s}",
-            center + v(sx * across, 0, radius),
-            center + v(sx * across, 0, -radius),
-            radius,
-            radius,
-            [joint],
-            None,
-            EYE,
-            n=6,
-            segments=8,
-        )
-        for s, sx in SIDES
-    ]
-
-
-def sprawl_limb(joints: tuple[str, ...], phase: float, sx: float, direction: np.ndarray) -> Limb:
-    """An insect or spider leg reaching out along ``direction``: it swings about the vertical and
-    lifts about the horizontal axis across the leg."""
-    return Limb(joints, phase, (0.0, sx, 0.0), tuple(unit(np.cross(direction, Y))), None)
-
 
 # -- quadruped --------------------------------------------------------------------------------
 QUADRUPED = BodyParams(
@@ -708,189 +669,87 @@ def build_snake(p: BodyParams, palette: tuple[np.ndarray, ...]) -> Body:
     return Body("snake", p, sk, parts, {"slither": (40, slither), "idle": (60, idle)})
 
 
-# -- insect and spider ------------------------------------------------------------------------
-INSECT = BodyParams(
-    body_length=0.3, leg_length=0.25, neck_length=0.02, tail_length=0.0, head_size=0.05, girth=0.05
-)
-SPIDER = BodyParams(
-    body_length=0.25, leg_length=0.35, neck_length=0.0, tail_length=0.0, head_size=0.075, girth=0.09
-)
+# -- biped dinosaur ---------------------------------------------------------------------------
+# body, leg, neck, tail length, head size, girth (BodyParams order)
+DINOSAUR = BodyParams(1.0, 0.8, 0.3, 1.4, 0.28, 0.26)
 
 
-def _legged_walk(
-    sk: SkeletonBuilder,
-    parts: list[Part],
-    origin: str,
-    y: float,
-    H: float,
-    radius: float,
-    attach: list[tuple[float, np.ndarray]],
-    color: np.ndarray,
-    first_leg_left_phase0: list[bool],
-    thickness: float = 0.05,
-) -> list[Limb]:
-    """Add sprawling three-joint legs (side reach then down to the ground); returns their limbs.
-    ``thickness``: the leg's radius at the body, times ``H`` (a third of it at the tip)."""
-    limbs = []
-    for i, ((zoff, direction), left0) in enumerate(zip(attach, first_leg_left_phase0, strict=True)):
-        for s, sx in SIDES:
-            d = unit(np.array([sx * direction[0], 0.0, direction[2]]))
-            coxa = v(0, y, zoff) + d * radius
-            knee = coxa + d * 0.4 * H + v(0, 0.35 * H, 0)
-            foot = knee + d * 0.45 * H + v(0, 0.12 * H - knee[1], 0)
-            tip = foot + d * 0.18 * H - v(0, 0.1 * H, 0)
-            joints = sk.chain(
-                [f"leg{i + 1}_upper_{s}", f"leg{i + 1}_lower_{s}", f"leg{i + 1}_foot_{s}"],
-                np.stack([coxa, knee, foot]),
-                origin,
-            )
-            parts.append(
-                limb_part(
-                    f"leg{i + 1}_{s}",
-                    [coxa - d * 0.5 * radius, coxa, knee, foot, tip],
-                    thickness * H,
-                    0.3 * thickness * H,
-                    joints,
-                    origin,
-                    color,
-                    up=Y,
-                    n=22,
-                    segments=8,
-                )
-            )
-            phase = 0.0 if (sx < 0) == left0 else 0.5
-            limbs.append(sprawl_limb(tuple(joints), phase, sx, d))
-    return limbs
-
-
-def build_insect(p: BodyParams, palette: tuple[np.ndarray, ...]) -> Body:
+def build_dinosaur(p: BodyParams, palette: tuple[np.ndarray, ...]) -> Body:
+    sk = SkeletonBuilder()
     main, second, belly = palette
     L, H, r, hs = p.body_length, p.leg_length, p.girth, p.head_size
-    y = 0.5 * H
-    sk = SkeletonBuilder()
-    sk.add("thorax", v(0, y, 0))
-    sk.add("head", v(0, y + 0.2 * r, -0.2 * L - p.neck_length), "thorax")
-    sk.add("abdomen", v(0, y + 0.1 * r, 0.15 * L), "thorax")
+    ys = H + 0.15 * r
+    sk.add("pelvis", v(0, ys, 0.25 * L))
+    sk.add("spine", v(0, ys + 0.05 * r, -0.1 * L), "pelvis")
+    sk.add("chest", v(0, ys, -0.42 * L), "spine")
+    neck_dir = unit((0, 0.55, -0.85))
+    n0 = v(0, ys + 0.3 * r, -0.5 * L)
+    sk.chain(["neck", "head"], np.stack([n0, n0 + neck_dir * p.neck_length]), "chest")
     head = sk.position("head")
+    fwd = unit((0, -0.15, -1))
+    sk.add("jaw", head + v(0, -0.25 * hs, 0.1 * hs), "head")
+    # The tail leaves the hips level and droops a little towards its tip.
+    t0 = v(0, ys + 0.15 * r, 0.55 * L)
+    tail_pts = [t0]
+    for k in range(1, 6):
+        tail_pts.append(tail_pts[-1] + unit((0, -0.05 - 0.04 * k, 1.0)) * p.tail_length / 5)
+    tail = sk.chain([f"tail{k}" for k in range(1, 6)], np.stack(tail_pts[:5]), "pelvis")
+
+    spine = [sk.position(j) for j in ("pelvis", "spine", "chest")]
+    body_line = polyline([v(0, ys + 0.1 * r, 0.55 * L), *spine, v(0, ys + 0.15 * r, -0.58 * L)], 36)
+    torso = _body_radii(36, 0.85 * r, 1.1 * r, 0.12)
+    neck_pts = [v(0, ys + 0.1 * r, -0.4 * L), n0, head]
+    tail_line = [v(0, ys + 0.1 * r, 0.4 * L), *tail_pts]
+    jaw0, jaw1 = head + v(0, -0.3 * hs, 0.1 * hs), head + v(0, -0.35 * hs, -1.3 * hs)
+    head0, head1 = head - fwd * 0.45 * hs, head + fwd * 1.55 * hs
     parts = [
-        blob_part(
-            "thorax",
-            v(0, y, 0.2 * L),
-            v(0, y, -0.22 * L),
-            r,
-            0.9 * r,
-            ["thorax"],
-            None,
-            main,
-            n=14,
-            segments=16,
-            belly=belly,
-        ),
-        blob_part(
-            "abdomen",
-            v(0, y + 0.05 * r, 0.1 * L),
-            v(0, y + 0.25 * r, 0.85 * L),
-            1.35 * r,
-            1.2 * r,
-            ["abdomen"],
-            "thorax",
-            second,
-            n=22,
-            segments=18,
-            taper=-0.2,
-            belly=belly,
-        ),
-        blob_part(
-            "head",
-            head + v(0, 0, 0.8 * hs),
-            head - v(0, 0.1 * hs, 1.0 * hs),
-            hs,
-            0.95 * hs,
-            ["head"],
-            "thorax",
-            main,
-            n=14,
-            segments=16,
-        ),
-        *eyes(head + v(0, 0.25 * hs, -0.55 * hs), 0.65 * hs, 0.3 * hs, "head"),
+        Part("body", body_line, torso, np.asarray(Y), ["pelvis", "spine", "chest"], None, main, belly, 24),
+        limb_part("neck", neck_pts, 0.75 * r, 0.5 * hs, ["neck"], "chest", main, (0, 0.85, 0.55), 14, 16),
+        blob_part("head", head0, head1, 0.5 * hs, 0.55 * hs, ["head"], "neck", main, Y, 20, 18, 0.35, belly),
+        blob_part("jaw", jaw0, jaw1, 0.38 * hs, 0.2 * hs, ["jaw"], "head", belly, Y, 14, 14, 0.4),
+        limb_part("tail", tail_line, 0.75 * r, 0.04 * r, tail, "pelvis", main, Y, 30, 14),
+        *eyes(head + fwd * 0.2 * hs + v(0, 0.3 * hs, 0), 0.42 * hs, 0.09 * hs, "head"),
     ]
+    legs, arms = [], []
+    arm = 0.3 * L + 0.15 * H
     for s, sx in SIDES:
-        a0 = head + v(sx * 0.3 * hs, 0.7 * hs, -0.5 * hs)
-        pts = [a0, a0 + unit((sx * 0.4, 0.8, -1)) * 0.12 * L, a0 + unit((sx * 0.6, 0.4, -1)) * 0.26 * L]
-        joints = sk.chain([f"antenna1_{s}", f"antenna2_{s}"], np.stack(pts[:2]), "head")
+        x, z = sx * 0.55 * r, 0.25 * L
+        hip, knee = v(x, ys - 0.1 * r, z), v(x, 0.52 * H, z - 0.16 * H)
+        ankle, toe = v(x, 0.17 * H, z + 0.1 * H), v(x, 0.03 * H, z - 0.12 * H)
+        joints = sk.chain([f"thigh_{s}", f"shin_{s}", f"foot_{s}"], np.stack([hip, knee, ankle]), "pelvis")
+        pts = [v(x, ys + 0.25 * r, z + 0.1 * L), hip, knee, ankle, toe]
+        parts.append(limb_part(f"leg_{s}", pts, 0.6 * r, 0.12 * r, joints, "pelvis", main, n=26))
+        legs.append(Limb(tuple(joints), 0.0 if sx < 0 else 0.5, X, None, (-1.0, 0.0, 0.0)))
+        sh = v(sx * 0.7 * r, ys - 0.35 * r, -0.4 * L)
+        el = sh + unit((sx * 0.2, -0.8, -0.3)) * 0.5 * arm
+        hand = el + unit((sx * 0.05, -0.2, -1.0)) * 0.35 * arm
+        joints = sk.chain([f"upperarm_{s}", f"forearm_{s}"], np.stack([sh, el]), "chest")
+        pts = [sh - v(sx * 0.2 * r, 0, 0), sh, el, hand, hand + unit((0, -0.6, -1)) * 0.15 * arm]
         parts.append(
-            limb_part(f"antenna_{s}", pts, 0.012 * L, 0.006 * L, joints, "head", EYE, up=Y, n=12, segments=6)
+            limb_part(f"arm_{s}", pts, 0.2 * r, 0.06 * r, joints, "chest", second, n=16, segments=10)
         )
-    attach = [(-0.12 * L, unit((1, 0, -0.6))), (0.0, unit((1, 0, 0.0))), (0.12 * L, unit((1, 0, 0.7)))]
-    limbs = _legged_walk(sk, parts, "thorax", y, H, 0.8 * r, attach, EYE * 2.5, [True, False, True])
+        arms.append(joints)
 
     def walk(b: ClipBuilder) -> None:
-        gait(b, limbs, swing=0.3, lift=0.35, bend=0.0)  # tripod gait
-        b.rotate("abdomen", X, 0.04 * b.wave(2))
-        bob(b, "thorax", 0.02 * H)
-        for s, _ in SIDES:
-            b.rotate(f"antenna1_{s}", X, 0.15 * b.wave(2))
+        gait(b, legs, swing=0.45, lift=0.0, bend=0.8)
+        sway(b, tail, Y, 0.08, lag=0.1)
+        b.rotate("pelvis", Y, 0.04 * b.wave(1))
+        b.rotate("neck", X, 0.05 * b.wave(2, 0.25))
+        bob(b, "pelvis", 0.02 * H)
 
     def idle(b: ClipBuilder) -> None:
-        b.rotate("abdomen", X, 0.08 * b.wave(2))
-        b.rotate("head", Y, 0.25 * b.wave(1))
-        for s, sx in SIDES:
-            b.rotate(f"antenna1_{s}", X, 0.25 * b.wave(3, 0.5 if sx > 0 else 0))
-            b.rotate(f"antenna2_{s}", Y, 0.2 * b.wave(2))
+        b.rotate("neck", Y, 0.3 * b.wave(1))
+        b.rotate("head", X, 0.1 * b.wave(2, 0.25))
+        b.rotate("jaw", X, -0.2 * np.clip(b.wave(1, 0.5), 0.0, None))
+        sway(b, tail, Y, 0.12, cycles=2, lag=0.1)
+        for joints in arms:
+            b.rotate(joints[1], X, 0.15 * b.wave(2))
 
-    return Body("insect", p, sk, parts, {"walk": (24, walk), "idle": (60, idle)})
+    def roar(b: ClipBuilder) -> None:
+        up = np.clip(b.wave(1), 0.0, None)
+        b.rotate("chest", X, 0.1 * up)
+        b.rotate("neck", X, 0.35 * up)
+        b.rotate("jaw", X, -0.5 * up)
+        sway(b, tail, X, 0.06, lag=0.1)
 
-
-def build_spider(p: BodyParams, palette: tuple[np.ndarray, ...]) -> Body:
-    main, second, belly = palette
-    L, H, r, hs = p.body_length, p.leg_length, p.girth, p.head_size
-    y = 0.35 * H
-    sk = SkeletonBuilder()
-    sk.add("cephalothorax", v(0, y, 0))
-    sk.add("abdomen", v(0, y + 0.2 * r, 0.3 * L), "cephalothorax")
-    parts = [
-        blob_part(
-            "cephalothorax",
-            v(0, y, 1.1 * hs),
-            v(0, y + 0.1 * hs, -1.2 * hs),
-            1.0 * hs,
-            0.7 * hs,
-            ["cephalothorax"],
-            None,
-            main,
-            n=16,
-            segments=18,
-            belly=belly,
-        ),
-        blob_part(
-            "abdomen",
-            v(0, y + 0.1 * r, 0.15 * L),
-            v(0, y + 0.5 * r, 0.25 * L + 2.4 * r),
-            1.05 * r,
-            0.95 * r,
-            ["abdomen"],
-            "cephalothorax",
-            second,
-            n=22,
-            segments=20,
-            belly=belly,
-        ),
-        *eyes(v(0, y + 0.45 * hs, -0.95 * hs), 0.3 * hs, 0.16 * hs, "cephalothorax"),
-    ]
-    angles = np.radians([55.0, 20.0, -15.0, -50.0])
-    attach = [(-0.3 * hs * np.sin(a), np.array([np.cos(a), 0.0, -np.sin(a)])) for a in angles]
-    limbs = _legged_walk(
-        sk, parts, "cephalothorax", y, H, 0.8 * hs, attach, main * 0.8, [True, False, True, False]
-    )
-
-    def walk(b: ClipBuilder) -> None:
-        gait(b, limbs, swing=0.25, lift=0.3, bend=0.0)  # alternating tetrapod gait
-        bob(b, "cephalothorax", 0.015 * H)
-        b.rotate("abdomen", Y, 0.05 * b.wave(2))
-
-    def idle(b: ClipBuilder) -> None:
-        b.rotate("abdomen", X, 0.06 * b.wave(1))
-        for lb in limbs[:2]:  # the front pair feels around
-            b.rotate(lb.joints[0], lb.lift_axis, 0.25 + 0.2 * b.wave(2))
-
-    return Body("spider", p, sk, parts, {"walk": (24, walk), "idle": (60, idle)})
+    return Body("dinosaur", p, sk, parts, {"walk": (36, walk), "idle": (60, idle), "roar": (40, roar)})
