@@ -5,6 +5,7 @@
     .venv/bin/python bench/video.py --part throughput --repeats 3
     .venv/bin/python bench/video.py --part quality --seg-option key_every=5 --flow-size 480  # variants
     .venv/bin/python bench/video.py --part length --lengths 5,20,60 --repeats 1   # `video add` by length
+    .venv/bin/python bench/video.py --part length --lengths 5,60 --fit   # and `zooctl fit CLIP` of each
 
 Quality: the seven shared real videos (``../shared/data/videos``; blackswan, dog and cows are the
 ones the segmenter was developed on) are decoded at the default size (854 px, DAVIS's own 480p) and
@@ -325,10 +326,14 @@ def run_child(args: list[str], env: dict | None = None, cwd: Path | None = None)
     }
 
 
-def length_sweep(lengths, repeats: int, extra: list[str], source_tree: Path | None) -> dict:
+def length_sweep(
+    lengths, repeats: int, extra: list[str], source_tree: Path | None, fit: bool = False
+) -> dict:
     """`zooctl video add CLIP` of 1080p 30 fps clips of each length (seconds), with the defaults
     (plus ``extra`` options): wall time, CPU time, peak memory of the process, frames kept; the
-    median of ``repeats`` runs each. ``source_tree``: run another checkout's zooctl (a baseline)."""
+    median of ``repeats`` runs each. ``source_tree``: run another checkout's zooctl (a baseline).
+    ``fit``: then, once per length, `zooctl fit CLIP` with no options into a fresh store holding
+    the starter bank (video add, retrieval, trials and fit in one process), timed the same way."""
     import os
     import shutil
 
@@ -377,7 +382,37 @@ def length_sweep(lengths, repeats: int, extra: list[str], source_tree: Path | No
             file=sys.stderr,
             flush=True,
         )
+        if fit:
+            med["fit"] = fit_clip(clip, tmp / f"fitstore-{seconds:g}s", env, source_tree)
     return out
+
+
+def fit_clip(clip: Path, store: Path, env: dict, source_tree: Path | None) -> dict:
+    """`zooctl fit CLIP` with no options into a fresh ``store`` seeded with the starter bank."""
+    import shutil
+
+    shutil.rmtree(store, ignore_errors=True)
+    base = [sys.executable, "-m", "zooctl", "--store", str(store)]
+    run_child([*base, "bank", "seed"], env, cwd=source_tree or REPO)
+    r = run_child([*base, "fit", str(clip), "--json"], env, cwd=source_tree or REPO)
+    rec = json.loads(r.pop("out"))
+    r.pop("err")
+    res = {
+        **r,
+        "frames": rec["frames"],
+        "template": rec["template"],
+        "stage_iters": {k: v.get("steps") for k, v in rec.get("losses", {}).items()},
+        "timings": rec["timings"],
+        "mask_iou": rec["metrics"]["mask_iou"],
+        "overlay_frames_expected": rec["frames"] + 60,
+    }
+    print(
+        f"    fit: {res['frames']} frames, template {res['template']}, wall {r['wall_s']:.0f} s, "
+        f"CPU {r['cpu_s']:.0f} s, peak {r['peak_mb']:.0f} MB, mask IoU {res['mask_iou']:.3f} (against its own automatic masks)",
+        file=sys.stderr,
+        flush=True,
+    )
+    return res
 
 
 def _value(text: str):
@@ -391,6 +426,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--part", choices=("all", "quality", "throughput", "length"), default="all")
     ap.add_argument("--lengths", default="5,20,60", help="clip lengths in seconds for --part length")
+    ap.add_argument("--fit", action="store_true", help="length part: also `zooctl fit CLIP` once per length")
     ap.add_argument(
         "--add-option",
         action="append",
@@ -492,7 +528,7 @@ def main() -> None:
     if args.part == "length":
         lengths = [float(x) for x in args.lengths.split(",")]
         print(f"video add of 1080p 30 fps clips (median of {args.repeats}):", file=sys.stderr)
-        report["length"] = length_sweep(lengths, args.repeats, args.add_option, args.baseline)
+        report["length"] = length_sweep(lengths, args.repeats, args.add_option, args.baseline, args.fit)
     print(json.dumps(report, indent=1))
 
 

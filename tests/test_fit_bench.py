@@ -165,7 +165,7 @@ def test_overlay_turns_around_the_fit_at_a_fixed_time(tmp_path):
 
     res = _fit_tiny(tmp_path)
     asset = fitted_asset(res.scene, res.template, "tube-fit", res.video.fps)
-    out = overlay_frames(asset, res.input_camera(), res.video.frames, turn_frames=4)
+    out = np.stack(list(overlay_frames(asset, res.input_camera(), res.video.frames, turn_frames=4)))
     T, W = res.video.num_frames, res.video.frames.shape[2]
     assert out.shape == (T + 4, 32, 64, 3)
     assert all((out[T + k, :, :W] == out[T // 2, :, :W]).all() for k in range(4))  # time stands still

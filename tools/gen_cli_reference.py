@@ -64,7 +64,7 @@ ENVIRONMENT: dict[str, tuple[str, str]] = {
     ),
     "ZOOCTL_MAX_ARRAY_MB": (
         "zooctl",
-        "Largest arrays one read of a stored HDF5 file may declare, in MB (default 2048).",
+        "Largest arrays one read of a stored HDF5 file may allocate, in MB (default 1024).",
     ),
     "ZOOCTL_RAY_OBJECT_STORE_MB": (
         "zooctl-ray",

@@ -81,17 +81,17 @@ def _num(v: float) -> str:
 # -- reads: what one file may make zooctl read or allocate --------------------------------------
 #
 # A sparse file claims gigabytes it does not hold, and an HDF5 dataset declares any shape in a few
-# bytes; readers check these limits against the sizes a file declares *before* reading it. The
-# defaults are above real data (the shared animals: under 1 MB; a 1,000-asset index: about 1 MB;
-# the arrays of a stored DAVIS video: about 600 MB, of the longest clip `video add` keeps by
-# default, 300 frames of 854x480: 1.7 GB).
+# bytes; readers check these limits against the sizes a file declares *before* reading it, at the
+# size the read allocates. A stored video is read a few frames at a time (its masks whole), so the
+# array limit bounds one read, not a video's length; the defaults are above real data and keep a
+# crafted file's peak under 2 GB.
 
 
 @dataclass(frozen=True)
 class ReadLimits:
     max_file_mb: float = 512.0  # one input file read whole: a model, a glTF buffer or image
     max_json_mb: float = 64.0  # one JSON text: a store index, card or record, a config, glTF JSON
-    max_array_mb: float = 2048.0  # the arrays one read of a stored HDF5 file takes, as declared
+    max_array_mb: float = 1024.0  # the arrays one read of a stored HDF5 file allocates, as declared
 
 
 READ_ENV = {

@@ -204,7 +204,11 @@ def _read_stats(store, name: str, stats) -> dict:
 
     store.summary(name)  # an unknown name: NotFoundError
     return read_h5(
-        store.path(name), "the video file", "remove it with `zooctl video rm` and add it again", stats
+        store.path(name),
+        "the video file",
+        "remove it with `zooctl video rm` and add it again",
+        stats,
+        ["boxes"],  # what it reads whole; the rest a frame at a time
     )
 
 
@@ -222,8 +226,9 @@ def show(
     store = _store()
     info = {**store.summary(name), **_read_stats(store, name, stored_video_stats)}
     if preview:
-        rec = store.get(name, what=("masks", "flow", "frames"))
-        with stage_progress(not json_out) as progress:
+        from ..store.video_reader import StoredVideo
+
+        with StoredVideo(store.path(name)) as rec, stage_progress(not json_out) as progress:
             from ..video.preview import write_preview
 
             write_preview(

@@ -146,6 +146,9 @@ class FitConfig:
     seed: int = 0
     fit_size: int = 128  # longest side (px) of the images the losses see
     max_frames: int | None = None
+    # The stages' iterations are for clips up to this many frames; a longer clip gets
+    # proportionally more, so each frame gets as many updates (0: the same for every length).
+    schedule_frames: int = 100
     soft_sigma: float = 0.05  # SoftRas sigma (px^2): small, since dense meshes dilate soft silhouettes
     checkpoint_every: int = 25  # steps between saved states (for --resume)
     hidden: int = 64  # displacement MLP width
@@ -187,6 +190,14 @@ class FitConfig:
         if isinstance(stage2, dict) and "lr_joints" in stage2 and "lr_joints_given" not in stage2:
             cfg.stage2.lr_joints_given = None
         return cfg.validate()
+
+    def stage(self, stage: int, num_frames: int | None = None) -> StageConfig:
+        """Stage ``stage``'s settings for a clip of ``num_frames`` frames: its iterations scaled
+        by ``num_frames / schedule_frames`` when the clip is longer (see ``schedule_frames``)."""
+        st = self.stage1 if stage == 1 else self.stage2
+        if num_frames is None or self.schedule_frames <= 0 or num_frames <= self.schedule_frames:
+            return st
+        return dataclasses.replace(st, iters=math.ceil(st.iters * num_frames / self.schedule_frames))
 
     def for_named_template(self) -> FitConfig:
         """This config for a template the user named: stage 2's joints at ``lr_joints_given``
@@ -231,6 +242,8 @@ class FitConfig:
             )
         if self.max_frames is not None and self.max_frames < 1:
             raise UsageError("max_frames must be at least 1")
+        if self.schedule_frames < 0:
+            raise UsageError("schedule_frames must be 0 (off) or a number of frames")
         if self.pose_prior.kind not in POSE_PRIORS or not self.pose_prior.min_std_deg > 0:
             raise UsageError(
                 f"pose_prior: kind {self.pose_prior.kind!r} must be one of {', '.join(POSE_PRIORS)} "

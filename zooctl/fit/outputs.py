@@ -12,6 +12,7 @@ from __future__ import annotations
 import io
 import math
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -98,9 +99,10 @@ def exported_mask_iou(asset: RiggedAsset, camera, masks: np.ndarray, batch: int 
 
 @torch.no_grad()
 def overlay_frames(
-    asset: RiggedAsset, camera, frames: np.ndarray, alpha: float = 0.6, turn_frames: int = 60
-) -> np.ndarray:
-    """(T + turn_frames, H, 2W, 3) uint8. First the video: the shaded fitted mesh over each frame,
+    asset: RiggedAsset, camera, frames: Any, alpha: float = 0.6, turn_frames: int = 60
+) -> Iterator[np.ndarray]:
+    """T + turn_frames images (H, 2W, 3) uint8, made one at a time as they are taken (``frames``
+    (T, H, W, 3) uint8: an array or a stored video's `FrameArray`, read a frame at a time). First the video: the shaded fitted mesh over each frame,
     outlined in `OUTLINE` (a fit shaded like the animal's own colours would not show), beside the
     fit playing its motion seen from the side (+90 degrees around the animal from the
     input camera, raised 20 degrees), a view the input never shows. Then a turntable: the fit frozen
@@ -113,7 +115,6 @@ def overlay_frames(
     posed = asset.pose("fit", np.arange(T)).astype(np.float32)  # (T, V, 3)
     faces = torch.as_tensor(asset.faces, dtype=torch.long)
     renderer = PreviewRenderer()
-    out = np.zeros((T + turn_frames, H, 2 * W, 3), np.uint8)
     size = float(np.linalg.norm(posed[0].max(0) - posed[0].min(0)))
 
     def around(t: int, azimuth: float, elevation: float):
@@ -129,19 +130,21 @@ def overlay_frames(
             posed[t], asset.faces, orbit_camera(eye, centre, H, W, 35.0), asset.vertex_colors
         )
 
-    for t in range(T):
+    left_mid = None
+    for t, frame in enumerate(frames):
         shaded = renderer.render(posed[t], asset.faces, camera, asset.vertex_colors)
         mask = rasterize(torch.as_tensor(posed[t][None]), faces, camera).mask[0].numpy()
-        img = frames[t].copy()
-        img[mask] = (alpha * shaded[mask] + (1 - alpha) * frames[t][mask]).astype(np.uint8)
-        out[t, :, :W] = _label(_outline(img, mask), "input + fit")
-        out[t, :, W:] = _label(around(t, 90.0, 20.0), "fit, side view (+90 deg)")
+        img = np.array(frame, np.uint8)
+        img[mask] = (alpha * shaded[mask] + (1 - alpha) * frame[mask]).astype(np.uint8)
+        left = _label(_outline(img, mask), "input + fit")
+        if t == T // 2:
+            left_mid = left
+        yield np.concatenate([left, _label(around(t, 90.0, 20.0), "fit, side view (+90 deg)")], 1)
     mid = T // 2
     for k in range(turn_frames):
-        out[T + k, :, :W] = out[mid, :, :W]
         ang = 360.0 * k / turn_frames
-        out[T + k, :, W:] = _label(around(mid, ang, 0.0), f"fit at frame {mid}, {ang:.0f} deg from the input")
-    return out
+        right = _label(around(mid, ang, 0.0), f"fit at frame {mid}, {ang:.0f} deg from the input")
+        yield np.concatenate([left_mid, right], 1)
 
 
 OUTLINE = (255, 0, 255)  # magenta: rare in footage of animals

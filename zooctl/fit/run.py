@@ -250,7 +250,7 @@ def _run_stage(
     pause_at: int | None = None,
 ) -> None:
     cfg, scene = result.config, result.scene
-    st = stage_config(cfg, stage)
+    st = stage_config(cfg, stage, scene.num_frames)
     last = st.iters if pause_at is None else min(st.iters, max(pause_at, first))
     runner = StageRunner(scene, targets, cfg, stage)
     opt = make_optimizer(scene, cfg, stage, learn_focal)

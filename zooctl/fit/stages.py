@@ -58,8 +58,9 @@ class Targets:
     flow_valid: Tensor | None = None
 
 
-def stage_config(cfg: FitConfig, stage: int) -> StageConfig:
-    return cfg.stage1 if stage == 1 else cfg.stage2
+def stage_config(cfg: FitConfig, stage: int, num_frames: int | None = None) -> StageConfig:
+    """The stage's settings, its iterations for a clip of ``num_frames`` (`FitConfig.stage`)."""
+    return cfg.stage(stage, num_frames)
 
 
 def make_optimizer(scene: FitScene, cfg: FitConfig, stage: int, learn_focal: bool) -> torch.optim.Adam:
@@ -93,7 +94,7 @@ class StageRunner:
 
     def __init__(self, scene: FitScene, targets: Targets, cfg: FitConfig, stage: int):
         self.scene, self.targets, self.cfg, self.stage = scene, targets, cfg, stage
-        self.st = stage_config(cfg, stage)
+        self.st = stage_config(cfg, stage, scene.num_frames)
         size = (scene.height, scene.width)
         # Renderers come from the registry (plugins included); soft_sigma is the soft renderer's.
         options = {"sigma": cfg.soft_sigma} if self.st.renderer == "soft" else {}

@@ -524,7 +524,18 @@ class VideoStore(IndexedStore):
     def rebuild_entry(
         self, name: str, path: Path, old: dict[str, Any] | None
     ) -> tuple[dict[str, Any], list[str]]:
-        summary = self.checked_item(read_video_h5(path), name, path).summary()
+        from .video_reader import StoredVideo
+
+        with StoredVideo(path) as sv:  # a frame at a time: a long video's arrays never sit in memory
+            t, h, w = sv.frames.shape[:3]
+            if t < 2:
+                raise StoreError(f"the video in {path.name} is invalid: it has {t} frame(s), not 2 or more")
+            if sv.name != name:
+                raise StoreError(f"{path.name} holds a video named {sv.name!r}")
+            coverage = np.concatenate([m.reshape(len(m), -1).mean(1) for _, m in sv.masks.chunks()])
+            summary = video_summary(
+                name, (t, h, w), sv.fps, coverage, sv.segmenter, sv.flow_estimator, sv.source
+            )
         summary["bytes"] = path.stat().st_size
         return summary, []
 

@@ -54,15 +54,20 @@ def export_video(store, name: str, what: str, out: str | Path) -> int:
     ``backward.npy`` (T-1, H, W, 2) float32 pixels, ``occlusion_forward/00000.png``... (255: occluded).
     Each file is written to a temporary and renamed, so a reader never sees half a file.
     """
+    from ..store.video_reader import StoredVideo
+
+    if what not in WHAT:
+        raise UsageError(f"--what {what!r} is not one of {', '.join(WHAT)}")
+    store.summary(name)  # an unknown name: NotFoundError
+    with StoredVideo(store.path(name)) as rec:  # read a few frames at a time
+        return _export(rec, what, Path(out))
+
+
+def _export(rec, what: str, out: Path) -> int:
     from PIL import Image
 
     from ..store.fs import publish, temp_path
 
-    if what not in WHAT:
-        raise UsageError(f"--what {what!r} is not one of {', '.join(WHAT)}")
-    parts = {"frames": ("frames",), "masks": ("masks",), "flow": ("flow",)}[what]
-    rec = store.get(name, what=parts)
-    out = Path(out)
     _out_folder(out)
     n = 0
 
@@ -86,12 +91,10 @@ def export_video(store, name: str, what: str, out: str | Path) -> int:
     else:
         for key, arr in (("forward", rec.flow_forward), ("backward", rec.flow_backward)):
             final = out / f"{key}.npy"
-            buf = io.BytesIO()  # np.save into a real file fails without an errno on a full disk
-            np.save(buf, arr.astype(np.float32))
             with _writing(out):
                 tmp = temp_path(final)
                 try:
-                    tmp.write_bytes(buf.getvalue())
+                    _write_npy(tmp, arr)
                     publish(tmp, final)
                 finally:
                     tmp.unlink(missing_ok=True)
@@ -106,3 +109,17 @@ def export_video(store, name: str, what: str, out: str | Path) -> int:
                 save_image(m.astype(np.uint8) * 255, out / key / f"{i:05d}.png", "PNG")
                 n += 1
     return n
+
+
+def _write_npy(path: Path, arr) -> None:
+    """``arr`` (a `FrameArray`) as a float32 ``.npy`` file, written a chunk of frames at a time
+    with plain writes (np.save into a file fails without an errno on a full disk)."""
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(
+        header,
+        {"descr": np.lib.format.dtype_to_descr(np.dtype("<f4")), "fortran_order": False, "shape": arr.shape},
+    )
+    with open(path, "wb") as f:
+        f.write(header.getvalue())
+        for _, chunk in arr.chunks():
+            f.write(np.ascontiguousarray(chunk, "<f4").tobytes())

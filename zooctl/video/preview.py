@@ -45,12 +45,14 @@ def preview_frame(
 
 
 def write_preview(rec, out: str | Path, progress=None) -> Path:
-    """Write a stored video's preview (`zooctl.store.videos.VideoRecord` with frames, masks, flow) as H.264."""
+    """Write a stored video's preview as H.264: ``rec`` a `zooctl.store.video_reader.StoredVideo`
+    (read a frame at a time) or a `zooctl.store.videos.VideoRecord` with frames, masks and flow."""
     from ..io.video import write_mp4
+    from .stats import magnitude_percentile
 
     t = len(rec.frames)
-    mag = np.linalg.norm(rec.flow_forward, axis=-1)
-    scale = max(float(np.percentile(mag, 99)), 1.0)  # one scale for the whole clip, so colours compare
+    p99, _ = magnitude_percentile(lambda: iter(rec.flow_forward), 0.99)
+    scale = max(p99, 1.0)  # one scale for the whole clip, so colours compare
     how = (rec.segmenter or {}).get("seeding") or [""] * t
 
     def frames():

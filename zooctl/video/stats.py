@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from typing import Any
 
 import numpy as np
@@ -35,19 +36,13 @@ def stored_video_stats(f) -> dict[str, Any]:
     masks, fwd = f["masks"], f["flow/forward"]
     occs = (f["flow/occlusion_forward"], f["flow/occlusion_backward"])
     coverage = np.array([float(masks[i].mean()) for i in range(len(masks))])
-    per_frame, top, occluded, n = [], 0.0, 0, 0
+    per_frame, occluded = [], 0
     for i in range(len(fwd)):
-        mag = np.linalg.norm(fwd[i].astype(np.float32), axis=-1)
+        mag = _magnitude(fwd[i])
         per_frame.append(float(mag.mean()))
-        top = max(top, float(mag.max()))
         occluded += sum(int(np.count_nonzero(o[i])) for o in occs)
-        n += mag.size
-    step = 1e-3
-    hist = np.zeros(int(top / step) + 2, np.int64)
-    for i in range(len(fwd)):
-        mag = np.linalg.norm(fwd[i].astype(np.float32), axis=-1)
-        hist += np.bincount((mag / step).astype(np.int64).ravel(), minlength=len(hist))[: len(hist)]
-    p99 = float(np.searchsorted(np.cumsum(hist), 0.99 * n)) * step
+    n = max(1, len(fwd) * int(np.prod(fwd.shape[1:3])))
+    p99, top = magnitude_percentile(lambda: (fwd[i] for i in range(len(fwd))), 0.99)
     return _stats(
         json.loads(f.attrs["segmenter"]),
         coverage,
@@ -58,6 +53,35 @@ def stored_video_stats(f) -> dict[str, Any]:
         occluded / (2 * n),
         np.asarray(per_frame),
     )
+
+
+MAX_MAGNITUDE = 4096.0  # px: past any real frame's diagonal; a damaged file's huge values count as this
+
+
+def _magnitude(flow: np.ndarray) -> np.ndarray:
+    """(H, W) flow magnitudes in pixels of one (H, W, 2) flow frame, non-finite ones as the maximum."""
+    mag = np.linalg.norm(np.asarray(flow, np.float32), axis=-1)
+    return np.nan_to_num(np.minimum(mag, MAX_MAGNITUDE), nan=MAX_MAGNITUDE)
+
+
+def magnitude_percentile(
+    flows: Callable[[], Iterable[np.ndarray]], q: float, step: float = 1e-3
+) -> tuple[float, float]:
+    """(q-quantile, maximum) of the magnitudes of the flow frames (each (H, W, 2)) ``flows()``
+    yields, seen one at a time (two passes: the maximum sizes the histogram), the quantile from
+    ``step`` px bins: no more than one frame in memory."""
+    top, n = 0.0, 0
+    for flow in flows():
+        mag = _magnitude(flow)
+        top, n = max(top, float(mag.max(initial=0.0))), n + mag.size
+    if n == 0:
+        return 0.0, 0.0
+    hist = np.zeros(int(top / step) + 2, np.int64)
+    for flow in flows():
+        hist += np.bincount((_magnitude(flow) / step).astype(np.int64).ravel(), minlength=len(hist))[
+            : len(hist)
+        ]
+    return float(np.searchsorted(np.cumsum(hist), q * n)) * step, top
 
 
 def _stats(seg, coverage, boxes, mean, p99, top, occluded, per_frame) -> dict[str, Any]:
