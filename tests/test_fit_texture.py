@@ -126,7 +126,7 @@ def scene():
 def vertex_bake(scene):
     a, truth, cam, frames, masks, _ = scene
     grey = dataclasses.replace(a, vertex_colors=np.full_like(truth, 0.5))
-    return bake(grey, cam, frames, masks)
+    return bake(grey, cam, frames, masks, make_uvs=False)
 
 
 def test_vertex_colours_come_back_where_seen(scene, vertex_bake):
@@ -185,8 +185,8 @@ def test_symmetry_is_judged_on_the_reference_shape(scene):
     v[v[:, side] > centre, length] += 0.1 * np.ptp(v[:, length])  # one side moved forward
     bent = dataclasses.replace(a, vertices=v.astype(np.float32))
     frames, masks, _ = render_unlit(bent, cam, truth)
-    _, own = bake(bent, cam, frames, masks)
-    out, ref = bake(bent, cam, frames, masks, reference=a.vertices)
+    _, own = bake(bent, cam, frames, masks, make_uvs=False)
+    out, ref = bake(bent, cam, frames, masks, reference=a.vertices, make_uvs=False)
     assert own["mirrored"] == 0 and ref["mirrored"] > 0.2
     from zooctl.errors import InputError
 
@@ -220,8 +220,10 @@ def test_overlapping_or_stray_uvs_bake_vertex_colours(scene):
     rng = np.random.default_rng(0)
     assert uv_samples(rng.random((a.num_vertices, 2)).astype(np.float32), a.faces) is None  # overlapping
     assert uv_samples(rng.random((a.num_vertices, 2)).astype(np.float32) + 1.5, a.faces) is None
-    out, info = bake(stacked, cam, frames[:2], masks[:2])
+    out, info = bake(stacked, cam, frames[:2], masks[:2], make_uvs=False)
     assert info["mode"] == "vertex" and out.vertex_colors is not None and out.texture_png is None
+    out, info = bake(stacked, cam, frames[:2], masks[:2], texture_size=128)  # an atlas replaces them
+    assert info["mode"] == "texture" and info["uvs"] == "generated" and out.texture_png is not None
 
 
 def test_a_character_no_frame_sees_keeps_its_colours(scene):
@@ -234,7 +236,7 @@ def test_pixels_outside_the_mask_give_no_colour(scene):
     """The background is green; a mask that leaves the animal's border out must keep green off it."""
     a, truth, cam, frames, masks, fids = scene
     grey = dataclasses.replace(a, vertex_colors=np.full_like(truth, 0.5))
-    out, _ = bake(grey, cam, frames, masks)
+    out, _ = bake(grey, cam, frames, masks, make_uvs=False)
     bg = srgb_to_linear(np.array(BACKGROUND) / 255.0)
     seen = np.zeros(a.num_vertices, bool)
     seen[a.faces[seen_faces(fids, a.num_faces)].reshape(-1)] = True
@@ -266,14 +268,16 @@ VALIDATE_JS = textwrap.dedent("""
 def baked_assets(scene, vertex_bake):
     a, _, cam, frames, masks, _ = scene
     textured, _ = bake(per_face_atlas(a), cam, frames, masks, texture_size=128)
-    return {"vertex": vertex_bake[0], "texture": textured}
+    atlas, info = bake(a, cam, frames, masks, texture_size=128)
+    assert info["uvs"] == "generated"
+    return {"vertex": vertex_bake[0], "texture": textured, "atlas": atlas}
 
 
 @pytest.mark.skipif(
     _validator() is None,
     reason="the Khronos glTF-Validator is not installed (`npm install -g gltf-validator`; .ci/run does it)",
 )
-@pytest.mark.parametrize("kind", ["vertex", "texture"])
+@pytest.mark.parametrize("kind", ["vertex", "texture", "atlas"])
 def test_glb_passes_the_khronos_validator(baked_assets, kind, tmp_path):
     from zooctl.io.gltf_export import save_glb
 
@@ -290,7 +294,7 @@ def test_glb_passes_the_khronos_validator(baked_assets, kind, tmp_path):
     assert issues["numErrors"] == 0, [m for m in issues["messages"] if m["severity"] == 0]
 
 
-@pytest.mark.parametrize("kind", ["vertex", "texture"])
+@pytest.mark.parametrize("kind", ["vertex", "texture", "atlas"])
 def test_glb_and_usd_carry_the_colours(baked_assets, kind, tmp_path):
     from pxr import Usd, UsdGeom, UsdShade, UsdValidation
 
@@ -313,11 +317,18 @@ def test_glb_and_usd_carry_the_colours(baked_assets, kind, tmp_path):
     errors = UsdValidation.ValidationContext(reg.GetOrLoadAllValidators()).Validate(stage)
     assert not [e for e in errors if e.GetType() == UsdValidation.ValidationErrorType.Error]
     mesh = next(UsdGeom.Mesh(p) for p in stage.Traverse() if p.IsA(UsdGeom.Mesh))
+    mat, _ = UsdShade.MaterialBindingAPI(mesh.GetPrim()).ComputeBoundMaterial()
+    diffuse = UsdShade.Shader(stage.GetPrimAtPath(mat.GetPath().AppendChild("PreviewSurface")))
+    source = diffuse.GetInput("diffuseColor").GetConnectedSources()[0][0].source
     if kind == "vertex":
         col = np.array(mesh.GetDisplayColorPrimvar().Get())
         assert np.allclose(col, asset.vertex_colors, atol=1e-6)
+        # A renderer that shows materials only still shows the vertex colours.
+        reader = UsdShade.Shader(source.GetPrim())
+        assert reader.GetIdAttr().Get() == "UsdPrimvarReader_float3"
+        assert reader.GetInput("varname").Get() == "displayColor"
     else:
-        mat, _ = UsdShade.MaterialBindingAPI(mesh.GetPrim()).ComputeBoundMaterial()
+        assert UsdShade.Shader(source.GetPrim()).GetIdAttr().Get() == "UsdUVTexture"
         shader = UsdShade.Shader(stage.GetPrimAtPath(mat.GetPath().AppendChild("BaseColor")))
         tex = shader.GetInput("file").Get().path
         assert (tmp_path / tex).read_bytes() == asset.texture_png
@@ -341,7 +352,10 @@ BLENDER_JS = textwrap.dedent("""
     import json, sys
     import bpy
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    bpy.ops.import_scene.gltf(filepath=sys.argv[-1])
+    if sys.argv[-1].endswith(".glb"):
+        bpy.ops.import_scene.gltf(filepath=sys.argv[-1])
+    else:
+        bpy.ops.wm.usd_import(filepath=sys.argv[-1])
     out = {"images": [], "attributes": [], "nodes": []}
     for o in bpy.data.objects:
         if o.type != "MESH":
@@ -368,24 +382,33 @@ def _bpy_missing() -> str | None:
     return None if p.returncode == 0 else (p.stderr.strip().splitlines() or ["import failed"])[-1]
 
 
-@pytest.mark.parametrize("kind", ["vertex", "texture"])
-def test_blender_shows_the_colours(baked_assets, kind, tmp_path):
+@pytest.mark.parametrize("fmt", ["glb", "usd"])
+@pytest.mark.parametrize("kind", ["vertex", "texture", "atlas"])
+def test_blender_shows_the_colours(baked_assets, kind, fmt, tmp_path):
+    """Blender's glTF and USD importers: a texture feeds the material's base colour in both; vertex
+    colours do from the GLB. From the USD they come in as the ``displayColor`` colour attribute
+    (Blender 4.2's importer does not follow the material's UsdPrimvarReader_float3, which other
+    USD readers do; the baked fit exports a texture, so this is only --no-texture's case)."""
     why = _bpy_missing()
     if why is not None:
         pytest.skip(f"Blender's bpy module is not importable ({why}); `make install` installs bpy==4.2.0")
     from zooctl.io.gltf_export import save_glb
+    from zooctl.io.usd_export import save_usd
 
-    path = save_glb(baked_assets[kind], tmp_path / f"{kind}.glb")
+    save = save_glb if fmt == "glb" else save_usd
+    path = save(baked_assets[kind], tmp_path / f"{kind}.{fmt}")
     script = tmp_path / "check.py"
     script.write_text(BLENDER_JS)
     p = subprocess.run([sys.executable, str(script), str(path)], capture_output=True, text=True, timeout=600)
     line = [s for s in p.stdout.splitlines() if s.startswith("RESULT ")]
     assert line, p.stdout[-2000:] + p.stderr[-2000:]
     out = json.loads(line[-1][len("RESULT ") :])
-    if kind == "vertex":
+    if kind != "vertex":
+        assert out["images"] == [[128, 128]], out
+    elif fmt == "glb":
         assert out["attributes"] and "VERTEX_COLOR" in out["nodes"], out
     else:
-        assert out["images"] == [[128, 128]], out
+        assert out["attributes"] == ["displayColor"], out
 
 
 # -- zooctl fit ------------------------------------------------------------------------------------
@@ -431,11 +454,15 @@ def test_fit_bakes_by_default_and_no_texture_keeps_the_templates_colours(small_v
     fits = FitStore(store)
 
     rec = _fit(store, folder, cfg, "baked")
-    assert rec["texture"]["mode"] == "vertex" and rec["timings"]["texture"] > 0
+    # The template has no UVs: the character gets an atlas and wears a texture.
+    assert rec["texture"]["mode"] == "texture" and rec["texture"]["uvs"] == "generated"
+    assert rec["timings"]["texture"] > 0
     baked = fits.character("baked")
-    assert np.abs(baked.vertex_colors - template.vertex_colors).max() > 0.05
+    assert baked.texture_png is not None and baked.vertex_colors is None and baked.uvs is not None
     glb = load_gltf(rec["outputs"]["glb"], "baked")  # what the user gets wears the baked colours
-    assert np.allclose(glb.vertex_colors, baked.vertex_colors, atol=1e-5)
+    assert glb.texture_png == baked.texture_png and np.allclose(glb.uvs, baked.uvs, atol=1e-6)
+    usd = Path(rec["outputs"]["usd"])
+    assert (usd.parent / f"{usd.stem}.texture.png").read_bytes() == baked.texture_png
 
     rec = _fit(store, folder, cfg, "plain", "--no-texture")
     assert rec["texture"] is None and "texture" not in rec["timings"] and rec["config"]["texture"] is False
@@ -453,3 +480,112 @@ def test_uvs_without_a_texture_survive_import(scene, tmp_path):
     assert back.texture_png is None and back.uvs is not None
     assert np.allclose(back.uvs, atlas.uvs, atol=1e-6)
     assert uv_samples(back.uvs, back.faces, 64) is not None
+
+
+# -- generated UVs ---------------------------------------------------------------------------------
+
+
+def render_pattern(asset: RiggedAsset, camera, period: float):
+    """(frames uint8 sRGB, masks): the ``fit`` clip wearing stripes of ``period`` (a fraction of
+    the animal's length) laid on its rest shape, finer than its faces, unlit over green."""
+    posed = torch.as_tensor(asset.pose("fit", np.arange(T)).astype(np.float32))
+    faces = torch.as_tensor(asset.faces, dtype=torch.long)
+    frags = rasterize(posed, faces, camera.expand(T))
+    rest = torch.as_tensor(asset.vertices.astype(np.float32))[None].expand(T, -1, -1).contiguous()
+    p = interpolate(rest, faces, frags).numpy()
+    length = float(np.ptp(asset.vertices, 0).max())
+    phase = 2 * np.pi * p / (period * length)
+    col = 0.45 + 0.35 * np.sin(phase[..., [0, 1, 2]] + phase[..., [1, 2, 0]])
+    frames = (linear_to_srgb(col) * 255 + 0.5).astype(np.uint8)
+    masks = frags.mask.numpy()
+    frames[~masks] = BACKGROUND
+    return frames, masks
+
+
+def rendered_psnr(asset: RiggedAsset, camera, frames: np.ndarray, masks: np.ndarray) -> float:
+    """PSNR (dB, sRGB) of ``asset``'s colours rendered unlit through ``camera`` inside ``masks``."""
+    from zooctl.render.albedo import decode_texture, render_colours
+
+    posed = asset.pose("fit", np.arange(T))
+    tex = None if asset.texture_png is None else decode_texture(asset.texture_png)
+    rgb, cover = render_colours(posed, asset.faces, camera, asset.vertex_colors, asset.uvs, tex)
+    m = masks & cover
+    got = linear_to_srgb(rgb[m]) * 255
+    mse = float(np.mean((got - frames[m].astype(np.float64)) ** 2))
+    return 10 * np.log10(255.0**2 / max(mse, 1e-9))
+
+
+def test_a_character_without_uvs_gets_an_atlas_and_a_texture(scene):
+    a, truth, cam, frames, masks, fids = scene
+    assert a.uvs is None
+    grey = dataclasses.replace(a, vertex_colors=np.full_like(truth, 0.5))
+    out, info = bake(grey, cam, frames, masks, texture_size=256)
+    assert info["mode"] == "texture" and info["uvs"] == "generated"
+    assert out.vertex_colors is None and out.texture_png is not None
+    # The same surface and skinning: faces in the same order, seam vertices split.
+    assert out.num_faces == a.num_faces and a.num_vertices <= out.num_vertices < 1.6 * a.num_vertices
+    assert np.allclose(out.vertices[out.faces], a.vertices[a.faces])
+    assert np.allclose(out.pose("fit", [3])[0][out.faces], a.pose("fit", [3])[0][a.faces], atol=1e-5)
+    assert uv_samples(out.uvs, out.faces, 256) is not None  # in the unit square, not overlapping
+    # Rendered back through the camera it was baked from, it looks like the frames.
+    assert rendered_psnr(out, cam, frames, masks) > 30
+
+
+def test_a_texture_holds_detail_that_vertex_colours_lose(scene):
+    """Stripes finer than the faces: a texture in generated UVs keeps them, vertex colours blur
+    them; judged by rendering each back through the camera that saw them."""
+    a, _, cam, _, _, _ = scene
+    frames, masks = render_pattern(a, cam, 0.08)
+    tex, info = bake(a, cam, frames, masks)
+    vert, _ = bake(a, cam, frames, masks, make_uvs=False)
+    assert info["mode"] == "texture"
+    p_tex, p_vert = rendered_psnr(tex, cam, frames, masks), rendered_psnr(vert, cam, frames, masks)
+    assert p_tex > p_vert + 3, (p_tex, p_vert)
+
+
+def test_resume_follows_no_texture(small_video, tmp_path):
+    """A fit interrupted in stage 2 and resumed with --no-texture keeps the template's colours
+    (the resumed fit took its whole config from the saved state, --no-texture included)."""
+    from fit_helpers import tiny_fit_config
+
+    from zooctl.cli.main import run
+    from zooctl.fit.job import fit_job
+    from zooctl.store.bank import Bank
+    from zooctl.store.fits import FitStore
+
+    store, folder, _ = small_video
+    cfg = tiny_fit_config(4)
+    cfg.checkpoint_every = 1
+
+    class StopInStage2:
+        name = ""
+
+        def stage(self, name, total, done=0):
+            self.name = name
+
+        def step(self, terms):
+            if self.name == "stage2":
+                raise KeyboardInterrupt
+
+        def message(self, text):
+            pass
+
+    with pytest.raises(KeyboardInterrupt):
+        fit_job(str(folder), store, cfg, name="paused", template="quadruped", reporter=StopInStage2())
+    fits = FitStore(store)
+    assert fits.get("paused")["status"] == "interrupted" and fits.load_state("paused")["config"]["texture"]
+    old = os.environ.get("ZOOCTL_STORE")
+    os.environ["ZOOCTL_STORE"] = str(store)
+    try:
+        code = run(["fit", str(folder), "--name", "paused", "--resume", "--no-texture", "--json"])
+    finally:
+        if old is None:
+            os.environ.pop("ZOOCTL_STORE", None)
+        else:
+            os.environ["ZOOCTL_STORE"] = old
+    assert code == 0
+    rec = fits.get("paused")
+    assert rec["status"] == "done" and rec["texture"] is None and rec["config"]["texture"] is False
+    plain = fits.character("paused")
+    assert plain.texture_png is None
+    assert np.array_equal(plain.vertex_colors, Bank(store).get("quadruped").vertex_colors)

@@ -3,25 +3,28 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..components import ComponentSpec
 from ..plugins import hookimpl
 
+if TYPE_CHECKING:  # an embedder's weights load when it is built, not when the plugin registers
+    from ..embed.base import Embedder
 
-def _effnet(device: str = "cpu", **options: Any) -> Any:
+
+def _effnet(device: str = "cpu", **options: Any) -> Embedder:
     from ..embed.effnet_embedder import EffnetEmbedder
 
     return EffnetEmbedder(device=device, **options)
 
 
-def _silhouette(device: str = "cpu", **options: Any) -> Any:
+def _silhouette(device: str = "cpu", **options: Any) -> Embedder:
     from ..embed.silhouette import SilhouetteEmbedder
 
     return SilhouetteEmbedder(device=device, **options)
 
 
-def _procnet(device: str = "cpu", **options: Any) -> Any:
+def _procnet(device: str = "cpu", **options: Any) -> Embedder:
     from ..embed.procnet import ProcnetEmbedder
 
     return ProcnetEmbedder(device=device, **options)

@@ -11,19 +11,25 @@ if TYPE_CHECKING:  # torch loads when a renderer is built, not when the plugin r
     from ..render.base import FlowRenderer, SilhouetteRenderer
 
 
-def _soft(image_size: Any, device: str = "cpu", **options: Any) -> SilhouetteRenderer:
+def _soft(
+    image_size: int | tuple[int, int] | None, device: str = "cpu", **options: Any
+) -> SilhouetteRenderer:
     from ..render.soft import SoftSilhouette
 
     return SoftSilhouette(image_size, device=device, **options)
 
 
-def _fast(image_size: Any, device: str = "cpu", **options: Any) -> SilhouetteRenderer:
+def _fast(
+    image_size: int | tuple[int, int] | None, device: str = "cpu", **options: Any
+) -> SilhouetteRenderer:
     from ..render.splat import SplatSilhouette
 
     return SplatSilhouette(image_size, device=device, **options)
 
 
-def _flow(image_size: Any = None, device: str = "cpu", **options: Any) -> FlowRenderer:
+def _flow(
+    image_size: int | tuple[int, int] | None = None, device: str = "cpu", **options: Any
+) -> FlowRenderer:
     from ..render.raster import RasterFlow
 
     return RasterFlow(image_size, device=device, **options)

@@ -3,25 +3,29 @@ with dual-quaternion skinning) and ``lbs``."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..components import ComponentSpec
 from ..plugins import hookimpl
 
+if TYPE_CHECKING:  # torch loads when a model is built, not when the plugin registers
+    from ..asset import RiggedAsset
+    from ..rig.base import ArticulationModel
 
-def _casa(asset: Any, device: str = "cpu", **options: Any) -> Any:
+
+def _casa(asset: RiggedAsset, device: str = "cpu", **options: Any) -> ArticulationModel:
     from ..rig.model import ArticulatedModel
 
     return ArticulatedModel(asset, device=device, **options)
 
 
-def _dqs(asset: Any, device: str = "cpu", **options: Any) -> Any:
+def _dqs(asset: RiggedAsset, device: str = "cpu", **options: Any) -> ArticulationModel:
     from ..rig.dqs import DualQuaternionModel
 
     return DualQuaternionModel(asset, device=device, **options)
 
 
-def _lbs(asset: Any, device: str = "cpu", **options: Any) -> Any:
+def _lbs(asset: RiggedAsset, device: str = "cpu", **options: Any) -> ArticulationModel:
     from ..rig.model import ArticulatedModel
 
     # plain LBS whatever the fit's ablation switches say

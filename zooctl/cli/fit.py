@@ -109,8 +109,8 @@ def fit(
     texture: bool = typer.Option(
         None,
         "--texture/--no-texture",
-        help="Bake the video's colours onto the character (a UV texture where the template has UVs, else "
-        "vertex colours); --no-texture keeps the template's colours.",
+        help="Bake the video's colours onto the character (a UV texture: the template's UVs, or an atlas "
+        "made for it); --no-texture keeps the template's colours (with --resume too).",
     ),
     max_frames: int = typer.Option(None, "--max-frames", help="Fit only the first N frames."),
     resume: bool = typer.Option(

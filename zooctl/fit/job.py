@@ -286,7 +286,7 @@ def fit_job(
         base = preset(state["config"].get("preset", "fast"))
         resumed = FitConfig.from_dict(state["config"], base)
         if cfg is not None:  # the fit goes on as it started; what it writes follows this command
-            pass  # TMPREVERT
+            resumed.texture = cfg.texture
         cfg = resumed
         source, template, masks = old["source"], old["template"], old.get("masks")
         box = tuple(old["box"]) if old.get("box") else None

@@ -12,15 +12,19 @@ animal's, so colours at the mask's edge are often background, and full weight st
 fraction of the mask's size inside it. Colours are averaged in linear RGB.
 
 A sample seen too little (less weight than half a frontal view) is blended with a fill colour:
-that of its mirror image across the symmetry plane when the mesh is symmetric and the mirror image
-was seen, else that of the nearest seen sample (straight-line distance). Both are judged on a
+in a texture, that of a seen texel right beside it when there is one (the rim of a silhouette,
+seen edge-on, continues the surface seen next to it), else that of its mirror image across the symmetry plane
+when the mesh is symmetric and the mirror image was seen, else that of the nearest seen sample
+(straight-line distance). Both are judged on a
 reference shape with the character's vertices: the template's (a fit keeps its topology), whose
 symmetry the fit's displacements and stretched bones may have bent, else the character's own.
 
 Where the character has UVs that lie in the unit square without overlapping, the samples are the
 texels of a square texture (PNG, sRGB; texels off every triangle take the nearest baked colour so
-that filtering does not bleed), exported as ``baseColorTexture`` / ``UsdUVTexture``; otherwise
-they are the corners of every face, averaged into vertex colours (``COLOR_0`` / ``displayColor``).
+that filtering does not bleed), exported as ``baseColorTexture`` / ``UsdUVTexture``. A character
+without such UVs (the bank's templates have none) gets a generated atlas first (`uv_atlas`). Only
+where none can be made are the samples the corners of every face, averaged into vertex colours
+(``COLOR_0`` / ``displayColor``).
 """
 
 from __future__ import annotations
@@ -43,6 +47,7 @@ DEPTH_TOLERANCE = 0.005  # of the posed mesh's size: a sample this far behind th
 SEEN_WEIGHT = 0.5  # weight (in frontal views) from which a sample's own colour stands alone
 SYMMETRY_RMS = 0.02  # find_symmetry_plane residual below which the mesh counts as symmetric
 MIRROR_TOLERANCE = 0.03  # of the mesh's size: how near a seen sample must be to the mirror image
+NEAR_TOLERANCE = 0.02  # of the mesh's size: a seen texel this near fills a little-seen one first
 _CORNER = 0.6  # barycentric weight of the corner a vertex sample sits nearest to
 
 
@@ -192,11 +197,17 @@ def observe(
 
 
 def fill_unseen(
-    points: np.ndarray, sum_wc: np.ndarray, sum_w: np.ndarray, plane: tuple[np.ndarray, float] | None
+    points: np.ndarray,
+    sum_wc: np.ndarray,
+    sum_w: np.ndarray,
+    plane: tuple[np.ndarray, float] | None,
+    near: float = 0.0,
 ) -> tuple[np.ndarray, dict[str, float]] | None:
     """(N, 3) linear colours of N samples at rest positions ``points`` from their weighted sums,
     the little-seen ones blended with a fill colour (module docstring); ``plane`` (unit normal,
-    offset) of the mesh's symmetry, or None. None when nothing was seen at all."""
+    offset) of the mesh's symmetry, or None; ``near`` (a fraction of the mesh's size): how near a
+    seen sample fills before the mirror image does (0: the mirror image first). None when
+    nothing was seen at all."""
     from scipy.spatial import cKDTree
 
     seen = sum_w >= SEEN_WEIGHT
@@ -212,15 +223,27 @@ def fill_unseen(
         tree = cKDTree(points[seen])
         source = own[seen]
         q = points[weak]
-        fill = source[tree.query(q)[1]]
-        if plane is not None:
-            n, d = plane
-            size = float(np.linalg.norm(points.max(0) - points.min(0))) or 1.0
-            refl = q - 2.0 * ((q @ n) - d)[:, None] * n
-            dist, j = tree.query(refl)
-            ok = dist <= MIRROR_TOLERANCE * size
+        fill = np.zeros_like(q)
+        size = float(np.linalg.norm(points.max(0) - points.min(0))) or 1.0
+        # Bounded queries: one whose answer is far is the slow kind. A sample right beside seen
+        # surface (a silhouette's rim) continues it; farther ones take their mirror image.
+        ok = np.zeros(len(q), bool)
+        if near > 0:
+            dist, j = tree.query(q, distance_upper_bound=near * size)
+            ok = np.isfinite(dist)
             fill[ok] = source[j[ok]]
-            mirrored[np.nonzero(weak)[0][ok]] = True
+        if plane is not None and not ok.all():
+            n, d = plane
+            rest = np.nonzero(~ok)[0]
+            refl = q[rest] - 2.0 * ((q[rest] @ n) - d)[:, None] * n
+            dist, j = tree.query(refl, distance_upper_bound=MIRROR_TOLERANCE * size)
+            hit = np.isfinite(dist)
+            fill[rest[hit]] = source[j[hit]]
+            ok[rest[hit]] = True
+            mirrored[np.nonzero(weak)[0][rest[hit]]] = True
+        if not ok.all():
+            # Nearest within a few percent: the fill of a far hidden patch needs no exact neighbour.
+            fill[~ok] = source[tree.query(q[~ok], eps=0.5)[1]]
         w = sum_w[weak][:, None]
         out[weak] = (w * own[weak] + SEEN_WEIGHT * fill) / (w + SEEN_WEIGHT)
     info = {
@@ -274,25 +297,38 @@ def bake(
     clip: str = "fit",
     texture_size: int = TEXTURE_SIZE,
     reference: np.ndarray | None = None,
+    make_uvs: bool = True,
 ) -> tuple[RiggedAsset, dict[str, Any]]:
     """``asset`` wearing the colours of ``frames`` (T, H, W, 3) uint8 sRGB inside ``masks``
     (T, H, W) bool, seen through ``camera`` (one camera at the frames' size) with its clip
     ``clip`` (one sample per frame): a UV texture or vertex colours (module docstring);
     ``reference`` (V, 3): the shape symmetry and nearness are judged on (default: the asset's
-    bind-pose vertices). Returns
-    the new asset (the input one, unchanged, when no frame saw it) and what the bake did:
-    mode (``texture``, ``vertex`` or ``none``), the fractions of the surface seen, glimpsed and
-    filled from its mirror image, and the seconds it took."""
+    bind-pose vertices). Without usable UVs and with ``make_uvs``, the character gets a generated
+    atlas first (`zooctl.fit.uv_atlas`: seam vertices split) and a texture is baked into it; vertex
+    colours only where no atlas could be made. Returns the new asset (the input one, unchanged,
+    when no frame saw it) and what the bake did: mode (``texture``, ``vertex`` or ``none``), where
+    the UVs came from (``asset``, ``generated`` or None), the fractions of the surface seen,
+    glimpsed and filled from its mirror image, and the seconds it took."""
+    original = asset
     t0 = time.perf_counter()
-    samples = uv_samples(asset.uvs, asset.faces, texture_size)
-    mode = "texture" if samples is not None else "vertex"
-    if samples is None:
-        samples = corner_samples(asset.faces)
-    sum_wc, sum_w = observe(asset, camera, frames, masks, samples, clip)
     shape = asset.vertices if reference is None else np.asarray(reference)
     if shape.shape != asset.vertices.shape:
         raise InputError(f"the reference shape has {len(shape)} vertices, the character {asset.num_vertices}")
     shape = shape.astype(np.float64)
+    samples = uv_samples(asset.uvs, asset.faces, texture_size)
+    uv_source = "asset" if samples is not None else None
+    if samples is None and make_uvs:
+        from .uv_atlas import with_atlas
+
+        made = with_atlas(asset, texture_size)
+        if made is not None:
+            samples = uv_samples(made[0].uvs, made[0].faces, texture_size)
+            if samples is not None:
+                asset, shape, uv_source = made[0], shape[made[1]], "generated"
+    mode = "texture" if samples is not None else "vertex"
+    if samples is None:
+        samples = corner_samples(asset.faces)
+    sum_wc, sum_w = observe(asset, camera, frames, masks, samples, clip)
     if mode == "vertex":
         V = asset.num_vertices
         sum_wc = np.stack([np.bincount(samples.vertex, sum_wc[:, c], V) for c in range(3)], 1)
@@ -300,12 +336,15 @@ def bake(
         points = shape
     else:
         points = samples.points(shape, asset.faces)
-    filled = fill_unseen(points, sum_wc, sum_w, symmetry_plane(shape))
-    info: dict[str, Any] = {"mode": mode, "frames": int(len(frames))}
+    # Texels are dense enough that the nearest seen one beside a rim texel is the same surface;
+    # a vertex's nearest seen neighbour may be another part (a leg beside the belly).
+    near = NEAR_TOLERANCE if mode == "texture" else 0.0
+    filled = fill_unseen(points, sum_wc, sum_w, symmetry_plane(shape), near)
+    info: dict[str, Any] = {"mode": mode, "frames": int(len(frames)), "uvs": uv_source}
     if filled is None:
-        info["mode"] = "none"
+        info["mode"], info["uvs"] = "none", None
         info["seconds"] = time.perf_counter() - t0
-        return asset, info
+        return original, info
     colors, stats = filled
     info.update(stats)
     if mode == "vertex":

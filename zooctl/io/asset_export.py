@@ -12,6 +12,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from ..asset import RiggedAsset
 from ..components import ExporterSpec
 from ..errors import StoreError, UsageError
 
@@ -109,7 +110,7 @@ def check_writable(path: Path) -> None:
 
 
 def export_asset(
-    asset: Any, path: Path | None, fmt: str | None = None, clips: list[str] | None = None, **opts: Any
+    asset: RiggedAsset, path: Path | None, fmt: str | None = None, clips: list[str] | None = None, **opts: Any
 ) -> Path:
     """Write ``asset`` (the named ``clips``, or all) through the exporter of ``fmt`` (default: from
     the path's suffix); ``path`` may be a folder (``asset.name`` + suffix inside it). ``opts`` go to
@@ -119,7 +120,7 @@ def export_asset(
 
 
 def write_export(
-    spec: ExporterSpec, asset: Any, path: Path, clips: list[str] | None = None, **opts: Any
+    spec: ExporterSpec, asset: RiggedAsset, path: Path, clips: list[str] | None = None, **opts: Any
 ) -> Path:
     """Write ``asset`` to ``path`` (resolved: `resolve_export`) through ``spec``; a folder that
     cannot be written or a full disk is a `UsageError` that says so. Returns ``path``."""

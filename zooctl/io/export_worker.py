@@ -29,6 +29,7 @@ from concurrent.futures import Future
 from pathlib import Path
 from typing import Any
 
+from ..asset import RiggedAsset
 from ..components import ExporterSpec
 
 Job = tuple[ExporterSpec, Path, "list[str] | None"]
@@ -56,7 +57,7 @@ class ExportWorker:
             except (pickle.PicklingError, AttributeError, TypeError):
                 pass  # a plugin's local function: that exporter imports what it needs when it writes
 
-    def submit(self, asset: Any, jobs: list[Job]) -> Future:
+    def submit(self, asset: RiggedAsset, jobs: list[Job]) -> Future:
         """Write ``asset`` once per ``(spec, path, clips)`` of ``jobs``, in the worker."""
         future: Future = Future()
         try:
@@ -120,7 +121,7 @@ class ExportWorker:
                 return None
 
 
-def write_jobs(asset: Any, jobs: list[Job]) -> float:
+def write_jobs(asset: RiggedAsset, jobs: list[Job]) -> float:
     """Write every job with `write_export`; returns the seconds it took."""
     from .asset_export import write_export
 

@@ -7,7 +7,9 @@ Stage layout (``N`` is the asset name made a valid USD identifier)::
                        skeleton space at bind time), restTransforms (local rest pose)
     /N/Mesh            Mesh with SkelBindingAPI: skel:jointIndices / skel:jointWeights primvars
                        (vertex, elementSize K), skel:geomBindTransform (identity: the points are
-                       already in bind space), displayColor or a UsdPreviewSurface texture
+                       already in bind space), displayColor
+/N/Looks/Material  UsdPreviewSurface: its diffuseColor a UsdUVTexture (the asset's texture, beside
+                   the layer) or, for vertex colours, a UsdPrimvarReader_float3 of displayColor
     /N/Animations/C    one SkelAnimation per clip; time code i * timeCodesPerSecond / fps is frame i
     /Camera            an optional UsdGeom.Camera
 
@@ -290,10 +292,15 @@ def _write_mesh(stage, path, asset: RiggedAsset, skel, texture_file: str | None)
         st.Set(Vt.Vec2fArray.FromNumpy(uv))
     if texture_file is not None and asset.uvs is not None:
         _write_material(stage, path.GetParentPath().AppendChild("Looks"), mesh, texture_file)
+    elif asset.vertex_colors is not None:
+        _write_material(stage, path.GetParentPath().AppendChild("Looks"), mesh, None)
     return mesh
 
 
-def _write_material(stage, looks_path, mesh, texture_file: str) -> None:
+def _write_material(stage, looks_path, mesh, texture_file: str | None) -> None:
+    """A UsdPreviewSurface bound to ``mesh`` whose diffuse colour is ``texture_file`` (sRGB, read
+    at the ``st`` primvar) or, without one, the ``displayColor`` primvar (a renderer that shows
+    only materials shows the vertex colours too)."""
     from pxr import Sdf, UsdGeom, UsdShade
 
     UsdGeom.Scope.Define(stage, looks_path)
@@ -302,17 +309,24 @@ def _write_material(stage, looks_path, mesh, texture_file: str) -> None:
     surf.CreateIdAttr("UsdPreviewSurface")
     surf.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.8)
     surf.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(0.0)
-    reader = UsdShade.Shader.Define(stage, mat.GetPath().AppendChild("StReader"))
-    reader.CreateIdAttr("UsdPrimvarReader_float2")
-    reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
-    tex = UsdShade.Shader.Define(stage, mat.GetPath().AppendChild("BaseColor"))
-    tex.CreateIdAttr("UsdUVTexture")
-    tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath("./" + texture_file))
-    tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("sRGB")
-    tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
-    rgb = tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
-    reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
-    surf.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(rgb)
+    diffuse = surf.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f)
+    if texture_file is None:
+        colour = UsdShade.Shader.Define(stage, mat.GetPath().AppendChild("DisplayColorReader"))
+        colour.CreateIdAttr("UsdPrimvarReader_float3")
+        colour.CreateInput("varname", Sdf.ValueTypeNames.String).Set("displayColor")
+        colour.CreateInput("fallback", Sdf.ValueTypeNames.Float3).Set((0.18, 0.18, 0.18))
+        diffuse.ConnectToSource(colour.CreateOutput("result", Sdf.ValueTypeNames.Float3))
+    else:
+        reader = UsdShade.Shader.Define(stage, mat.GetPath().AppendChild("StReader"))
+        reader.CreateIdAttr("UsdPrimvarReader_float2")
+        reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+        tex = UsdShade.Shader.Define(stage, mat.GetPath().AppendChild("BaseColor"))
+        tex.CreateIdAttr("UsdUVTexture")
+        tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath("./" + texture_file))
+        tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("sRGB")
+        tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+        reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+        diffuse.ConnectToSource(tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3))
     mat.CreateSurfaceOutput().ConnectToSource(surf.ConnectableAPI(), "surface")
     UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(mat)
 

@@ -17,7 +17,7 @@ fitted rotations.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING
 
 import torch
 
@@ -32,6 +32,10 @@ from ..rig.rotations import (
 from .losses import joint_loss, kl_loss, rotation_loss
 from .skeleton import Skeleton, SkeletonBatch
 
+if TYPE_CHECKING:
+    from ..asset import RiggedAsset
+    from .model import MotionConfig, MotionVAE, TrajectoryVAE
+
 Tensor = torch.Tensor
 
 
@@ -44,7 +48,12 @@ class SequencePrior:
     """
 
     def __init__(
-        self, model: Any, cfg: Any, asset: Any, video_fps: float, device: torch.device | str = "cpu"
+        self,
+        model: MotionVAE | TrajectoryVAE,
+        cfg: MotionConfig,
+        asset: RiggedAsset,
+        video_fps: float,
+        device: torch.device | str = "cpu",
     ):
         self.model, self.cfg = model, cfg
         for p in self.model.parameters():

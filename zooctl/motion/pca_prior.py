@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from ..asset import RiggedAsset
 from ..errors import InputError, StoreError
 from ..geometry import matrix_to_quat
 from .baselines import PCABaseline, rot6d_to_matrix_np
@@ -81,7 +82,9 @@ class PCAPrior:
             out = np.concatenate([out[:, :-ov], blend, x[:, k, ov:]], 1)
         return matrix_to_quat(rot6d_to_matrix_np(out[:, :frames]))
 
-    def sample(self, asset: Any, n: int = 5, frames: int = 60, seed: int = 0, **_: Any) -> np.ndarray:
+    def sample(
+        self, asset: RiggedAsset | Skeleton, n: int = 5, frames: int = 60, seed: int = 0, **_: Any
+    ) -> np.ndarray:
         """(n, frames, J, 4) wxyz local rotations for ``asset`` (a `RiggedAsset` or a `Skeleton`)."""
         sk = asset if isinstance(asset, Skeleton) else Skeleton.from_asset(asset)
         return quat_mul(sk.rest_rotations[None, None], self.sample_delta(sk, n, frames, seed))

@@ -21,12 +21,12 @@ import json
 import pickle
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
 
-from ..asset import Clip
+from ..asset import Clip, RiggedAsset
 from ..errors import InputError, StoreError
 from ..geometry import decompose_trs, matrix_to_quat
 from .calibrate import calibrate_temperature
@@ -36,6 +36,9 @@ from .model import MotionConfig, build_model
 from .skeleton import Skeleton, SkeletonBatch
 from .temperature import default_temperature, draws_diversely
 from .train import TrainHistory, TrainOptions, train_vae
+
+if TYPE_CHECKING:
+    from .fit_prior import SequencePrior
 
 WEIGHTS = "weights.pt"
 CONFIG = "config.json"
@@ -198,7 +201,7 @@ class PonymationPrior:
         pred, _, _ = self.model(x, sk, sample=False)
         return self._to_quat(pred)
 
-    def sequence_prior(self, asset: Any, video_fps: float) -> Any:
+    def sequence_prior(self, asset: RiggedAsset, video_fps: float) -> SequencePrior:
         """The VAE as a prior on a fit's rotations of ``asset`` (`zooctl.motion.fit_prior`)."""
         from .fit_prior import SequencePrior
 
@@ -341,7 +344,9 @@ class PonymationPrior:
         t = t + h00 * dp0 + h01 * dp1 + (L - 1) * (h10 * dv0 + h11 * dv1)
         return t.reshape(n, K - 1, L, W)
 
-    def sample(self, asset: Any, n: int = 5, frames: int = 60, seed: int = 0, **options: Any) -> np.ndarray:
+    def sample(
+        self, asset: RiggedAsset | Skeleton, n: int = 5, frames: int = 60, seed: int = 0, **options: Any
+    ) -> np.ndarray:
         """(n, frames, J, 4) wxyz local rotations for ``asset`` (a `RiggedAsset` or a `Skeleton`)."""
         sk = asset if isinstance(asset, Skeleton) else Skeleton.from_asset(asset)
         delta = self.sample_delta(sk, n, frames, seed, **options)
@@ -365,7 +370,7 @@ def transition_error(t: torch.Tensor, prev: torch.Tensor, nxt: torch.Tensor) -> 
     return err.mean(-1)
 
 
-def motion_clip(asset: Any, rotations: np.ndarray, fps: float, name: str) -> Clip:
+def motion_clip(asset: RiggedAsset, rotations: np.ndarray, fps: float, name: str) -> Clip:
     """A `Clip` of ``asset`` with the given local rotations (T, J, 4) and every joint at its rest
     translation and scale (root motion is not modelled)."""
     t, _, s = decompose_trs(asset.rest_local)

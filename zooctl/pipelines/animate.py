@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from ..asset import RiggedAsset
 from ..errors import NotFoundError, UsageError
 
 FIT_PREFIX = "fit:"
@@ -91,7 +92,7 @@ def fit_image(
 
 
 def sample_and_export(
-    asset: Any, label: str, out: Path, opts: AnimateOptions, store_root: Path
+    asset: RiggedAsset, label: str, out: Path, opts: AnimateOptions, store_root: Path
 ) -> dict[str, Any]:
     """Sample ``opts.sample`` motions for ``asset``, write one file per motion and format, the
     preview video and contact sheet, and ``animate.json``; returns that manifest."""

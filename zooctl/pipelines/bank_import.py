@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..asset import RiggedAsset
 from ..errors import InputError, UsageError, ZooctlError
 from ..files import regular_size
 from ..names import check_name, sanitize_name
@@ -22,7 +23,7 @@ class AddResult:
     error: ZooctlError | None = None
 
 
-def import_file(path: Path, name: str) -> Any:
+def import_file(path: Path, name: str) -> RiggedAsset:
     """Read one file into a validated `RiggedAsset` with the importer its suffix selects."""
     path = Path(path)
     if not path.exists():

@@ -14,28 +14,31 @@ it returns is a ``torch.nn.Module``-like callable of one of two kinds:
 
 from __future__ import annotations
 
-from typing import Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import torch
 
 from ..errors import UsageError
+
+if TYPE_CHECKING:
+    from .camera import Camera
 
 Tensor = torch.Tensor
 
 
 @runtime_checkable
 class SilhouetteRenderer(Protocol):
-    def __call__(self, vertices: Tensor, faces: Tensor, camera: Any) -> Tensor: ...
+    def __call__(self, vertices: Tensor, faces: Tensor, camera: Camera) -> Tensor: ...
 
 
 @runtime_checkable
 class FlowRenderer(Protocol):
     def __call__(
-        self, vertices: Tensor, faces: Tensor, camera: Any, vertices_next: Tensor
+        self, vertices: Tensor, faces: Tensor, camera: Camera, vertices_next: Tensor
     ) -> dict[str, Tensor]: ...
 
 
-def renders_flow(renderer: Any) -> bool:
+def renders_flow(renderer: SilhouetteRenderer | FlowRenderer) -> bool:
     """True for a `FlowRenderer` (its call takes ``vertices_next``), False for a silhouette one."""
     import inspect
 
@@ -46,14 +49,16 @@ def renders_flow(renderer: Any) -> bool:
         return False
 
 
-def get_renderer(name: str, image_size: Any = None, device: str = "cpu", **options: Any) -> Any:
+def get_renderer(
+    name: str, image_size: int | tuple[int, int] | None = None, device: str = "cpu", **options: Any
+) -> SilhouetteRenderer | FlowRenderer:
     """Build the renderer registered as ``name``; an unknown name is a `NotFoundError` listing them."""
     from ..plugins import get_registry
 
     return get_registry().get("renderer", name).create(image_size=image_size, device=device, **options)
 
 
-def check_silhouette(name: str, out: Any, batch: int, height: int, width: int) -> Tensor:
+def check_silhouette(name: str, out: object, batch: int, height: int, width: int) -> Tensor:
     """``out`` if it is the (B, H, W) coverage a silhouette renderer returns, else a clear error
     (e.g. ``--renderer flow``, which renders flow, not silhouettes)."""
     if not isinstance(out, torch.Tensor) or tuple(out.shape) != (batch, height, width):

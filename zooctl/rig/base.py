@@ -25,9 +25,13 @@ as `zooctl.rig.dqs.DualQuaternionModel` does.
 
 from __future__ import annotations
 
-from typing import Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import torch
+
+if TYPE_CHECKING:
+    from ..asset import RiggedAsset
+    from .model import Pose
 
 Tensor = torch.Tensor
 
@@ -46,7 +50,7 @@ class ArticulationModel(Protocol):
         rotations: Tensor | None = None,
         root_rotation: Tensor | None = None,
         root_translation: Tensor | None = None,
-    ) -> Any: ...
+    ) -> Pose: ...
 
     def global_scale(self) -> Tensor: ...
 
@@ -59,7 +63,9 @@ class ArticulationModel(Protocol):
     def smoothness_loss(self, rotations: Tensor) -> Tensor: ...
 
 
-def get_articulation_model(name: str, asset: Any, device: str = "cpu", **options: Any) -> Any:
+def get_articulation_model(
+    name: str, asset: RiggedAsset, device: str = "cpu", **options: Any
+) -> ArticulationModel:
     """Build the articulation model registered as ``name`` for ``asset``."""
     from ..plugins import get_registry
 

@@ -21,6 +21,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from ..asset import RiggedAsset
 from ..errors import NotFoundError, StoreError
 from ..names import check_name
 from .fs import fsync_dir, read_regular, store_lock, write_bytes_atomic, write_json_atomic, writing
@@ -127,7 +128,7 @@ class FitStore(NamedStore):
             )
         return state
 
-    def save_character(self, name: str, asset: Any) -> None:
+    def save_character(self, name: str, asset: RiggedAsset) -> None:
         from .asset_h5 import write_asset
         from .fs import publish, temp_path
 
@@ -140,7 +141,7 @@ class FitStore(NamedStore):
         finally:
             tmp.unlink(missing_ok=True)
 
-    def character(self, name: str) -> Any:
+    def character(self, name: str) -> RiggedAsset:
         from .asset_h5 import read_asset
 
         self.get(name)
