@@ -64,6 +64,13 @@ RendererOpt = typer.Option(None, "--renderer", help="Silhouette renderer: soft (
 ArticulationOpt = typer.Option(
     None, "--articulation", help="Articulation model: casa (default), dqs, lbs, a plugin's."
 )
+# --device, declared here once for every command that runs torch.
+DEVICE_HELP = "cpu or cuda"
+DeviceOpt = typer.Option("cpu", "--device", help=f"{DEVICE_HELP}.")
+# fit and bench fit: unset keeps the device of the fit config (a --config file's, else cpu).
+ConfigDeviceOpt = typer.Option(
+    None, "--device", help=f"{DEVICE_HELP} (default: a --config file's, else cpu)."
+)
 
 
 def print_table(columns: list[tuple[str, str]], rows: list[list[str]], title: str | None = None) -> None:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from ._common import JsonOpt, console, err_console, print_json, store_root
+from ._common import DeviceOpt, JsonOpt, console, err_console, print_json, store_root
 
 
 def animate(
@@ -60,7 +60,7 @@ def animate(
         min=0.0,
         help="Frames per second the preview renders and plays (same duration; 0: every frame).",
     ),
-    device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
+    device: str = DeviceOpt,
     json_out: bool = JsonOpt,
 ) -> None:
     """Sample motions from a trained prior for a bank asset, a fit or a photo; write USD + GLB per

@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from . import batch_opts
-from ._common import JsonOpt, console, err_console, print_json, print_table, store_root
+from ._common import DeviceOpt, JsonOpt, console, err_console, print_json, print_table, store_root
 
 
 def _bank():
@@ -47,7 +47,7 @@ def search(
         "animal label (default: the one chosen leave-one-out; 0: appearance only).",
         show_default=False,
     ),
-    device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
+    device: str = DeviceOpt,
     json_out: bool = JsonOpt,
 ) -> None:
     """Rank the bank's assets by how much their rendered views look like the animal in VIDEO
@@ -126,7 +126,7 @@ def reindex(
     missing: bool = typer.Option(
         False, "--missing", help="Only assets that have no views (or lack one of the embedders)."
     ),
-    device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
+    device: str = DeviceOpt,
     json_out: bool = JsonOpt,
     batch: batch_opts.BatchOptions = batch_opts.BatchOpts,
 ) -> None:

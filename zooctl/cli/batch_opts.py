@@ -32,7 +32,9 @@ AddressOpt = typer.Option(
 )
 CpusOpt = typer.Option(1.0, "--cpus-per-task", help="CPUs each task asks for (and its torch threads).")
 GpusOpt = typer.Option(
-    None, "--gpus-per-task", help="GPUs each task asks for (default: 1 with --device cuda)."
+    None,
+    "--gpus-per-task",
+    help="GPUs each task asks for (default: 1 with --device cuda; 0.25 runs four tasks on one GPU).",
 )
 
 

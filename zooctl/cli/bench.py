@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import typer
 
-from ._common import APP_OPTS, ArticulationOpt, JsonOpt, console, print_json
+from ._common import APP_OPTS, ArticulationOpt, DeviceOpt, JsonOpt, console, print_json
 
 app = typer.Typer(**APP_OPTS, help="Benchmark renderers and the articulation model.", no_args_is_help=True)
 
@@ -17,7 +17,7 @@ def render(
     faces: int = typer.Option(2000, "--faces", help="Triangles in the benchmark sphere."),
     size: int = typer.Option(128, "--size", help="Image size in pixels (square)."),
     batch: int = typer.Option(8, "--batch", help="Frames rendered together."),
-    device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
+    device: str = DeviceOpt,
     repeats: int = typer.Option(5, "--repeats", help="Timed runs (the median is reported)."),
     json_out: bool = JsonOpt,
 ) -> None:
@@ -40,7 +40,7 @@ def rig(
     joints: int = typer.Option(50, "--joints", help="Joints in its chain."),
     frames: int = typer.Option(8, "--frames", help="Frames posed together."),
     articulation: str = ArticulationOpt,
-    device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
+    device: str = DeviceOpt,
     repeats: int = typer.Option(5, "--repeats", help="Timed runs (the median is reported)."),
     json_out: bool = JsonOpt,
 ) -> None:

@@ -7,7 +7,16 @@ from pathlib import Path
 import typer
 
 from . import batch_opts
-from ._common import ArticulationOpt, JsonOpt, RendererOpt, console, err_console, print_json, store_root
+from ._common import (
+    ArticulationOpt,
+    ConfigDeviceOpt,
+    JsonOpt,
+    RendererOpt,
+    console,
+    err_console,
+    print_json,
+    store_root,
+)
 
 
 def _assets(bank_path: Path | None, names: list[str] | None):
@@ -87,12 +96,7 @@ def run(
     ),
     renderer: str = RendererOpt,
     articulation: str = ArticulationOpt,
-    device: str = typer.Option(
-        None,
-        "--device",
-        help="cpu or cuda for every fit (default: the preset's, cpu). With --executor, each task asks for "
-        "--gpus-per-task GPUs (default 1 on cuda; 0.25 runs four fits on one GPU).",
-    ),
+    device: str | None = ConfigDeviceOpt,
     config: Path = typer.Option(
         None,
         "--config",

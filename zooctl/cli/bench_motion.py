@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import typer
 
-from ._common import JsonOpt, console, print_json, print_table, store_root
+from ._common import DeviceOpt, JsonOpt, console, print_json, print_table, store_root
 
 
 def bench_motion(
@@ -28,7 +28,7 @@ def bench_motion(
     ),
     frames: int = typer.Option(60, "--frames", help="Frames per motion in the sampling timing."),
     repeats: int = typer.Option(3, "--repeats", help="Timed sampling runs (the median is reported)."),
-    device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
+    device: str = DeviceOpt,
     json_out: bool = JsonOpt,
 ) -> None:
     """Evaluate a prior on its held-out clips (train it with --holdout): reconstruction error,

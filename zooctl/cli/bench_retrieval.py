@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from ._common import JsonOpt, err_console, print_json, print_table
+from ._common import DeviceOpt, JsonOpt, err_console, print_json, print_table
 
 
 def retrieval(
@@ -27,7 +27,7 @@ def retrieval(
     views: int = typer.Option(24, "--views", help="Views rendered per bank asset."),
     frames: int = typer.Option(8, "--frames", help="Frames per rendered query video."),
     limit: int = typer.Option(0, "--limit", help="Use only the first N assets (0: all)."),
-    device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
+    device: str = DeviceOpt,
     json_out: bool = JsonOpt,
 ) -> None:
     """Leave-one-out: render a query video of each asset, search the bank without it, score body plans."""

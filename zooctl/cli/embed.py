@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from ._common import APP_OPTS, JsonOpt, console, print_json, store_root
+from ._common import APP_OPTS, DeviceOpt, JsonOpt, console, print_json, store_root
 
 RANDOMIZE_HELP = (
     "Domain randomisation of the training animals: any hue, flat facets half of the time, colour noise."
@@ -29,7 +29,7 @@ def train(
     steps: int = typer.Option(1500, "--steps", help="Training steps (batches of 32 animals x 4 views)."),
     minutes: float = typer.Option(None, "--minutes", help="Stop training after this many minutes."),
     seed: int = typer.Option(0, "--seed", help="Seed of the animals, their views and the training."),
-    device: str = typer.Option("cpu", "--device", help="torch device for rendering and training."),
+    device: str = DeviceOpt,
     out: Path = typer.Option(None, "-o", "--out", help="Weights .npz (default: STORE/models/procnet.npz)."),
     cache: bool = typer.Option(True, "--cache/--no-cache", help="Reuse features cached in the store."),
     randomize: bool = typer.Option(False, "--randomize", help=RANDOMIZE_HELP),

@@ -8,7 +8,15 @@ import typer
 
 from ..fit.config import PRESETS
 from . import batch_opts, fit_many
-from ._common import ArticulationOpt, RendererOpt, console, err_console, print_json, store_root
+from ._common import (
+    ArticulationOpt,
+    ConfigDeviceOpt,
+    RendererOpt,
+    console,
+    err_console,
+    print_json,
+    store_root,
+)
 
 PRESET_ITERS = {name: make().stage2.iters for name, make in PRESETS.items()}
 
@@ -91,7 +99,7 @@ def fit(
         "--candidates",
         help="Retrieved templates to try with a short fit each; the best one's fit goes on in full (default 3; 1: the top result). Trials within 0.01 of each other get a note naming the other template.",
     ),
-    device: str = typer.Option(None, "--device", help="cpu or cuda."),
+    device: str | None = ConfigDeviceOpt,
     renderer: str = RendererOpt,
     articulation: str = ArticulationOpt,
     focal: float = typer.Option(

@@ -7,7 +7,7 @@ import time
 import typer
 
 from ..motion.temperature import default_temperature, draws_diversely
-from ._common import APP_OPTS, JsonOpt, console, err_console, print_json, print_table, store_root
+from ._common import APP_OPTS, DeviceOpt, JsonOpt, console, err_console, print_json, print_table, store_root
 
 app = typer.Typer(
     **APP_OPTS, help="Train and manage generative motion priors (Ponymation).", no_args_is_help=True
@@ -64,7 +64,7 @@ def train(
         help="Step budget: stop after this many steps, or at --max-minutes if that comes first; the "
         "schedules follow whichever ends first (a fixed amount of work, whatever the machine's load).",
     ),
-    device: str = typer.Option(None, "--device", help="cpu or cuda (default: cpu)."),
+    device: str = DeviceOpt,
     width: int = typer.Option(
         None, "--width", help="Transformer width. Default by device: 256 on CUDA (Ponymation's), 64 on a CPU."
     ),
