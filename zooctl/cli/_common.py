@@ -71,6 +71,29 @@ DeviceOpt = typer.Option("cpu", "--device", help=f"{DEVICE_HELP}.")
 ConfigDeviceOpt = typer.Option(
     None, "--device", help=f"{DEVICE_HELP} (default: a --config file's, else cpu)."
 )
+# The fit config's sources, shared by fit and bench run.
+PresetOpt = typer.Option(
+    "fast",
+    "--preset",
+    help="fast or quality (2.4x the iterations at a higher resolution: a closer input view, not a truer 3D; "
+    "BENCHMARKS.md).",
+)
+FitConfigOpt = typer.Option(
+    None,
+    "--config",
+    help='JSON fit config applied on top of the preset, e.g. {"weights": {"pose_prior": 0.1}} (the '
+    "command's own options win where both set a field).",
+)
+# Sampling a motion prior, shared by animate and bench motion.
+PriorOpt = typer.Option(None, "--prior", help="Motion prior (default: the most recently trained).")
+TemperatureOpt = typer.Option(
+    None,
+    "--temperature",
+    min=0.0,
+    help="Scale of the prior's latent standard deviation: lower is closer to typical motion, higher more "
+    "varied. Default: the prior's (see `zooctl motion list`).",
+    show_default=False,
+)
 
 
 def print_table(columns: list[tuple[str, str]], rows: list[list[str]], title: str | None = None) -> None:

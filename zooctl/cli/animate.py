@@ -7,7 +7,16 @@ from pathlib import Path
 
 import typer
 
-from ._common import DeviceOpt, JsonOpt, console, err_console, print_json, store_root
+from ._common import (
+    DeviceOpt,
+    JsonOpt,
+    PriorOpt,
+    TemperatureOpt,
+    console,
+    err_console,
+    print_json,
+    store_root,
+)
 
 
 def animate(
@@ -35,17 +44,8 @@ def animate(
         help="Frames per motion (longer than the prior's window: chained segments).",
     ),
     seed: int = typer.Option(0, "--seed", help="Random seed."),
-    temperature: float = typer.Option(
-        None,
-        "--temperature",
-        min=0.0,
-        help="Scale of the latent's standard deviation: lower is closer to typical motion, higher more "
-        "varied. Default: the prior's (see `zooctl motion list`).",
-        show_default=False,
-    ),
-    prior_name: str = typer.Option(
-        None, "--prior", help="Motion prior (default: the most recently trained)."
-    ),
+    temperature: float = TemperatureOpt,
+    prior_name: str = PriorOpt,
     out: Path = typer.Option(None, "--out", help="Output folder (default: ./animate-TARGET)."),
     formats: str = typer.Option(
         "usd,glb", "--formats", help="Comma-separated export formats (any registered exporter)."

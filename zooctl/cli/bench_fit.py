@@ -10,7 +10,9 @@ from . import batch_opts
 from ._common import (
     ArticulationOpt,
     ConfigDeviceOpt,
+    FitConfigOpt,
     JsonOpt,
+    PresetOpt,
     RendererOpt,
     console,
     err_console,
@@ -69,7 +71,7 @@ def make(
 @batch_opts.with_batch_options
 def run(
     folder: Path = typer.Argument(..., help="Folder made by `zooctl bench make`."),
-    preset_name: str = typer.Option("fast", "--preset", help="fast or quality."),
+    preset_name: str = PresetOpt,
     ablation: list[str] = typer.Option(
         None,
         "--ablation",
@@ -97,12 +99,7 @@ def run(
     renderer: str = RendererOpt,
     articulation: str = ArticulationOpt,
     device: str | None = ConfigDeviceOpt,
-    config: Path = typer.Option(
-        None,
-        "--config",
-        help='JSON fit config applied to every fit on top of the preset, e.g. {"weights": {"pose_prior": 0.1}} '
-        "(the options above win where both set a field).",
-    ),
+    config: Path = FitConfigOpt,
     report: Path = typer.Option(None, "--report", help="Also write the markdown table here."),
     json_out: bool = JsonOpt,
     batch: batch_opts.BatchOptions = batch_opts.BatchOpts,

@@ -5,13 +5,20 @@ from __future__ import annotations
 
 import typer
 
-from ._common import DeviceOpt, JsonOpt, console, print_json, print_table, store_root
+from ._common import (
+    DeviceOpt,
+    JsonOpt,
+    PriorOpt,
+    TemperatureOpt,
+    console,
+    print_json,
+    print_table,
+    store_root,
+)
 
 
 def bench_motion(
-    prior_name: str = typer.Option(
-        None, "--prior", help="Prior to evaluate (default: the most recently trained)."
-    ),
+    prior_name: str = PriorOpt,
     samples: int = typer.Option(
         32, "--samples", min=2, help="Generated windows per skeleton (at least as many as held-out windows)."
     ),
@@ -19,13 +26,7 @@ def bench_motion(
     seeds: int = typer.Option(
         1, "--seeds", min=1, help="Sample with this many seeds and report their mean and standard deviation."
     ),
-    temperature: float = typer.Option(
-        None,
-        "--temperature",
-        min=0.0,
-        help="Scale of the prior's standard deviation when sampling (default: the prior's, see `zooctl motion list`).",
-        show_default=False,
-    ),
+    temperature: float = TemperatureOpt,
     frames: int = typer.Option(60, "--frames", help="Frames per motion in the sampling timing."),
     repeats: int = typer.Option(3, "--repeats", help="Timed sampling runs (the median is reported)."),
     device: str = DeviceOpt,

@@ -11,6 +11,8 @@ from . import batch_opts, fit_many
 from ._common import (
     ArticulationOpt,
     ConfigDeviceOpt,
+    FitConfigOpt,
+    PresetOpt,
     RendererOpt,
     console,
     err_console,
@@ -84,11 +86,7 @@ def fit(
         help="Output folder (default: fits/NAME in the current folder; a batch: OUT/NAME per video).",
     ),
     name: str = typer.Option(None, "--name", help="Fit name (default: the video's name)."),
-    preset_name: str = typer.Option(
-        "fast",
-        "--preset",
-        help="fast or quality (2.4x the iterations at a higher resolution: a closer input view, not a truer 3D; BENCHMARKS.md).",
-    ),
+    preset_name: str = PresetOpt,
     iters: int = typer.Option(
         None,
         "--iters",
@@ -112,7 +110,7 @@ def fit(
         "OpenCV axes: x right, y down, z forward), or 'gt' for a `bench make` video's own cameras. The "
         "viewpoint search then finds the animal's one orientation in the world instead of tracking it.",
     ),
-    config: Path = typer.Option(None, "--config", help="JSON config applied on top of the preset."),
+    config: Path = FitConfigOpt,
     seed: int = typer.Option(None, "--seed", help="Random seed."),
     texture: bool = typer.Option(
         None,
