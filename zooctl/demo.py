@@ -13,8 +13,8 @@ import sys
 import time
 from pathlib import Path
 
-# The motion prior's budget as steps, not minutes: about 2 minutes on an idle 2-core CPU, and the
-# same prior on a busy machine (a 2-minute budget there gave statues; BENCHMARKS.md).
+# The motion prior's budget as steps, not minutes: the same prior on an idle or a busy machine (a
+# time budget trained a busy machine's prior into statues; BENCHMARKS.md, Motion prior).
 DEMO_PRIOR_STEPS = 1600
 
 

@@ -99,8 +99,8 @@ TemperatureOpt = typer.Option(
 def print_table(columns: list[tuple[str, str]], rows: list[list[str]], title: str | None = None) -> None:
     """Print an aligned table: a bold header and plain rows.
 
-    ``columns`` are (header, "left"|"right"). Rich's Table costs about 1 ms a row, too slow for
-    `bank list` on a 1,000-asset bank; this is a few microseconds a row and reads the same.
+    ``columns`` are (header, "left"|"right"). Not Rich's Table, which is too slow for `bank list`
+    on a large bank (BENCHMARKS.md, "Measurements behind code choices"); this reads the same.
     """
     widths = [len(h) for h, _ in columns]
     for r in rows:

@@ -2,8 +2,9 @@
 
 Two backends compute the same features (to about 1e-5): the torch model (`zooctl.embed.effnet`,
 for CUDA and for batches when torch is loaded anyway, e.g. while `bank add` renders views) and the
-numpy one (`zooctl.embed.effnet_numpy`), which spares a search the torch import (1-2.5 s on a
-small CPU). ``backend="auto"`` takes numpy on the CPU when torch has not been imported yet.
+numpy one (`zooctl.embed.effnet_numpy`), which spares a search the torch import (its cost:
+BENCHMARKS.md, Retrieval). ``backend="auto"`` takes numpy on the CPU when torch has not been
+imported yet.
 """
 
 from __future__ import annotations

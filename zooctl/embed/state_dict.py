@@ -1,6 +1,6 @@
 """Read a PyTorch state dict (a file written by ``torch.save``) into numpy arrays without torch.
 
-Importing torch costs 1-2.5 s on a small CPU, more than a whole `zooctl bank search` should take;
+Importing torch costs more than a whole `zooctl bank search` should take (BENCHMARKS.md, Retrieval);
 the numpy EfficientNet (`zooctl.embed.effnet_numpy`) needs only the weights. Both of torch's
 formats are read: the zip archive of torch >= 1.6 (``archive/data.pkl`` + ``archive/data/<key>``)
 and the older stream (magic number, protocol, system info, the pickled object, the storage keys,

@@ -3,7 +3,7 @@
 Retrieval is `zooctl.retrieval` (CASA's embedding search over rendered views of every bank asset):
 the masked crops of a few frames are embedded with the enabled embedders and the bank ranked.
 `try_candidates` then gives the best few a short fit each and keeps the one whose silhouettes fit
-the video best (``FitConfig.trials``): the embeddings rank body plans right about 7 times in 10
+the video best (``FitConfig.trials``): the embeddings alone often rank the wrong body plan first
 (BENCHMARKS.md, Retrieval), the fit's own mask IoU is a direct check (``trials.margin`` lets
 retrieval's order settle near-ties). A trial is the beginning of the full fit, paused: the
 winner's fit goes on from its trial, so the trials cost only the losers' fits.
@@ -166,7 +166,7 @@ def try_candidates(
     return best, candidates, best_state
 
 
-TRIAL_NOISE = 0.01  # a trial's IoU moves by a median 0.0055 (up to 0.02) between seeds
+TRIAL_NOISE = 0.01  # about what a trial's IoU moves between seeds (BENCHMARKS.md, Fit: template trials)
 
 
 def close_trials_note(candidates: list[dict[str, Any]], chosen: str, source: str) -> str | None:

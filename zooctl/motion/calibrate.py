@@ -4,10 +4,8 @@ The trained VAE decodes z ~ N(0, I) into motions less varied than the data, and
 scaling the prior's standard deviation by a temperature widens them without leaving the data:
 `calibrate_temperature` picks, from a grid, the temperature whose samples are as diverse as the
 training windows themselves (mean pairwise joint-position distance, `metrics.diversity`), per
-skeleton and then averaged in log ratio. On the 28 shared assets (BENCHMARKS.md) a 64 x 2 prior
-decodes z ~ N(0, I) into samples about half as diverse as its training windows; its calibrated
-temperature was 3.5, and its motion Chamfer distance to held-out clips moved little between
-temperatures 3.5 and 7 (126.5 to 128.5).
+skeleton and then averaged in log ratio. What it picks and how little the held-out clips' motion
+Chamfer distance moves around it: BENCHMARKS.md, Motion prior.
 """
 
 from __future__ import annotations

@@ -149,7 +149,8 @@ def _memory_value(layer: nn.TransformerDecoderLayer, memory: torch.Tensor) -> to
 def padding_attn_mask(pad: torch.Tensor, heads: int) -> torch.Tensor:
     """pad (B, S) True where a token is padding -> bool attention mask (B * heads, S, S) that
     hides those keys: what ``key_padding_mask=pad`` does, without torch's key-padding shape
-    check, whose first call imports sympy (0.5 s of every ``zooctl animate``)."""
+    check, whose first call imports sympy (a noticeable part of every ``zooctl animate``;
+    BENCHMARKS.md, Motion prior)."""
     B, S = pad.shape
     return pad[:, None, None, :].expand(B, heads, S, S).reshape(B * heads, S, S)
 

@@ -300,14 +300,15 @@ class PonymationPrior:
         The objective lives in the decoder's *frame-feature* space: the spatial decoder maps equal
         features to equal poses, so matching the features of the boundary frames (and their
         differences, for velocity) matches the poses without running the J-token spatial decoder in
-        the loop (which made this step ~20 s for a 53-joint skeleton at width 256).
+        the loop (which made this step slow on big skeletons; BENCHMARKS.md, "Measurements behind
+        code choices").
         """
         prev, nxt = self._ends(content)
         scale = content.reshape(-1, content.shape[-1]).var(0).mean().clamp_min(1e-8)  # scale-free loss
         z = z.detach().clone().requires_grad_(True)
         if steps <= 0:
             return z.detach()
-        # Adam by hand: `torch.optim` imports torch._dynamo on first use, 2-4 s of a fresh process.
+        # Adam by hand: `torch.optim` imports torch._dynamo on first use, seconds of a fresh process.
         m, v, lr, b1, b2 = torch.zeros_like(z), torch.zeros_like(z), 0.1, 0.9, 0.999
         for p in self.model.parameters():
             p.requires_grad_(False)

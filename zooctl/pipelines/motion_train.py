@@ -19,9 +19,9 @@ from typing import Any
 
 from ..errors import UsageError
 
-# On a CPU the paper's 256 x 4 gets a few hundred steps in 20 minutes and stays near the mean
-# pose; the per-bone trajectory model at 64 x 2 gets several times more steps than the per-frame
-# one and reconstructs more of the motion (BENCHMARKS.md, motion prior).
+# On a CPU the paper's 256 x 4 gets too few steps in the time budget and stays near the mean
+# pose; the per-bone trajectory model at 64 x 2 gets many more steps than the per-frame one and
+# reconstructs more of the motion (BENCHMARKS.md, Motion prior).
 CPU_SIZE = {"arch": "trajectory", "width": 64, "layers": 2, "batch_size": 32, "lr": 1e-3, "max_minutes": 20.0}
 CUDA_SIZE = {
     "arch": "ponymation",

@@ -234,8 +234,8 @@ def h5_image(fill: Callable[[Any], None], libver: str | None = None) -> bytes:
 
 
 def json_bytes(obj: Any) -> bytes:
-    """How the store writes JSON. No indent: json's C encoder only runs without one (10x faster on
-    a 1,000-asset index)."""
+    """How the store writes JSON. No indent: json's C encoder only runs without one (BENCHMARKS.md,
+    Asset bank)."""
     return (json.dumps(obj, sort_keys=True, separators=(",", ":")) + "\n").encode()
 
 

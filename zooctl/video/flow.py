@@ -27,7 +27,7 @@ DIS_PRESETS = {
     "fast": cv2.DISOPTICAL_FLOW_PRESET_FAST,
     "medium": cv2.DISOPTICAL_FLOW_PRESET_MEDIUM,
 }
-FLOW_WORK_SIZE = 640  # longest side DIS works at by default: DAVIS J as at full 854 px, 15% less CPU per add
+FLOW_WORK_SIZE = 640  # longest side DIS works at: masks as good for less CPU (BENCHMARKS.md, Video store)
 
 
 class DISFlow:

@@ -160,8 +160,9 @@ class GrabCutTracker:
         sw, sh = self.flow_size(w, h)
         if (sw, sh) == (w, h):
             return self._honour(frames, box, box_frame, progress, flow)
-        # GrabCut and its cues work at a bounded size (4x faster at 480p, and the band/window sizes
-        # were tuned there); the masks come back up with a linear upsample of their 0/1 values.
+        # GrabCut and its cues work at a bounded size (much faster, BENCHMARKS.md, "Measurements behind
+        # code choices"; the band/window sizes were tuned there); the masks come back up with a
+        # linear upsample of their 0/1 values.
         # A lazy video (frames read from the store's file) keeps its working set in scratch files.
         scale = self._scale(w, h)
         small = working(frames, t, (sh, sw, 3), np.uint8)

@@ -1,9 +1,10 @@
 """CPU kernels of the renderers (and of the contour loss's nearest-vertex search): plain C++
 compiled with the system compiler on first use.
 
-Why not ``torch.utils.cpp_extension.load_inline``: building against the PyTorch headers took
-128 s on the 2-core CI box for a one-line extension (and needs ninja); these sources include no
-PyTorch header, compile with one ``g++`` call in a few seconds and are called through `ctypes`
+Why not ``torch.utils.cpp_extension.load_inline``: building against the PyTorch headers takes
+minutes on a small machine even for a one-line extension (and needs ninja; BENCHMARKS.md,
+"Measurements behind code choices"); these sources include no PyTorch header, compile with one
+``g++`` call and are called through `ctypes`
 on the tensors' raw buffers. Autograd stays in Python (`torch.autograd.Function` in each renderer).
 
 - Build: all ``*.cpp`` here into one shared library, cached as
