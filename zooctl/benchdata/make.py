@@ -18,9 +18,12 @@ frames; the light direction, ambient level and background are random. Saved per 
   the motion, for re-animation) seen by the last frame's camera (OpenCV convention, `zooctl.render.camera`);
   ``gt_view_masks`` (C, T, H, W) bool, ``gt_view_rotation`` (C, T, 3, 3) and ``gt_view_translation``
   (C, T, 3): the same frames seen by C = 2 cameras the fit never sees (`NOVEL_VIEWS`: the input
-  camera turned +90 degrees in azimuth, and raised 35 degrees in elevation), masks only;
-- ``meta.json``: asset name, frames, size, fps, seed, motion (and the clip); ``video.mp4``: the
-  frames as H.264.
+  camera turned +90 degrees in azimuth, and raised 35 degrees in elevation), masks only; with
+  ``appearance="textured"`` (`zooctl.benchdata.appearance`: a procedural coat over a natural-looking
+  scene instead of flat colours over a gradient) also ``gt_view_frames`` (C, T, H, W, 3) uint8,
+  what those cameras see of the animal (black around it);
+- ``meta.json``: asset name, frames, size, fps, seed, motion (and the clip), ``appearance`` for a
+  textured video; ``video.mp4``: the frames as H.264.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from ..asset import RiggedAsset
 from ..errors import UsageError
 from ..geometry import compose_trs, quat_normalize, quat_slerp
 from ..store.fs import write_bytes_atomic, write_json_atomic
+from .appearance import APPEARANCES, Coat, natural_background
 
 KEY_EVERY = 12
 BONES_PER_KEY = 8
@@ -154,8 +158,10 @@ def shade_frames(
     ambient: float,
     bg: np.ndarray,
     batch: int = 8,
+    coat: Coat | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Flat-shaded frames (T, H, W, 3) uint8 over ``bg`` and masks (T, H, W) from per-frame cameras."""
+    """Flat-shaded frames (T, H, W, 3) uint8 over ``bg`` and masks (T, H, W) from per-frame cameras;
+    the albedo is each face's mean vertex colour, or ``coat``'s at every pixel (`appearance`)."""
     from ..render.camera import Camera
     from ..render.raster import rasterize
 
@@ -186,13 +192,19 @@ def shade_frames(
         centres = cam.centers()[0].numpy()  # (B, 3)
         view = tri.mean(2) - centres[:, None]
         n = np.where((n * view).sum(-1, keepdims=True) > 0, -n, n)  # two-sided
-        shade = albedo[None] * (ambient + (1 - ambient) * np.clip(n @ light, 0, 1))[..., None]
+        light_f = ambient + (1 - ambient) * np.clip(n @ light, 0, 1)  # (B, F)
+        shade = albedo[None] * light_f[..., None]
         shade = (np.clip(shade, 0, 1) ** (1 / 2.2) * 255).astype(np.uint8)
         fid = frags.face_ids.numpy()
         m = fid >= 0
         for b, i in enumerate(idx):
             img = bg.copy()
-            img[m[b]] = shade[b][fid[b][m[b]]]
+            if coat is None:
+                img[m[b]] = shade[b][fid[b][m[b]]]
+            else:
+                f = fid[b][m[b]]
+                lit = coat.albedo(asset.faces, f, frags.bary[b].numpy()[m[b]]) * light_f[b][f][:, None]
+                img[m[b]] = (np.clip(lit, 0, 1) ** (1 / 2.2) * 255).astype(np.uint8)
             rgb[i], masks[i] = img, m[b]
     return rgb, masks
 
@@ -206,9 +218,12 @@ def make_video(
     fps: float = 30.0,
     motion: str = "random",
     clip: str | None = None,
+    appearance: str = "flat",
 ) -> Path:
     """Render one test video of ``asset`` into ``out_dir/<asset.name>/`` (module docstring);
-    ``clip`` names the clip a ``motion="clips"`` video plays (default: one drawn at random)."""
+    ``clip`` names the clip a ``motion="clips"`` video plays (default: one drawn at random);
+    ``appearance`` ``textured``: a coat and a scene that a colour bake can be judged on
+    (`zooctl.benchdata.appearance`), and the held-out cameras' frames."""
     from ..io.video import write_mp4
     from ..render.camera import Camera
     from ..render.preview import fit_camera, orbit_camera
@@ -218,6 +233,8 @@ def make_video(
         raise UsageError("--frames must be >= 1 and --size >= 16")
     if motion not in MOTIONS:
         raise UsageError(f"--motion {motion!r} is not one of {', '.join(MOTIONS)}")
+    if appearance not in APPEARANCES:
+        raise UsageError(f"--appearance {appearance!r} is not one of {', '.join(APPEARANCES)}")
     rng = np.random.default_rng([seed, sum(asset.name.encode())])
     # 12 more frames than shown: the last one is a held-out novel pose for the re-animation metric.
     played = clip_motion(asset, frames + KEY_EVERY, rng, fps, clip) if motion == "clips" else None
@@ -255,11 +272,24 @@ def make_video(
     light[1] = abs(light[1]) + 0.5
     bg = _background(size, size, rng)
     faces_t = torch.as_tensor(asset.faces, dtype=torch.long)
-    rgb, masks = shade_frames(
-        asset, verts, cams, light / np.linalg.norm(light), float(rng.uniform(0.25, 0.5)), bg
-    )
+    ambient = float(rng.uniform(0.25, 0.5))
+    coat = None
+    if appearance == "textured":  # drawn apart: a flat video's draws stay what they were
+        look = np.random.default_rng([seed, sum(asset.name.encode()), 1])
+        coat, bg = Coat(asset, look), natural_background(size, size, look)
+    rgb, masks = shade_frames(asset, verts, cams, light / np.linalg.norm(light), ambient, bg, coat=coat)
     views = [orbit(da, de) for da, de in NOVEL_VIEWS]
-    view_masks = np.stack([shade_frames(asset, verts, c, light, 0.5, bg)[1] for c in views])
+    extra = {}
+    if coat is None:
+        view_masks = np.stack([shade_frames(asset, verts, c, light, 0.5, bg)[1] for c in views])
+    else:  # the same light: a surface point's colour is the same from every camera
+        black = np.zeros_like(bg)
+        shot = [
+            shade_frames(asset, verts, c, light / np.linalg.norm(light), ambient, black, coat=coat)
+            for c in views
+        ]
+        view_masks = np.stack([m for _, m in shot])
+        extra["gt_view_frames"] = np.stack([f for f, _ in shot])
     view_R = np.stack([[c.rotation[0].numpy() for c in v] for v in views]).astype(np.float64)
     view_t = np.stack([[c.translation[0].numpy() for c in v] for v in views]).astype(np.float64)
     flow = np.zeros((max(frames - 1, 0), size, size, 2), np.float16)
@@ -310,6 +340,7 @@ def make_video(
         gt_view_masks=view_masks,
         gt_view_rotation=view_R,
         gt_view_translation=view_t,
+        **extra,
     )
     write_bytes_atomic(dest / "video.npz", buf.getvalue())
     write_json_atomic(
@@ -323,6 +354,7 @@ def make_video(
             "asset": asset.name,
             "motion": "clips" if clip_name else "random",
             "clip": clip_name,
+            **({"appearance": appearance} if coat is not None else {}),
         },
     )
     write_mp4(dest / "video.mp4", rgb, fps)

@@ -34,7 +34,18 @@ ABLATIONS: dict[str, dict[str, Any]] = {
     "fixed-skinning": {"ablation": {"learn_skinning": False}},
     "retrieval-only": {"ablation": {"optimise": False}},
 }
-COLUMNS = ("mask_iou", "novel_view_iou", "miou", "mcham", "joint", "skinning", "reanimation", "wall_s")
+COLUMNS = (
+    "mask_iou",
+    "novel_view_iou",
+    "view_psnr",
+    "miou",
+    "mcham",
+    "joint",
+    "skinning",
+    "reanimation",
+    "wall_s",
+)
+_FIT_METRICS = tuple(k for k in COLUMNS if k not in ("view_psnr", "wall_s"))  # from the fit's record
 
 
 def bench_videos(folder: Path) -> list[Path]:
@@ -152,7 +163,8 @@ def _run_inline(
                     "candidates": rec.get("retrieval") or [],
                     "wall_s": time.perf_counter() - t,
                 }
-                row.update({k: m.get(k) for k in COLUMNS if k != "wall_s"})
+                row.update({k: m.get(k) for k in _FIT_METRICS})
+                row.update(_colour_error(store_root, name, v))
             except UsageError as exc:
                 row = {"video": v.name, "ablation": a, "error": exc.message}
             rows.append(row)
@@ -213,8 +225,20 @@ def _run_batch(
             "candidates": r.summary.get("retrieval") or [],
             "wall_s": r.summary.get("fit_s"),
         }
-        rows.append(row | {k: m.get(k) for k in COLUMNS if k != "wall_s"})
+        rows.append(
+            row | {k: m.get(k) for k in _FIT_METRICS} | _colour_error(store_root, it.key, it.payload.source)
+        )
     return rows
+
+
+def _colour_error(store_root: Path, name: str, video: str | Path) -> dict[str, Any]:
+    """``view_psnr`` and ``input_psnr`` of a finished fit of a textured video (`appearance`)."""
+    from .appearance import fit_psnr
+
+    res = fit_psnr(Path(store_root), name, Path(video))
+    if res is None:
+        return {}
+    return {"view_psnr": res["view_psnr"], "input_psnr": res["input_psnr"]}
 
 
 def _add_body_plans(rows: list[dict[str, Any]], own: dict[str, str], bank) -> None:
@@ -272,7 +296,10 @@ def _mean(vals: list) -> float | None:
 
 def markdown_table(res: dict[str, Any]) -> str:
     """The summary (one row per ablation) and the per-video rows, as markdown."""
-    head = "| ablation | videos | 2D mask IoU | novel-view IoU | mIoU | mCham | Joint (CD-J2J) | Skinning | Re-animation | wall s |"
+    head = (
+        "| ablation | videos | 2D mask IoU | novel-view IoU | held-out PSNR dB | mIoU | mCham | Joint (CD-J2J) "
+        "| Skinning | Re-animation | wall s |"
+    )
     camera = (
         "known (each video's own camera rotations)" if res.get("known_camera") else "estimated from the masks"
     )
@@ -285,10 +312,17 @@ def markdown_table(res: dict[str, Any]) -> str:
         "Novel-view IoU: mask IoU from held-out cameras (+90 deg azimuth, +35 deg elevation) after "
         "mIoU's alignment (`zooctl.fit.metrics`); n/a for videos made without them."
     )
-    lines += ["", head, "|" + "---|" * 10]
+    lines.append(
+        "Held-out PSNR: the fit's colours rendered unlit from those cameras against what they saw, on "
+        "the pixels both cover (`zooctl.benchdata.appearance`); n/a for videos made without "
+        "`--appearance textured`."
+    )
+    lines += ["", head, "|" + "---|" * 11]
 
     def f(x, k=""):
-        return ("n/a" if k == "novel_view_iou" else "-") if x is None else f"{x:.3f}"
+        if x is None:
+            return "n/a" if k in ("novel_view_iou", "view_psnr") else "-"
+        return f"{x:.2f}" if k == "view_psnr" else f"{x:.3f}"
 
     for a, s in res["summary"].items():
         lines.append(f"| {a} | {s['videos']} | " + " | ".join(f(s[k], k) for k in COLUMNS) + " |")
@@ -302,12 +336,13 @@ def markdown_table(res: dict[str, Any]) -> str:
             )
     lines += [
         "",
-        "| video | ablation | template | 2D mask IoU | novel-view IoU | mIoU | mCham | Joint | Skinning | Re-anim. | wall s |",
-        "|" + "---|" * 11,
+        "| video | ablation | template | 2D mask IoU | novel-view IoU | held-out PSNR | mIoU | mCham | Joint "
+        "| Skinning | Re-anim. | wall s |",
+        "|" + "---|" * 12,
     ]
     for r in res["rows"]:
         if "error" in r:
-            lines.append(f"| {r['video']} | {r['ablation']} | error: {r['error']} |" + " |" * 8)
+            lines.append(f"| {r['video']} | {r['ablation']} | error: {r['error']} |" + " |" * 9)
         else:
             right = r.get("plan", {}).get("right")
             mark = "" if right is None else (" (right plan)" if right else " (other plan)")

@@ -59,12 +59,21 @@ def make(
         help="random: 8 random bones re-posed every 12 frames, the rest held; clips: one of the "
         "asset's own clips, in place (random for an asset without clips).",
     ),
+    appearance: str = typer.Option(
+        "flat",
+        "--appearance",
+        help="flat: the asset's colours, flat-shaded over a colour gradient; textured: a procedural coat "
+        "over a natural-looking scene, and the held-out cameras' frames, so `bench run` reports the "
+        "fit's colour error (PSNR) from them.",
+    ),
 ) -> None:
     """Render PlanetZoo-style test videos with ground truth (motion, camera, masks, flow)."""
     from ..benchdata.make import make_video
 
     for _name, load in _assets(bank, asset):
-        dest = make_video(load(), out, frames=frames, size=size, seed=seed, motion=motion)
+        dest = make_video(
+            load(), out, frames=frames, size=size, seed=seed, motion=motion, appearance=appearance
+        )
         console.print(f"made {dest}", highlight=False, markup=False)
 
 
