@@ -7,10 +7,13 @@ import json
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 from rich.console import Console
+
+if TYPE_CHECKING:
+    from ..store.bank import Bank
 
 
 def _own_suggestions() -> dict[str, Any]:
@@ -40,6 +43,13 @@ def store_root() -> Path:
     from ..paths import default_store
 
     return state.store if state.store is not None else default_store()
+
+
+def open_bank() -> Bank:
+    """The bank of the store `store_root` names."""
+    from ..store.bank import Bank
+
+    return Bank.open(store_root())
 
 
 def print_json(obj: Any) -> None:

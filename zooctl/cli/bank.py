@@ -14,12 +14,12 @@ from ._common import (
     add_upkeep_commands,
     console,
     err_console,
+    open_bank,
     print_json,
     print_skipped,
     print_table,
     print_views_pending,
     stage_progress,
-    store_root,
 )
 
 app = typer.Typer(
@@ -27,12 +27,6 @@ app = typer.Typer(
     help="Manage the bank of rigged, animated assets (templates for fitting).",
     no_args_is_help=True,
 )
-
-
-def _bank():
-    from ..store.bank import Bank
-
-    return Bank.open(store_root())
 
 
 def _limit_option(key: str, refuse: str):
@@ -110,7 +104,7 @@ def add(
 
     with import_limits(**limits), stage_progress(not json_out and len(paths) > 1) as progress:
         results = add_files(
-            _bank(),
+            open_bank(),
             paths,
             name=name,
             tags=tag,
@@ -162,7 +156,7 @@ def list_(
     json_out: bool = JsonOpt, tag: str = typer.Option(None, "--tag", help="Only assets with this tag.")
 ) -> None:
     """List the assets in the bank."""
-    bank = _bank()
+    bank = open_bank()
     rows = bank.list()
     print_views_pending(bank.views_pending(rows))
     if tag:
@@ -202,7 +196,7 @@ def list_(
 @app.command("show")
 def show(name: str = typer.Argument(..., help="Asset name."), json_out: bool = JsonOpt) -> None:
     """Show one asset: counts, bounding box, clips and the joint tree."""
-    card = _bank().card(name)
+    card = open_bank().card(name)
     if json_out:
         print_json(card)
         return
@@ -261,7 +255,7 @@ def label_cmd(
     from ..errors import UsageError
     from ..retrieval.labels import relabel
 
-    bank = _bank()
+    bank = open_bank()
     bank.summary(name)  # a missing asset is one clear error before any work
     entry = relabel(bank, name, label)
     if entry is None:
@@ -275,7 +269,7 @@ def label_cmd(
         console.print(f"{name}: {_label_line(entry)}", highlight=False, markup=False)
 
 
-add_rm_command(app, _bank, "Remove assets from the bank.", "Asset names to remove.")
+add_rm_command(app, open_bank, "Remove assets from the bank.", "Asset names to remove.")
 
 
 @app.command("migrate")
@@ -283,7 +277,7 @@ def migrate(json_out: bool = JsonOpt) -> None:
     """Upgrade every asset file to this zooctl's layout (named migrations, atomic per asset)."""
     from ..store.migrate import migrate_bank
 
-    report = migrate_bank(_bank())
+    report = migrate_bank(open_bank())
     if json_out:
         print_json(report)
     else:
@@ -301,7 +295,7 @@ def _repair(bank):
 
 add_upkeep_commands(
     app,
-    _bank,
+    open_bank,
     "assets",
     clean_help="""Remove leftovers of killed writers (temporary files; cards and views of removed assets).
 

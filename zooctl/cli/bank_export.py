@@ -4,13 +4,7 @@ from __future__ import annotations
 
 import typer
 
-from ._common import JsonOpt, console, print_json, store_root
-
-
-def _bank():
-    from ..store.bank import Bank
-
-    return Bank.open(store_root())
+from ._common import JsonOpt, console, open_bank, print_json
 
 
 def export(
@@ -47,7 +41,7 @@ def export(
         raise UsageError("--clip and --all-clips cannot be used together", hint="drop one of them")
     spec, fmt, path = resolve_export(output, fmt, name, default_format="usdz")
     check_writable(path)
-    asset = _bank().get(name)
+    asset = open_bank().get(name)
     t0 = time.perf_counter()
     options = {}
     if camera:

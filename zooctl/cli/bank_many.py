@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._common import store_root
+from ._common import open_bank
 from .batch_opts import BatchOptions, report_batch, run_cli_batch
 
 
@@ -31,12 +31,11 @@ def add_many(
     limits: dict | None = None,
     label: str | None = None,
 ) -> None:
-    from ..pipelines.bank_import import _views_default
+    from ..pipelines.bank_import import views_by_default
     from ..pipelines.batch_bank import bank_task, commit_bank, plan_add, skip_stored
-    from ..store.bank import Bank
 
-    bank = Bank.open(store_root())
-    views = _views_default() if views is None else views
+    bank = open_bank()
+    views = views_by_default() if views is None else views
     items = plan_add(bank, paths, name, tags, license, replace, views, resume, device, limits, label)
     ex = batch.make_executor(device)
     report = run_cli_batch(ex, bank_task, items, commit_bank, skip_stored if resume else None, json_out)
@@ -54,9 +53,8 @@ def reindex_many(
     batch: BatchOptions,
 ) -> None:
     from ..pipelines.batch_bank import bank_task, commit_bank, plan_reindex
-    from ..store.bank import Bank
 
-    items = plan_reindex(Bank.open(store_root()), names, embedders, n_views, size, device)
+    items = plan_reindex(open_bank(), names, embedders, n_views, size, device)
     ex = batch.make_executor(device)
     report = run_cli_batch(ex, bank_task, items, commit_bank, None, json_out)
     report_batch(report, json_out, "assets", _COLS, _row)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from ._common import JsonOpt, console, print_json
+from ._common import JsonOpt, console, open_bank, print_json
 
 
 def render(
@@ -39,9 +39,8 @@ def render(
     """Render shaded previews on the CPU: a still, a clip video, or a contact sheet of the bank."""
     from ..errors import UsageError
     from ..render.preview import contact_sheet, render_asset, save_png
-    from .bank_export import _bank
 
-    bank = _bank()
+    bank = open_bank()
     if sheet:
         if name is not None:
             raise UsageError(

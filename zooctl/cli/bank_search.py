@@ -7,13 +7,7 @@ from pathlib import Path
 import typer
 
 from . import batch_opts
-from ._common import DeviceOpt, JsonOpt, console, err_console, print_json, print_table, store_root
-
-
-def _bank():
-    from ..store.bank import Bank
-
-    return Bank.open(store_root())
+from ._common import DeviceOpt, JsonOpt, console, err_console, open_bank, print_json, print_table, store_root
 
 
 def search(
@@ -58,7 +52,7 @@ def search(
 
     if top < 1:  # before the slow part
         raise UsageError(f"--top {top} must be at least 1")
-    bank = _bank()
+    bank = open_bank()
     query, res = search_source(
         bank,
         video,
@@ -136,7 +130,7 @@ def reindex(
     from ..errors import UsageError, ZooctlError
     from ..retrieval.index import enabled_embedders, index_asset, views_entries
 
-    bank = _bank()
+    bank = open_bank()
     targets = list(names) if names else bank.names()
     embs = list(embedder) if embedder else enabled_embedders()
     if missing:

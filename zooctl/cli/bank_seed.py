@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import typer
 
-from ._common import JsonOpt, console, print_json, stage_progress
+from ._common import JsonOpt, console, open_bank, print_json, stage_progress
 
 
 def seed(
@@ -43,9 +43,8 @@ def seed(
 
         raise UsageError(f"--random {random} must be 0 or more")
     from ..pipelines.bank_import import seed_starter
-    from .bank_export import _bank
 
-    bank = _bank()
+    bank = open_bank()
     with stage_progress(not json_out) as progress:
         added = seed_starter(
             bank,

@@ -64,7 +64,7 @@ def add_files(
     """
     from ..retrieval.labels import check_label, label_asset
 
-    views = _views_default() if views is None else views
+    views = views_by_default() if views is None else views
     if label is not None:
         check_label(label)
     if name is not None and len(paths) > 1:
@@ -113,7 +113,7 @@ def seed_starter(
     from ..procedural import seed_bank
     from ..procedural.random import random_assets
 
-    views = _views_default() if views is None else views
+    views = views_by_default() if views is None else views
     assets = random_assets(random, seed=seed, labels=plans) if random > 0 else None
     added = seed_bank(bank, seed=seed, plans=plans, variants=variants, replace=replace, assets=assets)
     from ..retrieval.labels import relabel
@@ -149,7 +149,7 @@ def repair_bank(bank: Bank, progress: Callable[[str, int, int], None] | None = N
     return {**report, "views_rendered": rendered, "views_failed": failed}
 
 
-def _views_default() -> bool:
+def views_by_default() -> bool:
     import os
 
     return os.environ.get("ZOOCTL_VIEWS", "1") != "0"

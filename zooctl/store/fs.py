@@ -243,7 +243,7 @@ def write_json_atomic(final: Path, obj: Any) -> None:
     write_bytes_atomic(final, json_bytes(obj))
 
 
-def _pid_alive(pid: int) -> bool:
+def pid_alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -260,7 +260,7 @@ def remove_stale_temps(directory: Path) -> int:
         return 0
     for p in directory.glob(".*.tmp*"):
         m = re.search(r"\.(\d+)\.[^.]+\.tmp", p.name)
-        if m and _pid_alive(int(m.group(1))):
+        if m and pid_alive(int(m.group(1))):
             continue
         with contextlib.suppress(FileNotFoundError):
             p.unlink()

@@ -20,7 +20,7 @@ from typing import Any
 from ..errors import NotFoundError, StoreError
 from ..files import regular_size
 from ..names import check_name
-from .fs import _pid_alive, fsync_dir, read_regular, store_lock, writing
+from .fs import fsync_dir, pid_alive, read_regular, store_lock, writing
 from .indexed import NamedStore
 
 CONFIG = "config.json"
@@ -32,7 +32,8 @@ def load_prior_dir(path: Path, device: str = "cpu") -> Any:
         cfg = json.loads(read_regular(Path(path) / CONFIG))
     except (OSError, json.JSONDecodeError) as exc:
         raise StoreError(
-            f"{path} holds no readable motion prior: {exc}", hint="give a folder made by `zooctl motion train`"
+            f"{path} holds no readable motion prior: {exc}",
+            hint="give a folder made by `zooctl motion train`",
         ) from None
     _check_regular(Path(path))
     return _create(cfg, Path(path), device)
@@ -171,7 +172,7 @@ class MotionStore(NamedStore):
             return 0
         for p in self.dir.glob(".*.tmp"):
             pid = next((int(x) for x in p.name.split(".") if x.isdigit()), None)
-            if pid is not None and _pid_alive(pid):
+            if pid is not None and pid_alive(pid):
                 continue  # a live writer's work in progress
             shutil.rmtree(p, ignore_errors=True)
             n += 1
