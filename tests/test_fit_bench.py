@@ -160,7 +160,7 @@ def test_bench_folders_without_novel_views_say_n_a(tmp_path, store):
 
 
 def test_overlay_turns_around_the_fit_at_a_fixed_time(tmp_path):
-    from zooctl.fit.export import fitted_asset
+    from zooctl.fit.fitted_asset import fitted_asset
     from zooctl.fit.outputs import OUTLINE, overlay_frames
 
     res = _fit_tiny(tmp_path)

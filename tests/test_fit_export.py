@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from zooctl.fit.export import fitted_asset
+from zooctl.fit.fitted_asset import fitted_asset
 from zooctl.fit.scene import FitScene
 from zooctl.rig.rotations import quat_to_matrix
 from zooctl.rig.synthetic import tube_asset

@@ -520,7 +520,7 @@ def write_outputs(
     reporter: Reporter | None,
 ) -> dict[str, Any]:
     """Character, USD, GLB, overlay video, loss plot and metrics; the record fields they fill."""
-    from .export import fitted_asset
+    from .fitted_asset import fitted_asset
     from .outputs import (
         bake_colours,
         exported_mask_iou,

@@ -198,7 +198,7 @@ class ArticulatedModel(nn.Module):
             v = v + d
             # The field's mean moves the whole mesh (a fit drifts into one: the root translation
             # can take it just as well); the skeleton goes with it, so it stays where the template
-            # has it inside the mesh, as in the exported rig (`zooctl.fit.export`).
+            # has it inside the mesh, as in the exported rig (`zooctl.fit.fitted_asset`).
             joints = joints + d.mean(0)
         if root_rotation is not None:
             R = quat_to_matrix(root_rotation)[..., None, :, :]
