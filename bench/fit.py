@@ -3,6 +3,7 @@
     python bench/fit.py speed [--preset fast|quality] [--device cpu|cuda]
     python bench/fit.py quality [--assets N] [--frames 60] [--size 320] [--ablation ...]
     python bench/fit.py davis [--store DIR] [--videos dog cows blackswan] [--masks given auto]
+    python bench/fit.py length [--frames 240] [--short 60] [--asset Fox] [--template Wolf]
 
 ``speed`` renders one 60-frame 320x320 video of a shared Quaternius animal, fits it with another
 animal as the template (`zooctl fit --template`, a fresh process, retrieval excluded only when
@@ -13,6 +14,10 @@ does) with their given masks and with automatic GrabCut masks seeded by the firs
 box, and reports the reprojected mask IoU against the DAVIS annotations (the ground truth in
 both cases). The template comes from retrieval over a bank of the 28 shared assets unless
 ``--template VIDEO=ASSET`` says otherwise.
+``length`` renders one long clip (the asset playing its own clips) and fits it whole and its
+first ``--short`` frames alone (`fit_video`, the fast preset, the same template), then compares
+the two fits on the frames both cover: the 3D metrics on 8 frames spread over them and the mask
+IoU against the rendered (true) masks; with CPU seconds and the stage iterations each ran.
 Results: print a markdown line for BENCHMARKS.md (machine, command, median).
 """
 
@@ -183,6 +188,56 @@ def _gt_masks(folder: Path, store: Path, video, size: tuple[int, int]):
     return _read_mask_folder(folder / "Annotations", rec.source_indices[: video.num_frames], size)
 
 
+def length(args) -> None:
+    import resource
+
+    import numpy as np
+
+    from zooctl.fit.config import preset
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.metrics import evaluate_fit
+    from zooctl.fit.run import fit_video, input_mask_iou
+    from zooctl.store.bank import Bank
+
+    def cpu() -> float:
+        ru = resource.getrusage(resource.RUSAGE_SELF)
+        return ru.ru_utime + ru.ru_stime
+
+    with tempfile.TemporaryDirectory() as d:
+        store, vids = Path(d) / "store", Path(d) / "videos"
+        glbs = [next(ASSETS.glob(f"*/{n}.glb")) for n in (args.asset, args.template)]
+        zooctl("bank", "add", *map(str, glbs), store=store)
+        zooctl("bench", "make", "--out", str(vids), "--asset", args.asset, "--frames", str(args.frames),
+               "--size", str(args.size), "--motion", "clips", "--seed", str(args.seed), store=store)  # fmt: skip
+        video = load_fit_video(vids / args.asset)
+        template = Bank(store).get(args.template)
+        rows = {}
+        for label, v in (("short", video.truncated(args.short)), ("long", video)):
+            cfg = preset("fast").for_named_template()
+            t, c = time.perf_counter(), cpu()
+            res = fit_video(v, template, cfg)
+            wall, cpu_s = time.perf_counter() - t, cpu() - c
+            m = evaluate_fit(res, frames=8, reanimate_iters=0, within=args.short)
+            iou = input_mask_iou(res)[: args.short]  # bench masks are the rendered truth
+            rows[label] = {
+                "frames": v.num_frames,
+                "iters": [len(res.history["stage1"]), len(res.history["stage2"])],
+                "wall_s": round(wall, 1),
+                "cpu_s": round(cpu_s, 1),
+                "mask_iou": round(float(np.nanmean(iou)), 4),
+                **{k: round(float(m[k]), 4) for k in ("miou", "mcham", "joint", "skinning")},
+                "novel_view_iou": None if m["novel_view_iou"] is None else round(m["novel_view_iou"], 4),
+            }
+            print(label, json.dumps(rows[label]), flush=True)
+        s, lg = rows["short"], rows["long"]
+        keys = ("mask_iou", "miou", "novel_view_iou", "joint", "mcham")
+        print(
+            f"| {machine()} | {args.asset} {args.frames} frames x {args.size} px, template {args.template}, fast | "
+            + " | ".join(f"{k} {s[k]} -> {lg[k]}" for k in keys)
+            + f" | wall {s['wall_s']} -> {lg['wall_s']} s, CPU {s['cpu_s']} -> {lg['cpu_s']} s |"
+        )
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser()
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -205,5 +260,12 @@ if __name__ == "__main__":
     dv.add_argument("--template", action="append", default=[], help="VIDEO=ASSET instead of retrieval")
     dv.add_argument("--preset", default="fast")
     dv.add_argument("--max-frames", type=int, default=60)
+    ln = sub.add_parser("length")
+    ln.add_argument("--frames", type=int, default=240)
+    ln.add_argument("--short", type=int, default=60)
+    ln.add_argument("--size", type=int, default=320)
+    ln.add_argument("--asset", default="Fox")
+    ln.add_argument("--template", default="Wolf")
+    ln.add_argument("--seed", type=int, default=0)
     a = ap.parse_args()
-    {"speed": speed, "quality": quality, "davis": davis}[a.cmd](a)
+    {"speed": speed, "quality": quality, "davis": davis, "length": length}[a.cmd](a)

@@ -182,7 +182,11 @@ def test_bench_run_pose_prior_option(tmp_path):
     assert component_overrides(None, None, "clips") == {"pose_prior": {"kind": "clips"}}
     assert component_overrides(None, None) is None
     r = zooctl("bench", "run", str(tmp_path), "--pose-prior", "bogus", store=tmp_path / "store")
-    assert r.code == 2 and "pose_prior: kind 'bogus'" in r.err and "Traceback" not in r.err, r.err
+    assert (
+        r.code == 2
+        and "pose_prior.kind 'bogus' must be one of none, rest, clips, motion" in r.err
+        and "Traceback" not in r.err
+    ), r.err
 
 
 def test_bench_run_device_option(tmp_path):
@@ -193,7 +197,9 @@ def test_bench_run_device_option(tmp_path):
 
     assert component_overrides(None, None, None, "cuda") == {"device": "cuda"}
     r = zooctl("bench", "run", str(tmp_path), "--device", "gpu", store=tmp_path / "store")
-    assert r.code == 2 and "'gpu' is not cpu or cuda" in r.err and "Traceback" not in r.err, r.err
+    assert r.code == 2 and "device 'gpu' must be cpu, cuda or cuda:N" in r.err and "Traceback" not in r.err, (
+        r.err
+    )
     if not torch.cuda.is_available():  # one clear line, not one failed row per video
         r = zooctl("bench", "run", str(tmp_path), "--device", "cuda", store=tmp_path / "store")
         assert r.code == 2 and "no CUDA device" in r.err and "Traceback" not in r.err, r.err

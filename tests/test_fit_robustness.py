@@ -78,8 +78,9 @@ def test_config_errors(tmp_path):
         load_config(bad)
     with pytest.raises(UsageError):
         FitConfig.from_dict({"fit_size": 4})
-    with pytest.raises(UsageError, match="learning rates"):
+    with pytest.raises(UsageError, match=r"stage2.lr_joints 0 must be > 0") as err:
         FitConfig.from_dict({"stage2": {"lr_joints": 0}})
+    assert "joint rotations" in err.value.hint
     cfg = FitConfig.from_dict(json.loads(preset("quality").to_json()))
     assert cfg.to_dict() == preset("quality").to_dict()
 
@@ -123,7 +124,7 @@ def test_a_named_template_steps_its_joints_at_the_given_rate(tube_video, store):
     assert own.stage2.lr_joints == 0.005
     both = FitConfig.from_dict({"stage2": {"lr_joints": 0.005, "lr_joints_given": 0.002}})
     assert both.for_named_template().stage2.lr_joints == 0.002
-    with pytest.raises(UsageError, match="learning rates"):
+    with pytest.raises(UsageError, match=r"stage2.lr_joints_given -0.01 must be > 0"):
         FitConfig.from_dict({"stage2": {"lr_joints_given": -0.01}})
 
 

@@ -130,13 +130,17 @@ def _camera_frame_pred(result, frames: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return pose.vertices.cpu().numpy() @ R.T, pose.joints.cpu().numpy() @ R.T
 
 
-def evaluate_fit(result, frames: int = 4, reanimate_iters: int = 40) -> dict[str, Any]:
-    """The 3D metrics of a `zooctl.fit.run.FitResult` whose video has ground truth."""
+def evaluate_fit(
+    result, frames: int = 4, reanimate_iters: int = 40, within: int | None = None
+) -> dict[str, Any]:
+    """The 3D metrics of a `zooctl.fit.run.FitResult` whose video has ground truth, on ``frames``
+    frames spread over the video (over its first ``within`` frames when given: to compare a fit
+    of a long clip with a fit of its start)."""
     gt = result.video.gt
     need = ("vertices", "faces", "joints", "skin_joints", "skin_weights", "cam_rotation", "cam_translation")
     if any(k not in gt for k in need):
         raise InputError("the video has no complete ground truth")
-    T = result.scene.num_frames
+    T = result.scene.num_frames if within is None else min(within, result.scene.num_frames)
     sel = np.unique(np.linspace(0, T - 1, min(frames, T)).astype(int))
     pv_all, pj_all = _camera_frame_pred(result, sel)
     faces_p = result.template.faces
