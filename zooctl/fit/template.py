@@ -11,16 +11,22 @@ winner's fit goes on from its trial, so the trials cost only the losers' fits.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..asset import RiggedAsset
 from ..errors import UsageError
 
+if TYPE_CHECKING:
+    from ..store.bank import Bank
+    from .config import FitConfig
+    from .inputs import FitVideo
+    from .run import Reporter
+
 
 def retrieve(
-    bank: Any,
+    bank: Bank,
     frames: np.ndarray,
     masks: np.ndarray,
     exclude: set[str] | None = None,
@@ -78,7 +84,7 @@ def promote_kin(matches: list[Any], trials: int) -> list[Any]:
 
 
 def choose_template(
-    bank: Any,
+    bank: Bank,
     name: str | None,
     frames: np.ndarray,
     masks: np.ndarray,
@@ -100,12 +106,12 @@ def choose_template(
 
 
 def select_template(
-    bank: Any,
+    bank: Bank,
     name: str | None,
-    video: Any,
-    cfg: Any,
+    video: FitVideo,
+    cfg: FitConfig,
     exclude: set[str] | None = None,
-    reporter: Any = None,
+    reporter: Reporter | None = None,
 ) -> tuple[RiggedAsset, list[dict[str, Any]], dict[str, Any] | None, float | None]:
     """`choose_template`, then the template trials when the template was retrieved and the config
     asks for them: (template, candidates, the winning trial's state to continue from or None,
@@ -129,11 +135,11 @@ def select_template(
 
 
 def try_candidates(
-    bank: Any,
-    video: Any,
+    bank: Bank,
+    video: FitVideo,
     candidates: list[dict[str, Any]],
-    cfg: Any,
-    reporter: Any = None,
+    cfg: FitConfig,
+    reporter: Reporter | None = None,
 ) -> tuple[RiggedAsset, list[dict[str, Any]], dict[str, Any] | None]:
     """Short-fit the first ``cfg.trials.candidates`` retrieval candidates; (best template, the
     candidates with ``trial_iou`` added to those tried, the best trial's fit state or None).

@@ -20,30 +20,36 @@ tell the better view (BENCHMARKS.md, Fit); ``always`` for retrieval's candidates
 from __future__ import annotations
 
 import time
-from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .run import fit_video
+from .run import FitResult, Reporter, fit_video
+
+if TYPE_CHECKING:
+    from ..asset import RiggedAsset
+    from .config import FitConfig
+    from .inputs import FitVideo
 
 
-def mirror_wanted(cfg: Any, template_given: bool) -> bool:
+def mirror_wanted(cfg: FitConfig, template_given: bool) -> bool:
     """Whether ``camera.mirror_trial`` asks for the check on this template (module docstring)."""
     mode = cfg.camera.mirror_trial
     return mode == "always" or (mode == "given" and template_given)
 
 
-def trial_iou(result: Any) -> float:
+def trial_iou(result: FitResult) -> float:
     """Mean input-view mask IoU of a (trial) fit; frames with an empty mask have none (NaN)."""
     return float(np.nanmean(result.iou)) if np.isfinite(result.iou).any() else 0.0
 
 
 def trial_with_mirror(
-    video: Any,
-    template: Any,
-    cfg: Any,
-    reporter: Any = None,
-    checkpoint: Any = None,
+    video: FitVideo,
+    template: RiggedAsset,
+    cfg: FitConfig,
+    reporter: Reporter | None = None,
+    checkpoint: Callable[[dict[str, Any]], None] | None = None,
     mirror: bool = True,
 ) -> tuple[float, dict[str, Any] | None, dict[str, Any]]:
     """The template's trial (`fit_video` paused after ``cfg.trials.iters`` stage-2 iterations)
