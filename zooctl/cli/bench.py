@@ -7,6 +7,7 @@ import typer
 from ._common import APP_OPTS, ArticulationOpt, DeviceOpt, JsonOpt, console, print_json
 
 app = typer.Typer(**APP_OPTS, help="Benchmark renderers and the articulation model.", no_args_is_help=True)
+RepeatsOpt = typer.Option(5, "--repeats", help="Timed runs (the median is reported).")
 
 
 @app.command("render")
@@ -18,7 +19,7 @@ def render(
     size: int = typer.Option(128, "--size", help="Image size in pixels (square)."),
     batch: int = typer.Option(8, "--batch", help="Frames rendered together."),
     device: str = DeviceOpt,
-    repeats: int = typer.Option(5, "--repeats", help="Timed runs (the median is reported)."),
+    repeats: int = RepeatsOpt,
     json_out: bool = JsonOpt,
 ) -> None:
     """Milliseconds per frame of one renderer's forward + backward."""
@@ -41,7 +42,7 @@ def rig(
     frames: int = typer.Option(8, "--frames", help="Frames posed together."),
     articulation: str = ArticulationOpt,
     device: str = DeviceOpt,
-    repeats: int = typer.Option(5, "--repeats", help="Timed runs (the median is reported)."),
+    repeats: int = RepeatsOpt,
     json_out: bool = JsonOpt,
 ) -> None:
     """Milliseconds per frame of FK + skinning (casa: stretchable LBS), forward + backward."""
