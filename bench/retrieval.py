@@ -7,11 +7,15 @@ assets and the starter animals, labelled as a user's would be (name, tags, views
 and family at top-1 and top-3; the semantic weight swept, and chosen in-sample and leave-one-out
 over the real videos and the rendered leave-one-out queries together. ``--real-store DIR`` reuses
 a store that holds the seven videos (``video add`` without a box) and that bank; without it one is
-built in a temporary folder (about 15 minutes on 2 cores).
+built in a temporary folder (about 15 minutes on 2 cores). ``--heldout``: the shared assets also
+queried with renders in styles the bank's views never use (`zooctl.retrieval.styles`), leave one
+asset out, at every weight, with how many of appearance's right answers the term loses.
+``--fit-choice``: the template `zooctl fit` picks for each real video (retrieval and the template
+trials, no full fit).
 
     .venv/bin/python bench/retrieval.py [--embedder effnet --embedder silhouette] [--views 24]
-        [--synthetic 10000] [--skip-loo] [--skip-real] [--real-store DIR]
-        [--out bench/out/retrieval.json]
+        [--synthetic 10000] [--skip-loo] [--skip-real] [--real-store DIR] [--heldout]
+        [--fit-choice] [--out bench/out/retrieval.json]
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ from zooctl.cli._common import print_table
 from zooctl.retrieval.benchmark import COLUMNS, loo_benchmark, search_latency, summary_rows, synthetic_bank
 from zooctl.retrieval.semantic import SEMANTIC_WEIGHT
 from zooctl.retrieval.semantic_bench import asset_truth, choose_loo, judge
+from zooctl.retrieval.styles import HELDOUT_STYLES
 
 REAL_VIDEOS = ("dog", "cows", "blackswan", "bear", "elephant", "dog-agility", "mallard-water")
 WEIGHTS = (0.0, 1.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 16.0)
@@ -82,6 +87,82 @@ def real_benchmark(store: Path, embedders: list[str], frames: int) -> dict:
     return out
 
 
+def fit_choice(store: Path, preset_name: str = "fast") -> dict:
+    """The template `zooctl fit` chooses for each real video: retrieval (`retrieve`: the semantic
+    term and the best asset of the family among the trials) then the template trials
+    (`select_template`), stopped there (no full fit); judged as `real_benchmark` judges."""
+    from zooctl.fit.config import preset
+    from zooctl.fit.job import load_source
+    from zooctl.fit.template import select_template
+    from zooctl.store.bank import Bank
+
+    videos = json.loads((SHARED / "videos" / "labels.json").read_text())
+    asset_labels = json.loads((SHARED / "assets" / "labels.json").read_text())
+    bank = Bank.open(store)
+    truths = {
+        e["name"]: asset_truth(e["name"], bank.card(e["name"]).get("meta", {}), asset_labels)
+        for e in bank.list()
+    }
+    rows = {}
+    for v in REAL_VIDEOS:
+        cfg = preset(preset_name)
+        t, c = time.perf_counter(), time.process_time()
+        video = load_source(v, store, None, cfg.max_frames)
+        asset, cands, _, t_trials = select_template(bank, None, video, cfg)
+        chosen = judge(videos[v], [asset.name], truths)
+        first = judge(videos[v], [x["name"] for x in cands], truths)
+        rows[v] = {
+            "chosen": asset.name,
+            "candidates": [[x["name"], x.get("trial_iou")] for x in cands[: cfg.trials.candidates]],
+            "rank": chosen["rank"],
+            "plan": chosen["plan1"],
+            "family": chosen["family1"],
+            "retrieval_plan1": first["plan1"],
+            "retrieval_family1": first["family1"],
+            "trials_s": t_trials,
+            "wall_s": time.perf_counter() - t,
+            "cpu_s": time.process_time() - c,
+        }
+        r = rows[v]
+        print(
+            f"  {v}: {asset.name} (trials {', '.join(f'{n} {i}' for n, i in r['candidates'])}) "
+            f"plan {int(r['plan'])} family {int(r['family'])} at {r['rank']}; {r['wall_s']:.0f} s wall, "
+            f"{r['cpu_s']:.0f} s CPU",
+            file=sys.stderr,
+            flush=True,
+        )
+    return rows
+
+
+def heldout_report(report: dict) -> None:
+    """Held-out render styles (leave-one-asset-out, renders drawn as the bank's views never are): at
+    each weight, top-1 body plan of the answerable queries per style and in all, and how many of
+    the queries appearance alone (weight 0) gets right the semantic term loses."""
+    held = report.get("shared", {}).get("heldout", {})
+    if not held:
+        return
+    styles = list(held)
+    rows = []
+    for w in WEIGHTS:
+        if str(w) not in held[styles[0]]:
+            continue
+        cells, right, total, lost = [], 0, 0, 0
+        for st in styles:
+            base = {x["query"]: x for x in held[st]["0.0"]["rows"] if x["answerable"]}
+            now = {x["query"]: x for x in held[st][str(w)]["rows"] if x["answerable"]}
+            r = sum(x["top1_plan"] for x in now.values())
+            cells.append(f"{r}/{len(now)}")
+            right, total = right + r, total + len(now)
+            lost += sum(base[q]["top1_plan"] and not now[q]["top1_plan"] for q in now)
+        rows.append([f"{w:g}", *cells, f"{right}/{total}", str(lost)])
+    report["heldout_summary"] = rows
+    print_table(
+        [("weight", "right"), *[(st, "right") for st in styles], ("all", "right"), ("lost vs 0", "right")],
+        rows,
+        title="held-out render styles, leave-one-asset-out: top-1 body plan (answerable queries)",
+    )
+
+
 def semantic_report(report: dict) -> None:
     """Tables: every weight on both query sets; the weight chosen in-sample and leave-one-out."""
     real = report.get("real", {}).get("weights", {})
@@ -127,6 +208,7 @@ def semantic_report(report: dict) -> None:
             f"{part}: in-sample (weight {w_in:g}) {sum(ins[q] for q in keys):g}, leave-one-out "
             f"{sum(loo[q] for q in keys):g} of {(2 if part == 'real' else 1) * len(keys)}"
         )
+    heldout_report(report)
     chosen = real.get(str(SEMANTIC_WEIGHT), {})
     print_table(
         [
@@ -166,6 +248,14 @@ def main() -> None:
     )
     ap.add_argument("--skip-real", action="store_true", help="no real-video retrieval (issue 49)")
     ap.add_argument("--real-store", type=Path, default=None, help="a store with the 7 videos and the bank")
+    ap.add_argument(
+        "--heldout",
+        action="store_true",
+        help="also query the shared assets with renders in the held-out styles (zooctl.retrieval.styles)",
+    )
+    ap.add_argument(
+        "--fit-choice", action="store_true", help="also the template `zooctl fit` chooses for each real video"
+    )
     ap.add_argument("--out", type=Path, default=Path("bench/out/retrieval.json"))
     args = ap.parse_args()
     embedders = args.embedder or ["effnet", "silhouette"]
@@ -198,6 +288,7 @@ def main() -> None:
                     progress=lambda msg, i, n: print(f"  [{i}/{n}] {msg}", file=sys.stderr, flush=True),
                     queries=queries,
                     semantic_weights=list(WEIGHTS) if label == "shared" else None,
+                    styles=list(HELDOUT_STYLES) if args.heldout and label == "shared" else None,
                 )
                 report[label] = r
                 print_table(
@@ -221,6 +312,13 @@ def main() -> None:
                 f"whole `zooctl bank search dog` (stored, cached), {len(report['real']['labels'])} assets: {t:.2f} s (median of 5)"
             )
             semantic_report(report)
+            if args.fit_choice:
+                report["fit_choice"] = fit_choice(store)
+                ok = report["fit_choice"].values()
+                print(
+                    f"zooctl fit's template (retrieval + trials): plan {sum(r['plan'] for r in ok)}/{len(ok)}, "
+                    f"family {sum(r['family'] for r in ok)}/{len(ok)}"
+                )
         if args.synthetic:
             dims = {"effnet": 1280, "silhouette": 576}
             root = tmp / "synthetic"

@@ -14,8 +14,10 @@ from gltf_builder import write_tiny_glb
 
 from zooctl.retrieval.semantic import (
     class_distribution,
+    confidence,
     matched_taxon,
     query_taxon,
+    relative_scores,
     semantic_scores,
     views_taxon,
 )
@@ -140,12 +142,31 @@ def test_semantic_scores_follow_the_taxonomy():
     dist = class_distribution(crops)
     taxa = [tax.lookup(x) for x in ("cow", "bison", "deer", "fox", "black swan")] + [None]
     s = semantic_scores(dist, taxa)
-    assert s[0] > s[1] > s[2] > s[3] > s[4] == 0 and s[5] == 0
+    # the nearest relative of each class takes its probability: the cow the oxen, the cow and the
+    # bison (both its family) the water buffalo; the deer (only the order) nothing
+    np.testing.assert_allclose(s, [0.7, 0.1, 0, 0, 0, 0], atol=1e-9)
     assert query_taxon(dist).name == "cattle"
     assert matched_taxon(dist, taxa[2]) == ("order", "Artiodactyla")
+    # without the cow and the bison the deer is the nearest: the order takes the family's place
+    assert semantic_scores(dist, taxa[2:])[0] == pytest.approx(0.7)
     # a query the classifier does not take for an animal weighs little: confidence-weighted
     weak = class_distribution(np.stack([_probs({345: 0.05})]))
     assert semantic_scores(weak, taxa[:1])[0] < 0.1 * s[0]
+
+
+def test_semantic_term_falls_back_to_the_nearest_order():
+    """A bear in a bank without bears: the carnivores (its order) take it, not an asset labelled
+    only with the body plan; an elephant with no asset of its order: every quadruped alike."""
+    tax = load_taxonomy()
+    taxa = [tax.resolve(x) for x in ("quadruped", "red fox", "grey wolf", "cow", "bird")]
+    bear = class_distribution(np.stack([_probs({294: 0.6, 295: 0.1, 277: 0.05, 345: 0.05})]))
+    s = semantic_scores(bear, taxa)
+    np.testing.assert_allclose(s, [0, 0.75, 0.7, 0.05, 0], atol=1e-9)
+    rel = relative_scores(bear, s)
+    assert rel[1] == pytest.approx(confidence(bear)) and rel[0] == 0  # the fox: the family's 0.7
+    elephant = class_distribution(np.stack([_probs({385: 0.5, 386: 0.3})]))
+    s = semantic_scores(elephant, taxa)
+    np.testing.assert_allclose(s, [0.8, 0.8, 0.8, 0.8, 0], atol=1e-9)
 
 
 def test_search_semantic_term_and_family_in_trials(tmp_path):

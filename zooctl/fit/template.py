@@ -42,7 +42,7 @@ def retrieve(
     ``label`` and, where it shares a taxon with the video's animal, ``shares`` ("family Canidae")."""
     try:
         from ..retrieval.index import enabled_embedders
-        from ..retrieval.query import QueryFrames, crops_from_frames
+        from ..retrieval.query import QueryFrames, classifier_crops, crops_from_frames
         from ..retrieval.search import embed_query, score_bank
     except ImportError as exc:  # pragma: no cover - retrieval ships with zooctl
         raise UsageError(
@@ -50,6 +50,7 @@ def retrieve(
         ) from exc
     images, crop_masks, chosen = crops_from_frames(frames, masks, 8, 224)
     query = QueryFrames(images, crop_masks, chosen, "fit")
+    query.class_images = classifier_crops(frames, masks, chosen, 224)
     emb, _ = embed_query(query, enabled_embedders(), device)
     res = score_bank(bank, emb, query.identities, query.classes, exclude=exclude)
     if not res.matches:

@@ -35,6 +35,7 @@ def loo_benchmark(
     progress=None,
     queries: list[str] | None = None,
     semantic_weights: list[float] | None = None,
+    styles: list[str] | None = None,
 ) -> dict[str, Any]:
     """Leave-one-out retrieval over ``assets`` in a new bank at ``root``. See the module docstring.
 
@@ -42,9 +43,12 @@ def loo_benchmark(
     Query i of ``queries`` is rendered with the same seed whatever else the bank holds.
     ``semantic_weights``: also score the default search (every embedder, nearest, zsum) with the
     semantic term at each of these weights (`zooctl.retrieval.semantic`); the assets are labelled
-    as `bank add` labels them (name, tags, else views)."""
+    as `bank add` labels them (name, tags, else views). ``styles``: also query each asset with renders
+    in these held-out styles (`zooctl.retrieval.styles`; the same clip and camera as its plain
+    query), scored like the semantic runs (at weight 0 too) under ``heldout``."""
     from ..store.bank import Bank
     from .labels import label_asset
+    from .search import classify_query
 
     bank = Bank(root)
     index_s = []
@@ -64,7 +68,27 @@ def loo_benchmark(
         q = render_query_video(a, n_frames=frames, size=size, seed=1000 + seed * 7919 + i, device=device)
         q_emb[a.name] = {e: embed_inputs(cached_embedder(e, device), q.images, q.masks) for e in embedders}
         if semantic_weights:
-            q_classes[a.name] = cached_embedder("effnet", device).classify(q.images)
+            q_classes[a.name] = classify_query(cached_embedder("effnet", device), q)
+    heldout: dict[str, dict[str, Any]] = {}
+    for style in styles or []:
+        emb_s: dict[str, dict[str, np.ndarray]] = {}
+        cls_s: dict[str, np.ndarray] = {}
+        for i, a in enumerate(by_name[n] for n in names):
+            seed_i = 1000 + seed * 7919 + i
+            q = render_query_video(a, n_frames=frames, size=size, seed=seed_i, device=device, style=style)
+            eff = cached_embedder("effnet", device)
+            emb_s[a.name] = {
+                e: embed_inputs(cached_embedder(e, device), q.images, q.masks) for e in embedders
+            }
+            cls_s[a.name] = classify_query(eff, q)
+        if progress:
+            progress(f"held-out style {style}", len(heldout) + 1, len(styles))
+        heldout[style] = {
+            str(w): leave_one_out(
+                bank, assets, emb_s, embedders, queries=set(names), query_classes=cls_s, semantic_weight=w
+            ).to_json()
+            for w in sorted({0.0, *(semantic_weights or [])})
+        }
     results = []
     # Every embedder alone and every combination of them (7 sets for 3 embedders).
     sets = [list(c) for k in range(1, len(embedders) + 1) for c in itertools.combinations(embedders, k)]
@@ -81,6 +105,7 @@ def loo_benchmark(
         semantic[str(w)] = r.to_json()
     return {
         "semantic": semantic,
+        "heldout": heldout,
         "labels": {s["name"]: s.get("label") for s in bank.list()},
         "assets": len(assets),
         "queries": len(names),

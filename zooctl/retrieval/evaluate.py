@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from .query import QueryFrames, crops_from_frames
+from .query import QueryFrames, classifier_crops, crops_from_frames
 from .views import asset_colors, light_direction, random_background, shade_frames
 
 BODY_PLANS = {
@@ -73,14 +73,24 @@ def plan_label(name: str, meta: Any) -> str | None:
 
 
 def render_query_video(
-    asset, n_frames: int = 8, size: int = 224, seed: int = 0, render_size: int = 320, device: str = "cpu"
+    asset,
+    n_frames: int = 8,
+    size: int = 224,
+    seed: int = 0,
+    render_size: int = 320,
+    device: str = "cpu",
+    style: str | None = None,
 ) -> QueryFrames:
     """A synthetic query: ``n_frames`` frames of one random clip, seen by one random camera.
 
     Returns the frames cropped like a real query with ground-truth masks (`QueryFrames`).
+    ``style``: one of `zooctl.retrieval.styles.HELDOUT_STYLES`, drawn the way the bank's views
+    never are (the same clip, camera azimuth and background as without it for one ``seed``).
     """
     from ..render.preview import fit_camera
+    from .styles import check_style, style_colors, style_elevation, style_light, style_pixels
 
+    check_style(style)
     rng = np.random.default_rng(seed)
     if asset.clips:
         clip = list(asset.clips.values())[int(rng.integers(len(asset.clips)))]
@@ -89,23 +99,29 @@ def render_query_video(
     else:
         posed = asset.pose(None)[None].astype(np.float32)
     az, el, fov = rng.uniform(0, 360), rng.uniform(0, 35), rng.uniform(30, 50)
+    el = style_elevation(el, style)
     cam = fit_camera(posed.reshape(-1, 3), render_size, render_size, az, el, fov, margin=1.1)
     n = len(posed)
-    light = light_direction(rng, cam.rotation[0].numpy().astype(np.float64))
+    rotation = cam.rotation[0].numpy().astype(np.float64)
+    light = light_direction(rng, rotation)
     bg = random_background(rng, render_size)
+    light, ambient = style_light(light, rotation, float(rng.uniform(0.25, 0.45)), style)
     rgb, sil = shade_frames(
         posed,
         asset.faces,
-        asset_colors(asset),
+        style_colors(asset_colors(asset), style),
         [cam] * n,
         np.repeat(light[None], n, 0),
-        np.full(n, rng.uniform(0.25, 0.45)),
+        np.full(n, ambient),
         np.full(n, rng.uniform(0.85, 1.15)),
         [bg] * n,
         device,
     )
+    rgb = style_pixels(rgb, sil, style, seed)
     images, masks, chosen = crops_from_frames(rgb, sil, n_frames, size)
-    return QueryFrames(images, masks, chosen, f"rendered {asset.name}")
+    query = QueryFrames(images, masks, chosen, f"rendered {asset.name}")
+    query.class_images = classifier_crops(rgb, sil, chosen, size)
+    return query
 
 
 @dataclass

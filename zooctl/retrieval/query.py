@@ -25,7 +25,8 @@ class QueryFrames:
     of the chosen frames in the decoded video; source: what was decoded; identities: {embedder:
     `zooctl.embed.base.embedder_identity`} of the embedders that embedded it (set by the search);
     classes: (K, 1000) ImageNet probabilities of the crops (set by the search when it embeds with
-    effnet; `zooctl.retrieval.semantic`), or None."""
+    effnet; `zooctl.retrieval.semantic`), or None; class_images: (K, S, S, 3) the crops the
+    classifier sees instead of ``images`` (`classifier_crops`), or None: ``images``."""
 
     images: np.ndarray
     masks: np.ndarray | None
@@ -34,6 +35,7 @@ class QueryFrames:
     notes: list[str] = field(default_factory=list)
     identities: dict[str, str] = field(default_factory=dict)
     classes: np.ndarray | None = None
+    class_images: np.ndarray | None = None
 
 
 def sample_indices(n: int, k: int) -> np.ndarray:
@@ -89,6 +91,17 @@ def crops_from_frames(
     return np.stack(out), None, chosen
 
 
+def classifier_crops(
+    frames: np.ndarray, masks: np.ndarray | None, chosen: np.ndarray, size: int
+) -> np.ndarray | None:
+    """The crops of ``chosen`` frames for the semantic term's classifier: `crops_from_frames`'
+    squares kept within the frame (`square_crop`'s ``inside``); None without masks (the centre
+    crops lie within the frame already)."""
+    if masks is None:
+        return None
+    return np.stack([square_crop(frames[i], masks[i], size, inside=True)[0] for i in chosen])
+
+
 def stored_query(videos, name: str, k: int, size: int) -> QueryFrames:
     """K crops of a stored video, decoding only the K sampled frames (frames with a mask first).
     ``frames`` are indices into the stored video."""
@@ -101,7 +114,9 @@ def stored_query(videos, name: str, k: int, size: int) -> QueryFrames:
     has_masks = len(idx) > 0 and bool(masks.reshape(len(masks), -1).any(1).all())
     images, crop_masks, chosen = crops_from_frames(frames, masks if has_masks else None, k, size)
     notes = [] if has_masks else ["the stored video has no masks: frames are centre-cropped"]
-    return QueryFrames(images, crop_masks, idx[chosen], f"stored video {name}", notes)
+    query = QueryFrames(images, crop_masks, idx[chosen], f"stored video {name}", notes)
+    query.class_images = classifier_crops(frames, masks if has_masks else None, chosen, size)
+    return query
 
 
 def load_query(
@@ -167,4 +182,6 @@ def load_query(
     if masks is None and not notes:
         notes.append("no masks: frames are centre-cropped and mask-only embedders are skipped")
     images, crop_masks, chosen = crops_from_frames(frames, masks, k, size)
-    return QueryFrames(images, crop_masks, chosen, str(path), notes)
+    query = QueryFrames(images, crop_masks, chosen, str(path), notes)
+    query.class_images = classifier_crops(frames, masks, chosen, size)
+    return query

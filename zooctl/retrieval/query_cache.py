@@ -26,7 +26,7 @@ from ..errors import NoSpaceError, ReadOnlyStoreError
 from ..store.fs import store_lock, write_bytes_atomic
 from .crop import DEFAULT_MARGIN
 
-CACHE_VERSION = 1
+CACHE_VERSION = 2  # 2: classes of the crops kept within the frame (`zooctl.retrieval.query.classifier_crops`)
 
 
 @dataclass

@@ -44,9 +44,9 @@ class Match:
     aggregation of cosine distances), its ``best_view`` overall and each query frame's nearest view.
     Per embedder also its ``terms`` of the fused score (they add up to ``score``) and the asset's
     ``ranks`` by that embedder alone among the scored candidates (1: best). With the semantic term
-    (`zooctl.retrieval.semantic`): the asset's ``label``, its ``semantic`` score (expected taxonomic
-    agreement, 0..1; its term is ``terms["semantic"]``) and ``taxon``, what its label shares with
-    the query's most probable species ([rank, name]) or None."""
+    (`zooctl.retrieval.semantic`): the asset's ``label``, its ``semantic`` score (0..1: how surely
+    it is among the bank's nearest relatives of the animal; its term is ``terms["semantic"]``) and
+    ``taxon``, what its label shares with the query's most probable species ([rank, name]) or None."""
 
     name: str
     score: float
@@ -111,11 +111,28 @@ def embed_query(
             notes.append(f"{e}: skipped, the query has no masks")
             continue
         if e == SEMANTIC_EMBEDDER and hasattr(emb, "embed_and_classify") and len(query.images):
-            out[e], query.classes = emb.embed_and_classify(query.images)  # one pass for both
+            out[e], probs = emb.embed_and_classify(query.images)  # one pass for both
+            query.classes = classify_query(emb, query, probs)
         else:
             out[e] = embed_inputs(emb, query.images, query.masks)
         query.identities[e] = embedder_identity(emb)
     return out, notes
+
+
+def classify_query(emb: Any, query: QueryFrames, probs: np.ndarray | None = None) -> np.ndarray:
+    """(K, 1000) ImageNet probabilities of the query for the semantic term: of its
+    ``class_images`` where it has them, else of its ``images``. ``probs``: the classes of
+    ``images`` from the embedding's pass, kept for every crop the classifier's crop equals."""
+    ci = query.class_images
+    if probs is None:
+        return emb.classify(query.images if ci is None else ci)
+    if ci is None or len(ci) != len(probs):
+        return probs
+    differ = [i for i in range(len(ci)) if not np.array_equal(ci[i], query.images[i])]
+    if differ:
+        probs = np.array(probs, copy=True)
+        probs[differ] = emb.classify(ci[differ])
+    return probs
 
 
 def _stored_video(source: Any, masks_dir: Any, store_root: Any):

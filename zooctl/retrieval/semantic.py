@@ -2,16 +2,22 @@
 ImageNet head, against what each bank asset is (its label, placed in `zooctl.retrieval.taxonomy`).
 
 The query's class distribution is the mean of its crops' ImageNet probabilities over the 398 animal
-classes; it is not renormalised, so a query the classifier does not take for an animal (a stylised
-render, a blurred crop) has little mass and the term fades: it is confidence-weighted.
-An asset's agreement is the expected taxonomic agreement, ``sum_c p(c) * agreement(c, label)
-/ 4`` (1: the same species with certainty; `zooctl.retrieval.taxonomy.agreement`); its semantic
-score is that relative to the best agreement any candidate reaches, times the query's
-`confidence`, the probability of its most probable family (`relative_scores`): the bank's closest
-animal scores the classifier's confidence whatever rank it shares (a bird for a swan when the bank
-has no duck), the others less; a render the classifier spreads over unrelated classes weighs little. An asset without a
-label scores 0 (it still competes on appearance). The fused search score adds ``-weight * score``. Bank labels inferred from rendered views use the same head: the deepest rank
-whose most probable taxon holds at least half the views' mean probability.
+classes (crops kept within the frame: `zooctl.retrieval.query.classifier_crops`); it is not
+renormalised, so a query the classifier does not take for an animal (a stylised render, a blurred
+crop) has little mass and the term fades: it is confidence-weighted.
+An asset's agreement is the probability that it is among the bank's nearest relatives of the
+animal the query shows: for every class, the assets whose labels share the deepest rank any
+candidate shares with it (`zooctl.retrieval.taxonomy.agreement`: the species, else the family,
+else the order, else the body plan) get its probability (`semantic_scores`). So the taxonomy falls
+back by itself: a bear in a bank without bears goes to the carnivores (its order), not to an asset
+labelled only "quadruped", and an elephant in a bank without any of its order to every quadruped
+alike (appearance decides). Its semantic score is that relative to the best any candidate reaches,
+times the query's `confidence`, the probability of its most probable family (`relative_scores`):
+the bank's closest animal scores the classifier's confidence whatever rank it shares (a bird for a
+swan when the bank has no duck), the others less; a render the classifier spreads over unrelated
+classes weighs little. An asset without a label scores 0 (it still competes on appearance). The
+fused search score adds ``-weight * score``. Bank labels inferred from rendered views use the same
+head: the deepest rank whose most probable taxon holds at least half the views' mean probability.
 """
 
 from __future__ import annotations
@@ -73,14 +79,18 @@ def entry_taxon(entry: dict[str, Any] | None) -> Taxon | None:
 
 
 def semantic_scores(dist: np.ndarray, taxa: Iterable[Taxon | None]) -> np.ndarray:
-    """(A,) expected agreement of the query distribution ``dist`` (398,) with each asset's taxon."""
-    seen: dict[Taxon, float] = {}
-    out = []
-    for t in taxa:
-        if t is not None and t not in seen:
-            seen[t] = float(dist @ agreement_vector(t))
-        out.append(0.0 if t is None else seen[t])
-    return np.array(out, np.float64)
+    """(A,) for each asset's taxon, the probability of the query distribution ``dist`` (398,) on the
+    classes it is among the nearest relatives of: those where it shares the deepest rank any of
+    ``taxa`` shares with the class (see the module docstring); 0 for None."""
+    taxa = list(taxa)
+    kinds = list(dict.fromkeys(t for t in taxa if t is not None))
+    if not kinds:
+        return np.zeros(len(taxa))
+    agree = np.stack([agreement_vector(t) for t in kinds])  # (U, 398)
+    best = agree.max(0)
+    nearest = (agree == best) & (best > 0)
+    score = dict(zip(kinds, nearest.astype(np.float64) @ np.asarray(dist, np.float64)))
+    return np.array([0.0 if t is None else score[t] for t in taxa], np.float64)
 
 
 def confidence(dist: np.ndarray) -> float:
@@ -92,7 +102,7 @@ def confidence(dist: np.ndarray) -> float:
 
 
 def relative_scores(dist: np.ndarray, scores: np.ndarray) -> np.ndarray:
-    """The semantic term's scores: each asset's expected agreement relative to the best any asset
+    """The semantic term's scores: each asset's `semantic_scores` relative to the best any asset
     reaches (1: as close as the bank comes to the query's animal), times the query's `confidence`."""
     top = float(scores.max()) if len(scores) else 0.0
     return scores * (confidence(dist) / top) if top > 0 else np.zeros_like(scores)
