@@ -164,3 +164,24 @@ def test_backend_choice():
         choose_backend("numpy", "cuda")
     with pytest.raises(UsageError, match="unknown effnet backend"):
         choose_backend("tensorflow", "cpu")
+
+
+def test_folded_batchnorm_computes_the_same_network():
+    """The torch backend folds every batch norm into its convolution: no normalisation pass is
+    left, and features and logits are the unfolded network's to float rounding."""
+    import torch
+
+    from zooctl.embed.effnet import fold_batchnorm, load_pretrained
+    from zooctl.embed.effnet_embedder import EffnetEmbedder
+
+    x = torch.from_numpy(np.random.default_rng(0).normal(size=(2, 3, 96, 96)).astype(np.float32))
+    plain = load_pretrained()
+    with torch.no_grad():
+        want_f, want = plain.features(x), plain(x)
+        folded = fold_batchnorm(load_pretrained())
+        got_f, got = folded.features(x), folded(x)
+    assert not any(isinstance(m, torch.nn.BatchNorm2d) for m in folded.modules())
+    np.testing.assert_allclose(got_f.numpy(), want_f.numpy(), atol=1e-4)
+    np.testing.assert_allclose(got.numpy(), want.numpy(), atol=1e-3)
+    emb = EffnetEmbedder(backend="torch")
+    assert not any(isinstance(m, torch.nn.BatchNorm2d) for m in emb.model.modules())

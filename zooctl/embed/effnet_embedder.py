@@ -79,13 +79,13 @@ class EffnetEmbedder:
         import torch
 
         from .base import torch_threads
-        from .effnet import load_pretrained
+        from .effnet import fold_batchnorm, load_pretrained
 
         threads = torch_threads()
         if threads:
             torch.set_num_threads(threads)
         self.device = torch.device(device)
-        self.model = load_pretrained(path).to(self.device)
+        self.model = fold_batchnorm(load_pretrained(path)).to(self.device)
         if self.device.type == "cpu":
             self.model = self.model.to(memory_format=torch.channels_last)
 

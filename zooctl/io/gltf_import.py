@@ -72,16 +72,20 @@ class _Doc:
                 f"{path}: glTF version {version!r} is not supported", hint="convert it to glTF 2.0"
             )
         self._buffers: dict[int, bytes] = {}
+        self._checked: dict[str, list[dict[str, Any]]] = {}
         self._accessors: dict[int, np.ndarray] = {}
         self._handed_out = 0  # elements returned by accessor(), cached or not
 
     def get(self, key: str) -> list[dict[str, Any]]:
+        if key in self._checked:  # checked once: readers call this for every accessor they read
+            return self._checked[key]
         v = self.json.get(key, [])
         if not isinstance(v, list):
             raise InputError(f"{self.path}: '{key}' must be an array")
         for i, x in enumerate(v):
             if not isinstance(x, dict):
                 raise InputError(f"{self.path}: {key}[{i}] must be an object")
+        self._checked[key] = v
         return v
 
     def index(self, value: Any, key: str, what: str) -> int:
