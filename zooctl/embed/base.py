@@ -56,7 +56,7 @@ def file_digest(path: str | Path) -> str:
     return _DIGESTS[key]
 
 
-def embedder_identity(embedder: Any) -> str:
+def embedder_identity(embedder: Embedder) -> str:
     """What distinguishes this embedder's embeddings from another version's (module docstring)."""
     ident = getattr(embedder, "identity", None)
     return str(ident) if ident else f"{embedder.name}/{int(embedder.dim)}"
