@@ -1,4 +1,4 @@
-"""Built-in video components: segmenters (`masks`, `grabcut`, `onnx`) and the `dis` flow estimator.
+"""Built-in video components: segmenters (`masks`, `grabcut`, `selftrain`, `onnx`) and the `dis` flow estimator.
 
 Factories import their modules lazily so that `zooctl --help` does not pay for OpenCV.
 """
@@ -19,6 +19,12 @@ def _grabcut(**options):
     from ..video.grabcut import GrabCutTracker
 
     return GrabCutTracker(**options)
+
+
+def _selftrain(**options):
+    from ..video.selftrain import SelfTrainedSegmenter
+
+    return SelfTrainedSegmenter(**options)
 
 
 def _onnx(**options):
@@ -47,6 +53,15 @@ def register_segmenters(register):
             _grabcut,
             "classical, CPU: seeded by --box (any frame) or by the animal localiser (ImageNet class maps + motion), "
             "motion + colour cues, GrabCut tracked both ways along the flow, re-seeded when the localiser disagrees",
+        )
+    )
+    register(
+        ComponentSpec(
+            "segmenter",
+            "selftrain",
+            _selftrain,
+            "grabcut, then a classifier learned from this video's sure pixels (EfficientNet-Lite0 features + "
+            "colour) decides every frame again (a leak or a dropped part on some frames is repaired); CPU, no weights",
         )
     )
     register(

@@ -66,7 +66,7 @@ def add(
     segmenter: str = typer.Option(
         None,
         "--segmenter",
-        help="masks | grabcut | onnx | a plugin's (default: masks when given, else grabcut).",
+        help="masks | grabcut | selftrain | onnx | a plugin's (default: masks when given, else grabcut).",
     ),
     box: str = typer.Option(
         None,
