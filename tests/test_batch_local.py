@@ -154,6 +154,27 @@ def test_a_video_folder_is_decoded_in_the_worker_and_stored_once_by_the_driver(t
     assert again[0].payload.ingest is None and again[0].payload.source == "tubecam"  # reused
 
 
+def test_a_batch_worker_streams_the_video_it_decodes(tmp_path, store, monkeypatch):
+    """Under an array read limit of half the video's arrays, the worker's decode, fit and the
+    driver's store of the video still succeed: nothing holds the whole video in memory (the
+    worker sends the compressed file, not its arrays)."""
+    from fit_helpers import write_davis_folder
+
+    from zooctl.fit.inputs import load_bench_video
+    from zooctl.store.videos import VideoStore
+
+    videos = fit_inputs(tmp_path, store, 1)
+    bench = load_bench_video(Path(videos[0]))
+    folder = write_davis_folder(tmp_path / "tubecam", bench.frames, bench.masks)
+    T, H, W = bench.masks.shape
+    arrays = T * H * W * 4 + 2 * (T - 1) * H * W * 5  # frames, masks; float16 flows, occlusions
+    monkeypatch.setenv("ZOOCTL_MAX_ARRAY_MB", str(arrays / 2 / 2**20))
+    items = plan_fits([str(folder)], store, tiny_config(), template="a0", out_root=tmp_path / "out")
+    report = run_batch(get_executor("local"), fit_task, items, commit_fit)
+    assert report.count("done") == 1, report.to_json()
+    assert VideoStore(store).summary("tubecam")["frames"] == T
+
+
 def test_a_video_stored_by_another_fit_during_the_batch_is_reused_or_kept(tmp_path, store):
     """While a batch's worker decodes a folder, `zooctl fit` of the same folder stores it: the
     driver reuses it. Had a different video taken the planned name, it stays, and the batch's

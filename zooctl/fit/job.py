@@ -149,28 +149,27 @@ def add_planned_video(
         return name
 
 
-def store_preprocessed_video(store_root: Path, video: Any, path: Path, masks: str | None) -> str:
-    """Store ``video``, preprocessed elsewhere (a batch worker) from ``path`` as `plan_stored_video`
+def store_preprocessed_video(store_root: Path, video: dict[str, Any], path: Path, masks: str | None) -> str:
+    """Store ``video`` (``name``, ``summary`` and the file's ``data``: what a batch worker's
+    `add_video` wrote into its own store), preprocessed from ``path`` as `plan_stored_video`
     planned it with ``masks``; returns the name it is stored under. A video stored under that name
     meanwhile is reused when `plan_stored_video` finds it the same (same file, same masks); else
     this one takes the next free name (the caller renames its references)."""
     from ..store.videos import VideoStore
 
     vs = VideoStore.open(store_root)
+    name = video["name"]
     for _ in range(3):  # again if another process takes the free name before this add
-        if not vs.exists(video.name):
+        if not vs.exists(name):
             try:
-                vs.add(video)
-                return video.name
+                vs.add_file(name, video["data"], video["summary"])
+                return name
             except AlreadyExistsError:
                 pass
         name, reused, _ = plan_stored_video(path, store_root, masks)
         if reused:
             return name
-        video.name = name
-    raise UsageError(
-        f"other zooctl processes keep storing videos named {video.name}", hint="run the batch again"
-    )
+    raise UsageError(f"other zooctl processes keep storing videos named {name}", hint="run the batch again")
 
 
 def plan_stored_video(

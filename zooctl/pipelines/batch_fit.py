@@ -5,9 +5,10 @@ Where things live:
 - a worker reads the store (the bank, stored videos) and the input files by path, so it needs
   them on a shared file system at the same path (or a copy of them there); it never writes them;
 - it fits into a private temporary folder on its own disk (a video file is decoded, its flow and
-  masks computed there too) and returns the fit's files as bytes (and the new stored video as a
-  record): results travel back through the executor, not the file system;
-- the driver writes them: the stored video (`VideoStore.add`), the output folder, and the fit's
+  masks computed there too, streamed into a video store of its own) and returns the fit's files
+  as bytes (and the new stored video's file): results travel back through the executor, not the
+  file system;
+- the driver writes them: the stored video (`VideoStore.add_file`), the output folder, and the fit's
   store folder under the store's lock with ``record.json`` last, so a fit exists only complete.
 """
 
@@ -166,14 +167,15 @@ def fit_task(task: FitTask, report) -> dict[str, Any]:
     try:
         store = Path(task.store)
         source, src_root, video = task.source, store, None
-        if task.ingest is not None:
+        if task.ingest is not None:  # streamed into a store of its own: a few frames in memory
             from ..store.videos import VideoStore
-            from ..video.ingest import preprocess
+            from ..video.ingest import add_video
 
             report("video")
-            video = preprocess(Path(task.source), task.ingest)
-            VideoStore.open(scratch).add(video)
-            source, src_root = video.name, scratch
+            videos = VideoStore.open(scratch)
+            summary = add_video(videos, Path(task.source), task.ingest)
+            source, src_root = summary["name"], scratch
+            video = {"name": summary["name"], "summary": summary, "file": videos.path(summary["name"])}
         private = FitStore(scratch)
         rec = fit_job(
             source,
@@ -195,7 +197,8 @@ def fit_task(task: FitTask, report) -> dict[str, Any]:
             "fit_files": _read_tree(private.path(task.name)),
             "out_files": _read_tree(scratch / "out"),
             "scratch_out": str((scratch / "out").resolve()),
-            "video": video,
+            # The compressed file (about a third of the arrays it holds), not the arrays.
+            "video": None if video is None else {**video, "file": None, "data": video["file"].read_bytes()},
         }
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
@@ -218,7 +221,7 @@ def commit_fit(item: BatchItem, value: dict[str, Any]) -> dict[str, Any]:
         from ..fit.job import store_preprocessed_video
 
         # A resumed batch may have stored it before it stopped, or another fit meanwhile: reused.
-        planned = video.name
+        planned = video["name"]
         stored = store_preprocessed_video(store, video, Path(task.source), task.masks)
     out = Path(task.out) if task.out is not None else fits.path(task.name).resolve()
 
