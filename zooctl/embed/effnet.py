@@ -121,7 +121,7 @@ def _folded(conv: nn.Conv2d, bn: nn.BatchNorm2d) -> nn.Conv2d:
 @torch.no_grad()
 def fold_batchnorm(model: EfficientNetLite0) -> EfficientNetLite0:
     """The same network for inference with every batch norm folded into the convolution before it
-    (the same outputs to float rounding, about 40% less CPU time: no separate normalisation pass).
+    (the same outputs to float rounding, in less CPU time: no separate normalisation pass).
     Not for training: the folded model has no batch statistics."""
     model._conv_stem, model._bn0 = _folded(model._conv_stem, model._bn0), nn.Identity()
     model._conv_head, model._bn1 = _folded(model._conv_head, model._bn1), nn.Identity()
