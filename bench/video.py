@@ -2,6 +2,7 @@
 
     .venv/bin/python bench/video.py                      # quality and throughput
     .venv/bin/python bench/video.py --part quality       # J per video, grid chosen leave-one-out
+    .venv/bin/python bench/video.py --part quality --segmenter selftrain  # and the learned segmenter
     .venv/bin/python bench/video.py --part throughput --repeats 3
     .venv/bin/python bench/video.py --part quality --seg-option key_every=5 --flow-size 480  # variants
     .venv/bin/python bench/video.py --part length --lengths 5,20,60 --repeats 1   # `video add` by length
@@ -99,6 +100,26 @@ def quality(sequences, max_size: int, preset: str, out: Path, cache, grid: dict,
             )
             report["box"][seq] = r
             print(f"  {seq:14s} first-frame box J={r['J']:.3f} (min {r['J_min']:.3f})", file=sys.stderr)
+    return report
+
+
+def selftrain_quality(sequences, max_size: int, preset: str, out: Path, cache) -> dict:
+    """`selftrain` against `grabcut` on the shared videos, its settings chosen leave-one-video-out
+    (`video_selftrain`); the table goes to selftrain.md."""
+    import video_selftrain
+
+    from zooctl.video.decode import decode
+
+    def load(seq):
+        dv = decode(VIDEOS / seq, max_size=max_size)
+        return dv.frames, load_truth(seq, dv.frames.shape)
+
+    report = video_selftrain.run(sequences, load, cache, SEG_OPTIONS, preset, FLOW_SIZE, out)
+    if len(sequences) >= 2:
+        text, report["leave_one_out"] = video_selftrain.table(report)
+        (out / "selftrain.md").write_text(text)
+        (out / "selftrain.json").write_text(json.dumps(report, indent=1))
+        print(text, file=sys.stderr)
     return report
 
 
@@ -474,6 +495,12 @@ def main() -> None:
     )
     ap.add_argument("--box", action="store_true", help="quality part: also the first true mask's box")
     ap.add_argument(
+        "--segmenter",
+        choices=("grabcut", "selftrain"),
+        default="grabcut",
+        help="quality part: selftrain also runs the learned segmenter and its grid (bench/video_selftrain.py)",
+    )
+    ap.add_argument(
         "--seg-option", action="append", default=[], metavar="K=V", help="grabcut option to measure"
     )
     ap.add_argument(
@@ -506,6 +533,11 @@ def main() -> None:
             print("quality (grabcut, no box; each grid setting varied alone):", file=sys.stderr)
             report["quality"] = quality(
                 args.sequences.split(","), args.max_size, args.preset, args.out, cache, grid, args.box
+            )
+        if args.sequences and args.segmenter == "selftrain":
+            print("quality of selftrain (no box; each of its grid settings varied alone):", file=sys.stderr)
+            report["selftrain"] = selftrain_quality(
+                args.sequences.split(","), args.max_size, args.preset, args.out, cache
             )
         if args.composited:
             print("quality on rendered animals over painted-out DAVIS backgrounds:", file=sys.stderr)
