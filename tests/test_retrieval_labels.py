@@ -225,6 +225,19 @@ def test_trials_include_the_best_asset_of_the_family():
     assert [x.name for x in promote_kin(ranked[:3], 2)] == ["Bull", "Snake", "Whale"]  # no family: as ranked
 
 
+def test_trials_weigh_what_the_classifier_sees():
+    """A trial that fits the input view a little better does not win over a candidate the
+    classifier is sure of (a dog against a duck-billed dinosaur seen side on); without semantic
+    scores, or with scores the classifier is unsure of, the trial IoU decides as before."""
+    from zooctl.fit.template import pick_trial
+
+    ious = [0.834, 0.798, 0.860]
+    assert pick_trial(ious) == 2
+    assert pick_trial(ious, semantic=[0.89, 0.01, 0.0]) == 0
+    assert pick_trial(ious, semantic=[0.1, 0.0, 0.0]) == 2  # a stylised render: little confidence
+    assert pick_trial([0.90, 0.80], semantic=[0.0, 0.9]) == 0  # a far worse fit still loses
+
+
 def test_stored_query_caches_its_classes(tmp_path):
     """The query's ImageNet probabilities come from the same pass as its effnet embeddings and are
     cached with them; a cache written before them is embedded again once."""

@@ -70,6 +70,8 @@ def retrieve(
             c["label"] = m.label
         if m.taxon:
             c["shares"] = f"{m.taxon[0]} {m.taxon[1]}"  # with what the video shows
+        if m.semantic is not None:
+            c["semantic"] = round(float(m.semantic), 4)
         out.append(c)
     return out
 
@@ -165,7 +167,8 @@ def try_candidates(
         cand["trial_iou"] = round(iou, 4)
         cand["view_trial"] = view
         trials.append((asset, iou, paused))
-    best, best_iou, best_state = trials[pick_trial([t[1] for t in trials], cfg.trials.margin)]
+    semantic = [float(c.get("semantic") or 0.0) for c in tried]
+    best, best_iou, best_state = trials[pick_trial([t[1] for t in trials], cfg.trials.margin, semantic)]
     if reporter is not None:
         reporter.message(f"template {best.name}: trial mask IoU {best_iou:.3f}")
     if best_state is not None:
@@ -173,6 +176,10 @@ def try_candidates(
     return best, candidates, best_state
 
 
+# Trial IoU a candidate's semantic score is worth in `pick_trial`: chosen on the shared real videos,
+# with the leave-one-video-out choice beside it (BENCHMARKS.md, Retrieval: the template zooctl fit
+# chooses).
+TRIAL_SEMANTIC_WEIGHT = 0.1
 TRIAL_NOISE = 0.01  # about what a trial's IoU moves between seeds (BENCHMARKS.md, Fit: template trials)
 
 
@@ -194,8 +201,14 @@ def close_trials_note(candidates: list[dict[str, Any]], chosen: str, source: str
     )
 
 
-def pick_trial(ious: list[float], margin: float = 0.0) -> int:
-    """Index of the winning trial: the first in retrieval order whose trial IoU is within
-    ``margin`` of the best (``margin`` 0: the best, ties keeping the retrieval order)."""
-    top = max(ious)
-    return next(i for i, iou in enumerate(ious) if iou >= top - margin)
+def pick_trial(ious: list[float], margin: float = 0.0, semantic: list[float] | None = None) -> int:
+    """Index of the winning trial: by trial IoU plus `TRIAL_SEMANTIC_WEIGHT` times its candidate's
+    semantic score (``semantic``, 0..1: how surely the classifier sees that animal or its nearest
+    relative in the bank; 0 for a candidate without one), the first in retrieval order within
+    ``margin`` of the best (``margin`` 0: the best, ties keeping the retrieval order). An input-view
+    silhouette cannot tell a dog from a duck-billed dinosaur seen side on; a classifier sure of a
+    dog can, and a stylised render it is not sure of moves the choice by little."""
+    sem = list(semantic) if semantic is not None else [0.0] * len(ious)
+    score = [iou + TRIAL_SEMANTIC_WEIGHT * s for iou, s in zip(ious, sem, strict=True)]
+    top = max(score)
+    return next(i for i, x in enumerate(score) if x >= top - margin)

@@ -17,7 +17,7 @@ def explain_table(res: SearchResult) -> tuple[list[tuple[str, str]], list[list[s
     cols += [(f"{e}: dist #rank term", "right") for e in res.embedders]
     sem = res.semantic_weight is not None
     if sem:
-        cols += [("label", "left"), ("shares", "left"), ("semantic: agreement term", "right")]
+        cols += [("label", "left"), ("shares", "left"), ("semantic: score term", "right")]
     rows = []
     for i, m in enumerate(res.matches, 1):
         row = [str(i), m.name, f"{m.score:+.2f}"]
@@ -36,8 +36,8 @@ def explain_table(res: SearchResult) -> tuple[list[tuple[str, str]], list[list[s
     if sem:
         title += (
             f"; semantic: the asset's label, the taxon it shares with the video's most likely animal, "
-            f"its taxonomic agreement with the video (relative to the best asset's, times how surely the classifier "
-            f"sees an animal: 0..1) and its term (-{res.semantic_weight:g} x it)"
+            f"how much of what the classifier sees it is the bank's nearest relative of (relative to the best "
+            f"asset's, times how surely the classifier sees an animal: 0..1) and its term (-{res.semantic_weight:g} x it)"
         )
     return cols, rows, title
 
