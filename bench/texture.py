@@ -3,6 +3,14 @@ its stored character, frames and masks, beside the fit's own recorded timings; o
 of the baked character from the input view and from both sides, to look at.
 
     .venv/bin/python bench/texture.py --store STORE --fit NAME [--repeat 3] [--png views.png]
+    .venv/bin/python bench/texture.py --store STORE --bench DIR [--ablation full]
+
+``--bench``: every video of a `bench make --appearance textured` folder DIR that `bench run`
+fitted into STORE (fit ``bench-<video>-<ablation>``) is baked again three ways on the same fitted
+shape (the character with the template's topology, its seams joined again): the template's
+colours (what ``--no-texture`` exports), vertex colours, and a texture in a generated atlas (the
+default); each is scored by the colour error from the held-out cameras and in sample
+(`zooctl.benchdata.appearance.view_psnr`) and its bake timed (wall and CPU seconds).
 """
 
 from __future__ import annotations
@@ -47,7 +55,20 @@ def views(asset, camera, frame: np.ndarray, t: int) -> np.ndarray:
     from either side (+-90 degrees around it, raised 15)."""
     from zooctl.render.preview import PreviewRenderer, orbit_camera
 
-    r = PreviewRenderer()
+    if asset.texture_png is not None:  # unlit: the preview renderer shades vertex colours only
+        from zooctl.render.albedo import decode_texture, render_colours
+
+        tex = decode_texture(asset.texture_png)
+
+        class Unlit:
+            def render(self, v, faces, cam, _colours):
+                rgb, cover = render_colours(v[None], faces, cam, None, asset.uvs, tex)
+                img = np.where(cover[0][..., None], rgb[0], 0.8)
+                return (np.clip(img, 0, 1) ** (1 / 2.2) * 255).astype(np.uint8)
+
+        r = Unlit()
+    else:
+        r = PreviewRenderer()
     posed = asset.pose("fit", t).astype(np.float32)
     H, W = frame.shape[:2]
     centre = 0.5 * (posed.max(0) + posed.min(0))
@@ -65,13 +86,134 @@ def views(asset, camera, frame: np.ndarray, t: int) -> np.ndarray:
     return np.concatenate([top, np.concatenate([side(90.0), side(-90.0)], 1)], 0)
 
 
+def joined(character, template):
+    """``character`` (a fit baked into a generated atlas: seam vertices split, faces in the
+    template's order) on the template's vertices again, wearing the template's colours."""
+    import dataclasses
+
+    if character.num_faces != template.num_faces:
+        raise SystemExit(f"{character.name}: not the template's faces")
+    src = np.zeros(template.num_vertices, np.int64)
+    src[template.faces.reshape(-1)] = character.faces.reshape(-1)  # a vertex of the character for each
+    return dataclasses.replace(
+        character,
+        vertices=character.vertices[src],
+        faces=template.faces,
+        skin_joints=character.skin_joints[src],
+        skin_weights=character.skin_weights[src],
+        uvs=template.uvs,
+        vertex_colors=template.vertex_colors,
+        texture_png=template.texture_png,
+    ).validate()
+
+
+def compare(store: Path, folder: Path, ablation: str) -> None:
+    """The ``--bench`` table (module docstring)."""
+    import torch
+
+    from zooctl.benchdata.appearance import view_psnr
+    from zooctl.benchdata.run import bench_videos
+    from zooctl.fit.scene import CAMERA_ROTATION
+    from zooctl.fit.texture import bake
+    from zooctl.render.camera import Camera
+    from zooctl.store.bank import Bank
+    from zooctl.store.fits import FitStore
+
+    fits, bank = FitStore(store), Bank(store)
+    rows = []
+    for video in bench_videos(folder):
+        name = f"bench-{video.name}-{ablation}".lower()
+        try:
+            rec = fits.get(name)
+        except Exception:  # noqa: BLE001  (not fitted: skipped)
+            continue
+        if rec.get("status") != "done":
+            continue
+        template = bank.get(rec["template"])
+        plain = joined(fits.character(name), template)
+        H, W = rec["image_size"]
+        f = rec["camera"]["focal_px"]
+        cam = Camera(
+            torch.tensor([[f, f, W / 2.0, H / 2.0]], dtype=torch.float32),
+            torch.as_tensor(CAMERA_ROTATION[None], dtype=torch.float32),
+            torch.zeros(1, 3),
+            H,
+            W,
+        )
+        with np.load(video / "video.npz") as z:
+            frames, masks = z["frames"][: rec["frames"]], z["masks"][: rec["frames"]]
+        row = {
+            "video": video.name,
+            "template": rec["template"],
+            "fit_wall_s": rec["timings"]["total_wall"],
+            "fit_bake_s": rec["timings"].get("texture", 0.0),
+        }
+        for kind, uvs in (("plain", None), ("vertex", False), ("texture", True)):
+            asset, secs = plain, (0.0, 0.0)
+            if uvs is not None:
+                t, c = time.perf_counter(), time.process_time()
+                asset, info = bake(plain, cam, frames, masks, reference=template.vertices, make_uvs=uvs)
+                secs = (time.perf_counter() - t, time.process_time() - c)
+                assert info["mode"] == kind, info
+                row["uvs"] = info["uvs"] if kind == "texture" else row.get("uvs")
+            res = view_psnr(asset, rec, video)
+            row[kind] = {
+                "view_psnr": res["view_psnr"],
+                "per_view": res["view_psnr_per_view"],
+                "input_psnr": res["input_psnr"],
+                "bake_wall_s": secs[0],
+                "bake_cpu_s": secs[1],
+            }
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    if not rows:
+        raise SystemExit(f"no fits of {folder}'s videos in {store} (run `zooctl bench run` first)")
+    print(f"\n{machine()}\n")
+    print(
+        "| video | template | held-out PSNR: template colours / vertex / texture | in sample: template / vertex "
+        "/ texture | bake s (wall/CPU): vertex, texture | fit wall s (its bake) |"
+    )
+    print("|---|---|---|---|---|---|")
+    for r in rows + [_mean_row(rows)]:
+        k = ("plain", "vertex", "texture")
+        print(
+            f"| {r['video']} | {r['template']} | "
+            + " / ".join(f"{r[x]['view_psnr']:.2f}" for x in k)
+            + " | "
+            + " / ".join(f"{r[x]['input_psnr']:.2f}" for x in k)
+            + f" | {r['vertex']['bake_wall_s']:.1f}/{r['vertex']['bake_cpu_s']:.1f}, "
+            + f"{r['texture']['bake_wall_s']:.1f}/{r['texture']['bake_cpu_s']:.1f} "
+            + f"| {r['fit_wall_s']:.0f} ({r['fit_bake_s']:.1f}) |"
+        )
+
+
+def _mean_row(rows: list[dict]) -> dict:
+    out: dict = {"video": "**mean**", "template": ""}
+    out["fit_wall_s"] = float(np.mean([r["fit_wall_s"] for r in rows]))
+    out["fit_bake_s"] = float(np.mean([r["fit_bake_s"] for r in rows]))
+    for k in ("plain", "vertex", "texture"):
+        out[k] = {
+            m: float(np.mean([r[k][m] for r in rows]))
+            for m in ("view_psnr", "input_psnr", "bake_wall_s", "bake_cpu_s")
+        }
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--store", type=Path, required=True, help="the store holding the fit and its video")
-    ap.add_argument("--fit", required=True, help="name of a finished fit")
+    ap.add_argument("--fit", help="name of a finished fit")
+    ap.add_argument(
+        "--bench", type=Path, help="a `bench make --appearance textured` folder `bench run` fitted"
+    )
+    ap.add_argument("--ablation", default="full", help="with --bench: whose fits (bench-<video>-<ablation>)")
     ap.add_argument("--repeat", type=int, default=3, help="timed bakes (median)")
     ap.add_argument("--png", type=Path, default=None, help="write the views of the baked character here")
     args = ap.parse_args()
+    if args.bench is not None:
+        return compare(args.store, args.bench, args.ablation)
+    if args.fit is None:
+        ap.error("give --fit NAME or --bench DIR")
 
     from zooctl.fit.texture import bake
     from zooctl.store.bank import Bank
@@ -80,8 +222,10 @@ def main() -> None:
 
     fits = FitStore(args.store)
     rec = fits.get(args.fit)
-    asset = fits.character(args.fit)
     template = Bank(args.store).get(rec["template"])
+    asset = fits.character(args.fit)
+    if asset.num_vertices != template.num_vertices:  # baked into a generated atlas: seams split
+        asset = joined(asset, template)
     video = VideoStore(args.store).get(rec["stored_video"])
     frames, masks = video.frames[: rec["frames"]], video.masks[: rec["frames"]]
     H, W = rec["image_size"]
