@@ -104,3 +104,36 @@ def test_stages_get_iterations_in_proportion_to_a_long_clip():
     assert cfg.stage(2, 250).iters == 25 and cfg.stage(1, 301).iters == 31
     cfg.schedule_frames = 0
     assert cfg.stage(2, 1000).iters == 10
+
+
+def test_whole_sequence_terms_hold_each_frame_of_a_long_clip_as_firmly():
+    """Smoothness, root smoothness and the rest-pose prior are means over all frames: past
+    schedule_frames they are scaled by T / schedule_frames, so a frame's share stays that of a
+    clip of schedule_frames frames (a 4x longer clip held its frames 4x more loosely before)."""
+    import torch
+
+    from zooctl.fit.config import preset
+    from zooctl.fit.losses import MaskTargets
+    from zooctl.fit.scene import FitScene
+    from zooctl.fit.stages import StageRunner, Targets
+    from zooctl.rig.synthetic import tube_asset
+
+    asset = tube_asset(bones=3, rings_per_bone=2, segments=8, bone_length=0.3, radius=0.05)
+    terms = {}
+    for T in (50, 200):
+        torch.manual_seed(0)
+        scene = FitScene(asset, T, 16, 16, focal=20.0, hidden=8)
+        with torch.no_grad():
+            scene.root_translation[:, 2] = -2.0
+            scene.rotations.copy_(scene.rotations + 0.1 * torch.randn_like(scene.rotations))
+            scene.root_translation[:, 0] = torch.linspace(0, 1, T) ** 2
+        targets = Targets(MaskTargets.build(np.ones((T, 16, 16), np.float32), seed=0))
+        cfg = preset("fast")
+        runner = StageRunner(scene, targets, cfg, 2)
+        assert runner.sequence_scale == max(1.0, T / 100)
+        terms[T] = runner.loss(torch.arange(4))[1]
+        cfg.schedule_frames = 0
+        terms[T, "off"] = StageRunner(scene, targets, cfg, 2).loss(torch.arange(4))[1]
+    for k in ("smooth", "pose", "root_smooth"):
+        assert terms[50][k] == pytest.approx(terms[50, "off"][k])
+        assert terms[200][k] == pytest.approx(2.0 * terms[200, "off"][k], rel=1e-5)

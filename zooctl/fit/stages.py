@@ -95,6 +95,11 @@ class StageRunner:
     def __init__(self, scene: FitScene, targets: Targets, cfg: FitConfig, stage: int):
         self.scene, self.targets, self.cfg, self.stage = scene, targets, cfg, stage
         self.st = stage_config(cfg, stage, scene.num_frames)
+        # Terms over the whole sequence are means over its frames, so each frame's share would
+        # shrink as a clip grows while a step's data terms (a window) do not: past
+        # schedule_frames they are scaled up, holding each frame as firmly as in a clip that long.
+        T, ref = scene.num_frames, cfg.schedule_frames
+        self.sequence_scale = max(1.0, T / ref) if ref > 0 else 1.0
         size = (scene.height, scene.width)
         # Renderers come from the registry (plugins included); soft_sigma is the soft renderer's.
         options = {"sigma": cfg.soft_sigma} if self.st.renderer == "soft" else {}
@@ -149,8 +154,10 @@ class StageRunner:
         terms["mask"] = w.mask * soft_iou_loss(sil, tg.masks.coverage[frames], weight)
         xy, _ = cam.project(verts)
         terms["contour"] = w.contour * contour_loss(xy, frames, tg.masks, weight)
-        terms["root_smooth"] = w.root_smooth * root_smoothness(
-            scene.root_rotation, scene.root_translation, scene.size
+        terms["root_smooth"] = (
+            self.sequence_scale
+            * w.root_smooth
+            * root_smoothness(scene.root_rotation, scene.root_translation, scene.size)
         )
         terms["scale"] = w.scale_prior * scale_prior(scene.model.log_scale)
         if self.stage == 2:
@@ -163,7 +170,7 @@ class StageRunner:
             smooth = smooth_weight(w, it, self.st.iters)
             if ab.smoothness and smooth > 0:
                 q_all = scene.rotations / scene.rotations.norm(dim=-1, keepdim=True)
-                terms["smooth"] = smooth * scene.model.smoothness_loss(q_all)
+                terms["smooth"] = self.sequence_scale * smooth * scene.model.smoothness_loss(q_all)
             if ab.symmetry and w.symmetry > 0:
                 terms["symmetry"] = w.symmetry * scene.model.symmetry_loss(sample=400) / scene.size**2
             if ab.stretch:
@@ -175,7 +182,11 @@ class StageRunner:
                 terms["displacement"] = w.displacement * displacement_prior(disp, scene.size)
             kind = self.cfg.pose_prior.kind
             if kind == "rest":
-                terms["pose"] = w.pose_prior * pose_prior(scene.rotations, scene.model.rest_rotation)
+                terms["pose"] = (
+                    self.sequence_scale
+                    * w.pose_prior
+                    * pose_prior(scene.rotations, scene.model.rest_rotation)
+                )
             elif kind == "clips":
                 q = scene.rotations[frames]
                 terms["pose"] = w.pose_prior * clip_pose_loss(q, scene.model.rest_rotation, scene.clip_stats)
