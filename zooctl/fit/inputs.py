@@ -264,7 +264,8 @@ def resample_flow(
 
     Uses the video's own flow when it has some (read a chunk of frames at a time, cropped to
     ``box``), otherwise DIS on the downscaled frames with a forward-backward consistency check.
-    The result is kept in ``video.cache`` for the next fit of the same video.
+    The result is kept in ``video.cache`` for the next fit of the same video (the losses only
+    read it: one copy serves every fit).
     """
     T, H, W = video.frames.shape[:3]
     if T < 2:
@@ -273,8 +274,7 @@ def resample_flow(
     key = ("flow", h, w, x0, y0, x1, y1)
     if key not in video.cache:
         video.cache[key] = _resample_flow(video, h, w, (x0, y0, x1, y1))
-    flow, valid = video.cache[key]
-    return flow.copy(), valid.copy()
+    return video.cache[key]
 
 
 def _resample_flow(
