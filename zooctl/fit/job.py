@@ -48,7 +48,7 @@ def load_source(
     """
     p = Path(source).expanduser()
     if p.exists():
-        if (p.is_dir() and (p / "video.npz").is_file()) or _single_image(p):
+        if (p.is_dir() and (p / "video.npz").is_file()) or is_single_image(p):
             if box is not None:
                 raise UsageError("--box only applies to videos segmented by GrabCut (--masks auto)")
             return load_fit_video(p, masks, max_frames)
@@ -89,7 +89,7 @@ def load_source(
     return video.truncated(max_frames).check()
 
 
-def _single_image(p: Path) -> bool:
+def is_single_image(p: Path) -> bool:
     from ..video.decode import IMAGE_SUFFIXES, image_files
 
     if p.is_file():
@@ -225,7 +225,7 @@ def _same_video(
     if segmenter == "masks":
         return seg.get("options", {}).get("path") == masks
     if segmenter == "grabcut":
-        from ..video.ingest import _scale_box
+        from ..video.ingest import scale_box
 
         stored_box = seg.get("box")
         if (stored_box is None) != (box is None):
@@ -233,7 +233,7 @@ def _same_video(
         if box is None:
             return True
         original = (int(rec.source.get("original_width", 0)), int(rec.source.get("original_height", 0)))
-        scaled = _scale_box(box, original, (int(summary["width"]), int(summary["height"])))
+        scaled = scale_box(box, original, (int(summary["width"]), int(summary["height"])))
         return bool(np.allclose(scaled, stored_box, atol=1))
     return True
 

@@ -76,7 +76,7 @@ def plan_fits(
     Names follow `zooctl fit`: the video's name, with ``-2``, ``-3`` ... for a second input of
     the same name in this batch. A name the store already has is refused up front while
     ``keep_existing`` (no ``--replace`` or ``--resume``); the old fit is never touched then."""
-    from ..fit.job import _single_image, check_name_free, plan_stored_video
+    from ..fit.job import check_name_free, is_single_image, plan_stored_video
     from ..store.fits import FitStore
 
     fits = FitStore(store_root)
@@ -92,7 +92,7 @@ def plan_fits(
         p = Path(src).expanduser()
         task = FitTask(str(store_root), src, "", config, template=template, cameras=cameras, masks=masks)
         try:
-            if p.exists() and ((p.is_dir() and (p / "video.npz").is_file()) or _single_image(p)):
+            if p.exists() and ((p.is_dir() and (p / "video.npz").is_file()) or is_single_image(p)):
                 task.source, base = str(p.resolve()), _bench_name(p)
             elif p.exists():
                 vname, reused, opts = plan_stored_video(p, store_root, masks, None, taken=videos)

@@ -172,7 +172,7 @@ class GrabCutTracker:
             small_flow = VideoFlow(flow.forward, flow.backward, None, None)
         else:
             small_flow = VideoFlow(
-                *(_resize_flow(f, sw, sh, frames) for f in (flow.forward, flow.backward)), None, None
+                *(resize_flows(f, sw, sh, frames) for f in (flow.forward, flow.backward)), None, None
             )
         small_box = None if box is None else tuple(int(round(v * scale)) for v in box)
         masks = self._honour(small, small_box, box_frame, progress, small_flow)
@@ -585,7 +585,7 @@ def _closed(mask: np.ndarray) -> np.ndarray:
     return cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, cues.disk(2)).astype(bool)
 
 
-def _resize_flow(flow, w: int, h: int, like=None):
+def resize_flows(flow, w: int, h: int, like=None):
     """(N, H, W, 2) flow -> (N, h, w, 2), displacements rescaled to the new pixel size (in memory,
     or in a scratch file when ``like`` is not a NumPy array)."""
     out = working(like if like is not None else flow, len(flow), (h, w, 2), np.float32)

@@ -217,7 +217,7 @@ def ingest(
             )
         if seg_name == "masks":
             segmenter.source_indices = np.asarray(stream.source_indices, np.int64)
-        box = _scale_box(opts.box, stream.original_size, (w, h))
+        box = scale_box(opts.box, stream.original_size, (w, h))
         kwargs: dict[str, Any] = {"box": box, "progress": stage("segment")}
         if uses_flow:
             kwargs["flow"] = seg_flow
@@ -399,7 +399,7 @@ def _choose_segmenter(path: Path, opts: AddOptions) -> tuple[str, dict[str, Any]
     return opts.segmenter, seg_opts
 
 
-def _scale_box(box, original: tuple[int, int], stored: tuple[int, int]) -> tuple[int, int, int, int] | None:
+def scale_box(box, original: tuple[int, int], stored: tuple[int, int]) -> tuple[int, int, int, int] | None:
     if box is None:
         return None
     sx, sy = stored[0] / original[0], stored[1] / original[1]

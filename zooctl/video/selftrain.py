@@ -259,7 +259,7 @@ class SelfTrainedSegmenter:
     ) -> np.ndarray:
         """(T, H, W, 3) uint8 RGB frames, optional box on frame ``box_frame`` -> (T, H, W) bool masks."""
         from .flow import DISFlow, VideoFlow, compute_video_flow
-        from .grabcut import _resize_flow
+        from .grabcut import resize_flows
         from .scratch import Resized
 
         t, h, w = frames.shape[:3]
@@ -270,7 +270,7 @@ class SelfTrainedSegmenter:
             flow = compute_video_flow(DISFlow(self.tracker.flow_preset), np.asarray(frames))
         if tuple(flow.forward.shape[1:3]) != (sh, sw):
             flow = VideoFlow(
-                *(_resize_flow(f, sw, sh, frames) for f in (flow.forward, flow.backward)), None, None
+                *(resize_flows(f, sw, sh, frames) for f in (flow.forward, flow.backward)), None, None
             )
         tracked = self.tracker.segment(
             frames,
