@@ -46,3 +46,8 @@ _.seekable
 
 # socketserver calls it when a request handler thread raises.
 _.handle_error  # plugins/zooctl-viewer/zooctl_viewer/serve.py
+
+# xatlas.PackOptions settings, read by the C++ library.
+_.resolution  # zooctl/fit/uv_atlas.py
+_.bilinear
+_.texels_per_unit
