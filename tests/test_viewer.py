@@ -227,6 +227,12 @@ def test_the_page_reports_what_it_was_measured_against(site, fit, browser):
 
 
 @needs_chromium
+def _ctrl_c_default() -> None:
+    """The server as a terminal starts it: with Ctrl-C's default. A child inherits an ignored
+    SIGINT (some test runners' workers ignore it), and then Python never raises KeyboardInterrupt."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_served_on_localhost_and_stops_on_ctrl_c(fit, browser):
     store, _ = fit
     env = dict(os.environ, ZOOCTL_STORE=str(store), COLUMNS="200", NO_COLOR="1")
@@ -237,6 +243,7 @@ def test_served_on_localhost_and_stops_on_ctrl_c(fit, browser):
         text=True,
         env=env,
         cwd=REPO,
+        preexec_fn=_ctrl_c_default,
     )
     try:
         line = p.stdout.readline()
@@ -263,6 +270,7 @@ def test_exposing_the_server_says_so(fit):
         text=True,
         env=env,
         cwd=REPO,
+        preexec_fn=_ctrl_c_default,
     )
     try:
         assert "serving fit walk at http://127.0.0.1:" in p.stdout.readline()
