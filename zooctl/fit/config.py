@@ -264,8 +264,8 @@ class FitConfig:
     pose_prior: PosePrior = spec(factory=PosePrior, required=False)
     texture: bool = spec(
         True,
-        help="bake the video's colours onto the exported character (UV texture or vertex colours); "
-        "false keeps the template's",
+        help="bake the video's colours onto the exported character as a UV texture (in an atlas made "
+        "for a template without UVs); false keeps the template's",
         required=False,
     )
     schema_version: int = spec(CONFIG_VERSION, const=CONFIG_VERSION)
