@@ -35,7 +35,7 @@ def test_frame_arrays_read_what_they_are_indexed_with(tmp_path):
         part = sv.flow_forward[1:18, 2:10, 3:9]
         assert part.dtype == np.float32 and (part == flow16[1:18, 2:10, 3:9]).all()
         assert (sv.flow_valid[:] == ~rec.occlusion_forward).all()
-        assert (sv.read_masks() == rec.masks).all() and sv.read_masks(5).shape == (5, 24, 32)
+        assert (sv.masks[:] == rec.masks).all() and sv.masks.head(5)[:].shape == (5, 24, 32)
         head = sv.frames.head(5)
         assert head.shape == (5, 24, 32, 3) and len(list(head)) == 5
         assert (np.asarray(head) == rec.frames[:5]).all()
@@ -67,9 +67,9 @@ def test_a_damaged_video_file_is_one_clear_error(tmp_path):
         StoredVideo(vs.path("clip"))
 
 
-def test_the_fit_of_a_stored_video_reads_frames_and_flow_a_few_at_a_time(tmp_path):
-    """Under an array read limit smaller than the video's frames and flow (but above its masks),
-    a whole fit with every output succeeds: nothing reads the frames or the flow whole."""
+def test_the_fit_of_a_stored_video_reads_frames_masks_and_flow_a_few_at_a_time(tmp_path):
+    """Under an array read limit smaller than the video's frames, masks and flow, a whole fit with
+    every output succeeds: nothing reads the frames, the masks or the flow whole."""
     from cli_helpers import zooctl
     from fit_helpers import tiny_overrides
 
@@ -77,12 +77,12 @@ def test_the_fit_of_a_stored_video_reads_frames_and_flow_a_few_at_a_time(tmp_pat
     from zooctl.store.bank import Bank
 
     store = tmp_path / "store"
-    vs, rec = _stored(tmp_path, t=40, h=96, w=128)
+    vs, rec = _stored(tmp_path, t=140, h=96, w=128)
     Bank(store).add(build_animal("quadruped", name="quadruped"))
     frames_mb = rec.frames.nbytes / 2**20
     flow_mb = rec.flow_forward.nbytes / 2**20
     limit = 1.0
-    assert frames_mb > limit and flow_mb > limit and rec.masks.nbytes / 2**20 < limit
+    assert frames_mb > limit and flow_mb > limit and rec.masks.nbytes / 2**20 > limit
     cfg = tmp_path / "tiny.json"
     cfg.write_text(json.dumps(tiny_overrides()))
     r = zooctl(
@@ -91,7 +91,7 @@ def test_the_fit_of_a_stored_video_reads_frames_and_flow_a_few_at_a_time(tmp_pat
     )  # fmt: skip
     assert r.code == 0, r.err
     record = json.loads((store / "fits" / "long" / "record.json").read_text())
-    assert record["status"] == "done" and record["frames"] == 40
+    assert record["status"] == "done" and record["frames"] == 140
     assert {"usd", "glb", "overlay"} <= set(record["outputs"])
 
 

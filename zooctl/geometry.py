@@ -9,7 +9,7 @@ Conventions used everywhere in zooctl:
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -173,3 +173,21 @@ def silhouette_iou(sil: np.ndarray, masks: np.ndarray) -> np.ndarray:
     inter = (sil & masks).reshape(B, -1).sum(1)
     union = (sil | masks).reshape(B, -1).sum(1)
     return np.where(masks.reshape(B, -1).any(1), inter / np.maximum(union, 1), np.nan)
+
+
+MASK_CHUNK = 64  # masks per read where every mask is needed: 26 MB at 854x480
+
+
+def mask_chunks(masks: Any, size: int = MASK_CHUNK) -> Iterator[np.ndarray]:
+    """Consecutive (n, H, W) bool blocks of (T, H, W) masks, an array or a stored video's
+    `FrameArray` (read a block at a time): anything with ``len`` and frame slices."""
+    for s in range(0, len(masks), size):
+        yield np.asarray(masks[s : min(s + size, len(masks))], dtype=bool)
+
+
+def nonempty_frames(masks: Any) -> np.ndarray:
+    """(K,) int64 indices of the frames whose mask has a pixel set."""
+    found = [np.zeros(0, np.int64)]
+    for s, b in zip(range(0, len(masks), MASK_CHUNK), mask_chunks(masks), strict=True):
+        found.append(s + np.flatnonzero(b.reshape(len(b), -1).any(1)))
+    return np.concatenate(found)

@@ -14,6 +14,7 @@ has none: the losses only ever see the fit resolution.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -21,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import InputError, UsageError
+from ..geometry import mask_chunks, nonempty_frames
 
 if TYPE_CHECKING:
     from ..store.video_reader import FrameArray
@@ -36,15 +38,16 @@ class FitVideo:
     camera_rotations (T, 3, 3) world-to-camera rotations (OpenCV axes) when the camera's motion is
     known (``--cameras``, or `zooctl bench run --known-camera`), else None.
 
-    A stored video's frames, flow and flow_valid are `FrameArray` s: read from its file as they
-    are indexed, so a long video's frames and flow never sit in memory whole (its masks do: the
-    fit needs every one of them at once). ``cache`` keeps what the fit derives from them (the
-    flow at the fit resolution) for the next fit of the same video (the template trials).
+    A stored video's frames, masks, flow and flow_valid are `FrameArray` s: read from its file as
+    they are indexed, so a long video's frames, masks and flow never sit in memory whole (what needs
+    every mask, `crop_box`, `MaskWindow`, `nonempty_frames`, reads them a chunk at a time).
+    ``cache`` keeps what the fit derives from them (the flow at the fit resolution) for the next
+    fit of the same video (the template trials).
     """
 
     name: str
     frames: np.ndarray | FrameArray
-    masks: np.ndarray
+    masks: np.ndarray | FrameArray
     fps: float = 30.0
     flow: np.ndarray | FrameArray | None = None
     flow_valid: np.ndarray | FrameArray | None = None
@@ -74,7 +77,7 @@ class FitVideo:
                 f"{T} frames of size {self.frames.shape[1:3]}",
                 hint="give one mask per frame, the size of the frames",
             )
-        if not self.masks.any():
+        if not len(nonempty_frames(self.masks)):
             raise InputError(
                 f"video {self.name!r}: every mask is empty, there is no animal to fit",
                 hint="check the masks (non-zero pixels mark the animal)",
@@ -88,7 +91,7 @@ class FitVideo:
         return FitVideo(
             self.name,
             _head(self.frames, n),
-            self.masks[:n],
+            _head(self.masks, n),
             self.fps,
             None if self.flow is None else _head(self.flow, max(n - 1, 0)),
             None if self.flow_valid is None else _head(self.flow_valid, max(n - 1, 0)),
@@ -229,11 +232,41 @@ def fit_resolution(H: int, W: int, longest: int) -> tuple[int, int, float]:
     return max(8, round(H * s)), max(8, round(W * s)), s
 
 
-def resample_masks(masks: np.ndarray, h: int, w: int) -> np.ndarray:
-    """(T, H, W) bool -> (T, h, w) float32 coverage in [0, 1] (area averaging)."""
+def resample_masks(masks: Any, h: int, w: int) -> np.ndarray:
+    """(T, H, W) bool (an array, a `FrameArray` or a `MaskWindow`, iterated a frame at a time)
+    -> (T, h, w) float32 coverage in [0, 1] (area averaging)."""
     import cv2
 
-    return np.stack([cv2.resize(m.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA) for m in masks])
+    out = np.empty((len(masks), h, w), np.float32)
+    for t, m in enumerate(masks):
+        out[t] = cv2.resize(m.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA)
+    return out
+
+
+class MaskWindow:
+    """The (x0, y0, x1, y1) ``box`` window of (T, H, W) bool masks, an array or a stored video's
+    `FrameArray`: (T, y1 - y0, x1 - x0), read a chunk at a time as it is iterated, a frame at a
+    time as it is indexed, so the window of a long video is never held whole."""
+
+    def __init__(self, masks: np.ndarray | FrameArray, box: tuple[int, int, int, int]) -> None:
+        self.masks, self.box = masks, box
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        x0, y0, x1, y1 = self.box
+        return len(self.masks), y1 - y0, x1 - x0
+
+    def __len__(self) -> int:
+        return len(self.masks)
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        x0, y0, x1, y1 = self.box
+        for block in mask_chunks(self.masks):
+            yield from block[:, y0:y1, x0:x1]
+
+    def __getitem__(self, key: Any) -> np.ndarray:
+        x0, y0, x1, y1 = self.box
+        return np.asarray(self.masks[key], dtype=bool)[..., y0:y1, x0:x1]
 
 
 def crop_box(masks: np.ndarray, margin: float = 0.15) -> tuple[int, int, int, int]:
@@ -243,7 +276,10 @@ def crop_box(masks: np.ndarray, margin: float = 0.15) -> tuple[int, int, int, in
     the principal point), so a small animal in a large frame gets the fit's full resolution.
     """
     T, H, W = masks.shape
-    ys, xs = np.nonzero(masks.any(0))
+    seen = np.zeros((H, W), bool)
+    for b in mask_chunks(masks):
+        seen |= b.any(0)
+    ys, xs = np.nonzero(seen)
     if len(xs) == 0:
         return 0, 0, W, H
     x0, x1, y0, y1 = xs.min(), xs.max() + 1, ys.min(), ys.max() + 1

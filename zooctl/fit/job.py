@@ -79,7 +79,7 @@ def load_source(
     video = FitVideo(
         source,
         rec.frames.head(n),
-        rec.read_masks(n),
+        rec.masks.head(n),
         float(rec.fps),
         rec.flow_forward.head(max(n - 1, 0)),
         rec.flow_valid.head(max(n - 1, 0)),

@@ -24,7 +24,7 @@ from ..rig.priors import find_symmetry_plane
 from .camera_init import CameraInit, initialise_camera
 from .config import FitConfig
 from .depth_mirror import depth_mirror, view_elevation
-from .inputs import FitVideo, crop_box, fit_resolution, resample_flow, resample_masks
+from .inputs import FitVideo, MaskWindow, crop_box, fit_resolution, resample_flow, resample_masks
 from .losses import MaskTargets
 from .pose_prior import clip_joint_limits, clip_pose_stats, motion_sequence_prior
 from .scene import FitScene
@@ -129,9 +129,9 @@ def fit_video(
     T, H, W = video.masks.shape
     box = crop_box(video.masks)
     x0, y0, x1, y1 = box
-    crop = video.masks[:, y0:y1, x0:x1]
     h, w, s = fit_resolution(y1 - y0, x1 - x0, cfg.fit_size)
     s = h / (y1 - y0)
+    crop = MaskWindow(video.masks, box)
     coverage = resample_masks(crop, h, w)
     dev = cfg.device
     mt = MaskTargets.build(coverage, seed=cfg.seed, device=dev)

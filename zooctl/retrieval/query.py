@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, NotFoundError, UsageError
+from ..geometry import nonempty_frames
 from .crop import square_crop
 
 DEFAULT_QUERY_FRAMES = 8
@@ -71,7 +72,7 @@ def crops_from_frames(
 
     T = len(frames)
     if masks is not None:
-        usable = np.flatnonzero(masks.reshape(T, -1).any(1))
+        usable = nonempty_frames(masks)
         if len(usable) == 0:
             raise InputError(
                 "every mask of the query video is empty", hint="check the masks, or search without them"

@@ -201,10 +201,6 @@ class StoredVideo:
     def num_frames(self) -> int:
         return len(self.frames)
 
-    def read_masks(self, n: int | None = None) -> np.ndarray:
-        """The first ``n`` (default all) masks (n, H, W) bool, read a chunk at a time into one array."""
-        return self.masks.head(self.num_frames if n is None else n)[:]
-
     def close(self) -> None:
         try:
             self.file.close()
