@@ -23,6 +23,12 @@ from zooctl.store.fs import write_bytes_atomic
 MARKER = "zooctl-view.json"
 MASK_RGBA = (0, 190, 255, 90)  # the fitted masks: translucent cyan
 SILHOUETTE_RGBA = (255, 0, 255, 255)  # the reprojected character's outline: magenta, as overlay.mp4
+PAGES = {  # page: its title, and whether it draws in 3D (loads the vendored three.js)
+    "fit": ("zooctl view", True),
+    "bank": ("zooctl view --bank", True),
+    "bench": ("zooctl view --bench", False),
+    "animate": ("zooctl view --animate", True),
+}
 
 
 def check_out_dir(out: Path) -> None:
@@ -64,16 +70,28 @@ def start_site(out: Path, page: str, meta: dict[str, Any], up: str = "") -> None
         static_files(out)
 
 
-def write_index(out: Path, page: str, up: str = "") -> Path:
-    """``index.html``, ``page``'s HTML: written last, so a folder with an index is a complete site.
-    ``up``: the relative path to the enclosing site that holds the scripts (see `start_site`)."""
+def page_html(page: str, up: str = "") -> str:
+    """``page``'s HTML: its body (``static/<page>.html``) in the layout every page shares
+    (``static/layout.html``: head, style, error line, scripts). ``up``: the relative path to the
+    enclosing site that holds the style and scripts (see `start_site`); the data is the page's own."""
+    from string import Template
+
     root = resources.files("zooctl_viewer") / "static"
-    html = (root / f"{page}.html").read_text()
-    if up:
-        for name in ("vendor/three.bundle.js", "common.js", f"{page}.js"):
-            html = html.replace(f'<script src="{name}">', f'<script src="{up}{name}">')
-        html = html.replace('href="viewer.css"', f'href="{up}viewer.css"')
-    write_bytes_atomic(out / "index.html", html.encode())
+    title, three = PAGES[page]
+    three_js = [f"{up}vendor/three.bundle.js"] if three else []
+    scripts = [*three_js, "data.js", f"{up}common.js", f"{up}{page}.js"]
+    return Template((root / "layout.html").read_text()).substitute(
+        title=title,
+        up=up,
+        body=(root / f"{page}.html").read_text(),
+        scripts="".join(f'<script src="{s}"></script>\n' for s in scripts),
+    )
+
+
+def write_index(out: Path, page: str, up: str = "") -> Path:
+    """``index.html``, ``page``'s HTML (`page_html`): written last, so a folder with an index is a
+    complete site."""
+    write_bytes_atomic(out / "index.html", page_html(page, up).encode())
     return out / "index.html"
 
 
