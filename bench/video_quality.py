@@ -19,6 +19,7 @@ import json
 import os
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import cv2
@@ -146,19 +147,10 @@ def segment_video(name, frames, truth, cache: Cache, base: dict, options: dict, 
     """Segment one video with ``base`` + ``options`` (cached); J per frame and what the segmenter
     reported."""
     from zooctl.plugins import get_registry
-    from zooctl.video.flow import DISFlow
-    from zooctl.video.mask_quality import per_frame_j
 
     spec = get_registry().get("segmenter", "grabcut")
     seg = spec.create(**base, **options)
-    h, w = frames.shape[1:3]
-    size = seg.flow_size(w, h)
-
-    def estimator():
-        return DISFlow(preset) if flow_size is None else DISFlow(preset, max_size=flow_size)
-
-    flow = cache.flow(frames, size, estimator)
-    flow_key = _digest(preset, flow_size, size)
+    flow, flow_key = segmenter_flow(cache, seg, frames, preset, flow_size)
 
     def run():
         t0 = time.perf_counter()
@@ -173,14 +165,56 @@ def segment_video(name, frames, truth, cache: Cache, base: dict, options: dict, 
         }
 
     masks, info = cache.masks(frames, flow_key, {**base, **options}, box, run)
+    return masks, scored(masks, truth, info)
+
+
+def segmenter_flow(cache: Cache, seg, frames, preset, flow_size):
+    """(flow, its cache key): DIS with ``preset`` (at most ``flow_size`` px) resized to the size
+    ``seg`` works at, as `video add` hands it over."""
+    from zooctl.video.flow import DISFlow
+
+    h, w = frames.shape[1:3]
+    size = seg.flow_size(w, h)
+
+    def estimator():
+        return DISFlow(preset) if flow_size is None else DISFlow(preset, max_size=flow_size)
+
+    return cache.flow(frames, size, estimator), _digest(preset, flow_size, size)
+
+
+def scored(masks, truth, info: dict) -> dict:
+    """J of ``masks`` against ``truth``: per frame, mean and worst frame, with ``info``."""
+    from zooctl.video.mask_quality import per_frame_j
+
     j = per_frame_j(masks, truth)
-    return masks, {
-        "frames": len(j),
-        "J": float(j.mean()),
-        "J_min": float(j.min()),
-        "per_frame": j.tolist(),
-        **info,
-    }
+    return {"frames": len(j), "J": float(j.mean()), "J_min": float(j.min()), "per_frame": j.tolist(), **info}
+
+
+def say(text: str) -> None:
+    """A progress line on stderr (stdout may carry the table)."""
+    print(text, file=sys.stderr, flush=True)
+
+
+def run_settings(seq, frames, truth, runs: list[dict], segment, label, line, overlay: Path) -> dict:
+    """{label(options): result} of each of ``runs`` on one video: ``segment(seq, frames, truth,
+    options=options)`` -> (masks, result), a progress line ``line(seq, label, result)`` each, and the
+    all-defaults run's `overlay_sheet` in ``overlay``."""
+    results = {}
+    for options in runs:
+        masks, r = segment(seq, frames, truth, options=options)
+        results[label(options)] = r
+        if not options:
+            overlay_sheet(overlay, frames, masks, truth, r["per_frame"])
+        say(line(seq, label(options), r))
+    return results
+
+
+def _progress_line(seq: str, label: str, r: dict) -> str:
+    return (
+        f"  {seq:14s} {label:22s} J={r['J']:.3f} (min {r['J_min']:.3f}) {r['frames']} frames, "
+        f"segment {r['segment_s']:.1f}s, seed frame {r['seed_frame']}, {len(r['re_seeded'])} re-seeded, "
+        f"{len(r['empty'])} empty, saw {', '.join(r['classes'])}"
+    )
 
 
 def run_real(sequences, load, cache: Cache, base: dict, grid: dict, preset, flow_size, out: Path) -> dict:
@@ -190,24 +224,13 @@ def run_real(sequences, load, cache: Cache, base: dict, grid: dict, preset, flow
 
     defaults = {k: getattr(get_registry().get("segmenter", "grabcut").create(**base), k) for k in grid}
     runs = configs(grid, defaults)
+    segment = partial(segment_video, cache=cache, base=base, preset=preset, flow_size=flow_size)
     results: dict = {}
     for seq in sequences:
         frames, truth = load(seq)
-        results[seq] = {}
-        curves = {}
-        for options in runs:
-            masks, r = segment_video(seq, frames, truth, cache, base, options, preset, flow_size)
-            results[seq][_label(options)] = r
-            curves[_label(options)] = r["per_frame"]
-            if not options:
-                overlay_sheet(out / "overlays" / f"{seq}.png", frames, masks, truth, r["per_frame"])
-            print(
-                f"  {seq:14s} {_label(options):22s} J={r['J']:.3f} (min {r['J_min']:.3f}) {r['frames']} frames, "
-                f"segment {r['segment_s']:.1f}s, seed frame {r['seed_frame']}, {len(r['re_seeded'])} re-seeded, "
-                f"{len(r['empty'])} empty, saw {', '.join(r['classes'])}",
-                file=sys.stderr,
-                flush=True,
-            )
+        overlay = out / "overlays" / f"{seq}.png"
+        results[seq] = run_settings(seq, frames, truth, runs, segment, _label, _progress_line, overlay)
+        curves = {label: r["per_frame"] for label, r in results[seq].items()}
         curve_plot(out / "curves" / f"{seq}.png", seq, curves, results[seq]["default"])
     return {"defaults": defaults, "grid": {k: list(v) for k, v in grid.items()}, "videos": results}
 
@@ -242,7 +265,19 @@ def leave_one_out_table(report: dict) -> tuple[str, dict]:
         cells += [f"{loo[k].in_sample_mean:.3f}", f"**{loo[k].held_out_mean:.3f}**"]
     cells += [f"**{loo['any'].held_out_mean:.3f}**"]
     rows.append("| " + " | ".join(cells) + " |")
-    numbers = {
+    numbers = loo_numbers(loo)
+    numbers["default_mean"] = mean
+    note = (
+        "\n\n`*`: developed on (the defaults were chosen looking at it). Per setting, the other grid "
+        "values are run with everything else at its default; leave-one-out: the value with the best "
+        "mean J on the other six videos (ties keep the default), scored on the seventh.\n"
+    )
+    return "\n".join(rows) + note, numbers
+
+
+def loo_numbers(loo: dict) -> dict:
+    """{setting: its leave-one-out choice as JSON} of {setting: `LeaveOneOut`}."""
+    return {
         k: {
             "best_on_all": v.best,
             "in_sample": v.in_sample,
@@ -253,13 +288,6 @@ def leave_one_out_table(report: dict) -> tuple[str, dict]:
         }
         for k, v in loo.items()
     }
-    numbers["default_mean"] = mean
-    note = (
-        "\n\n`*`: developed on (the defaults were chosen looking at it). Per setting, the other grid "
-        "values are run with everything else at its default; leave-one-out: the value with the best "
-        "mean J on the other six videos (ties keep the default), scored on the seventh.\n"
-    )
-    return "\n".join(rows) + note, numbers
 
 
 def curve_plot(path: Path, title: str, curves: dict[str, list[float]], default: dict) -> None:

@@ -17,8 +17,8 @@ and ``curves/selftrain-VIDEO.png`` (J per frame of `grabcut` and of each `selftr
 from __future__ import annotations
 
 import hashlib
-import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -40,21 +40,13 @@ def _source() -> str:
 
 def segment_video(seq, frames, truth, cache, base: dict, options: dict, preset, flow_size):
     """`selftrain` with ``options`` on one video (its tracker's masks from ``cache``); (masks, result)."""
-    from video_quality import _digest
+    from video_quality import scored, segmenter_flow
     from video_quality import segment_video as grabcut_video
 
     from zooctl.plugins import get_registry
-    from zooctl.video.flow import DISFlow
-    from zooctl.video.mask_quality import per_frame_j
 
     seg = get_registry().get("segmenter", "selftrain").create(**base, **options)
-    h, w = frames.shape[1:3]
-    size = seg.flow_size(w, h)
-
-    def estimator():
-        return DISFlow(preset) if flow_size is None else DISFlow(preset, max_size=flow_size)
-
-    flow = cache.flow(frames, size, estimator)
+    flow, flow_key = segmenter_flow(cache, seg, frames, preset, flow_size)
     tracked, info = grabcut_video(seq, frames, truth, cache, base, {}, preset, flow_size)
 
     def cached_tracker(*args, **kw):
@@ -73,22 +65,15 @@ def segment_video(seq, frames, truth, cache, base: dict, options: dict, preset, 
         }
 
     key_opts = {"segmenter": "selftrain", "source": _source(), **base, **options}
-    masks, learn = cache.masks(frames, _digest(preset, flow_size, size), key_opts, None, run)
-    j = per_frame_j(masks, truth)
-    return masks, {
-        "frames": len(j),
-        "J": float(j.mean()),
-        "J_min": float(j.min()),
-        "per_frame": j.tolist(),
-        **learn,
-    }
+    masks, learn = cache.masks(frames, flow_key, key_opts, None, run)
+    return masks, scored(masks, truth, learn)
 
 
 def run(sequences, load, cache, base: dict, preset, flow_size, out: Path, grid: dict | None = None) -> dict:
     """`grabcut` and `selftrain` (defaults and each grid value) on every video; overlays and curves.
     ``load(seq)`` -> (frames, truth). {video: {label: result}} with labels "grabcut", "selftrain",
     "selftrain,K=V"."""
-    from video_quality import _label, curve_plot, overlay_sheet
+    from video_quality import _label, configs, curve_plot, run_settings
     from video_quality import segment_video as grabcut_video
 
     from zooctl.plugins import get_registry
@@ -96,25 +81,23 @@ def run(sequences, load, cache, base: dict, preset, flow_size, out: Path, grid: 
     grid = GRID if grid is None else grid
     seg = get_registry().get("segmenter", "selftrain").create()
     defaults = {k: getattr(seg, k) for k in grid}
-    runs = [{}] + [{k: v} for k, values in grid.items() for v in values if v != defaults[k]]
+    runs = configs(grid, defaults)
+    segment = partial(segment_video, cache=cache, base=base, preset=preset, flow_size=flow_size)
     results: dict = {}
     for seq in sequences:
         frames, truth = load(seq)
         _, g = grabcut_video(seq, frames, truth, cache, base, {}, preset, flow_size)
         results[seq] = {"grabcut": g}
-        for options in runs:
-            masks, r = segment_video(seq, frames, truth, cache, base, options, preset, flow_size)
-            label = "selftrain" + ("," + _label(options) if options else "")
-            results[seq][label] = r
-            if not options:
-                overlay_sheet(out / "overlays" / f"selftrain-{seq}.png", frames, masks, truth, r["per_frame"])
-            print(
-                f"  {seq:14s} {label:30s} J={r['J']:.3f} (min {r['J_min']:.3f}; grabcut {g['J']:.3f}), "
-                f"learning {r['learn_cpu_s']:.1f} CPU s, {r.get('animal_cells')} animal / "
-                f"{r.get('background_cells')} background cells, {r.get('changed')} of the mask changed",
-                file=sys.stderr,
-                flush=True,
-            )
+        results[seq] |= run_settings(
+            seq,
+            frames,
+            truth,
+            runs,
+            segment,
+            lambda o: "selftrain" + ("," + _label(o) if o else ""),
+            partial(_progress_line, g),
+            out / "overlays" / f"selftrain-{seq}.png",
+        )
         curves = {k: v["per_frame"] for k, v in results[seq].items() if k in ("grabcut", "selftrain")}
         curve_plot(
             out / "curves" / f"selftrain-{seq}.png",
@@ -125,10 +108,18 @@ def run(sequences, load, cache, base: dict, preset, flow_size, out: Path, grid: 
     return {"defaults": defaults, "grid": {k: list(v) for k, v in grid.items()}, "videos": results}
 
 
+def _progress_line(grabcut: dict, seq: str, label: str, r: dict) -> str:
+    return (
+        f"  {seq:14s} {label:30s} J={r['J']:.3f} (min {r['J_min']:.3f}; grabcut {grabcut['J']:.3f}), "
+        f"learning {r['learn_cpu_s']:.1f} CPU s, {r.get('animal_cells')} animal / "
+        f"{r.get('background_cells')} background cells, {r.get('changed')} of the mask changed"
+    )
+
+
 def table(report: dict) -> tuple[str, dict]:
     """Markdown: per video `grabcut`, `selftrain` at its defaults, each grid setting in-sample and
     leave-one-out, and the choice among all runs (`grabcut` included) leave-one-out."""
-    from video_quality import DEVELOPED_ON
+    from video_quality import DEVELOPED_ON, loo_numbers
 
     from zooctl.video.mask_quality import leave_one_out
 
@@ -169,17 +160,7 @@ def table(report: dict) -> tuple[str, dict]:
         cells += [f"{loo[k].in_sample_mean:.3f}", f"**{loo[k].held_out_mean:.3f}**"]
     cells.append(f"**{every.held_out_mean:.3f}**")
     rows.append("| " + " | ".join(cells) + " |")
-    numbers = {
-        k: {
-            "best_on_all": v.best,
-            "in_sample": v.in_sample,
-            "picked": v.picked,
-            "held_out": v.held_out,
-            "held_out_mean": v.held_out_mean,
-            "in_sample_mean": v.in_sample_mean,
-        }
-        for k, v in {**loo, "any": every}.items()
-    }
+    numbers = loo_numbers({**loo, "any": every})
     numbers["mean"] = mean
     note = (
         "\n\n`*`: the videos `grabcut`'s defaults were developed on. Each `selftrain` setting is varied "
