@@ -1,7 +1,8 @@
-"""Shared benchmark helpers: timing whole commands and describing the machine."""
+"""Shared benchmark helpers: timing whole commands, describing the machine, writing results."""
 
 from __future__ import annotations
 
+import json
 import os
 import platform
 import statistics
@@ -46,3 +47,9 @@ def time_command(args: list[str], env: dict | None = None, repeat: int = 7) -> f
 
     run()  # warm the page cache
     return median_time(run, repeat)
+
+
+def write_json(path: Path, results: object, indent: int = 2) -> None:
+    """``results`` as JSON in ``path`` (its folder made)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(results, indent=indent))

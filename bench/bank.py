@@ -14,7 +14,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _util import SHARED, machine, time_command
+from _util import SHARED, machine, time_command, write_json
 
 from zooctl.io.gltf_import import load_gltf
 from zooctl.store.bank import Bank
@@ -69,8 +69,7 @@ def main() -> None:
             "bank_show_s": round(show_s, 3),
             "bank_show_json_s": round(show_json_s, 3),
         }
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(res, indent=2))
+        write_json(args.out, res)
         print(json.dumps(res, indent=2))
     finally:
         shutil.rmtree(root, ignore_errors=True)

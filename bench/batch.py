@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _util import machine  # noqa: E402
+from _util import machine, write_json  # noqa: E402
 
 
 def load() -> str:
@@ -131,8 +131,7 @@ def main() -> None:
     res["ray_noop"] = ray_overhead(40) | {"load_before": before}
     print(json.dumps(res, indent=2))
     if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(res, indent=2))
+        write_json(args.out, res)
 
 
 if __name__ == "__main__":

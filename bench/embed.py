@@ -7,13 +7,12 @@ for effnet also its numpy backend (what a search uses; BLAS threads as OMP_NUM_T
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
 import torch
-from _util import machine, median_time
+from _util import machine, median_time, write_json
 
 from zooctl.embed.base import get_embedder
 
@@ -59,8 +58,7 @@ def main() -> None:
             report["results"].append(row)
             label = f"{name}/{row['backend']}" if row["backend"] else name
             print(f"{label:14s} {device:5s} threads={threads or '-'}  {row['images_per_s']:.1f} images/s")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(report, indent=1))
+    write_json(args.out, report, indent=1)
     print(f"machine: {report['machine']}\nwrote {args.out}")
 
 

@@ -17,7 +17,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _util import REPO, machine
+from _util import REPO, machine, write_json
 
 sys.path.insert(0, str(REPO / "tests" / "fuzz"))
 from file_mutants import Case, make_store, mutants, run_cli, run_library, summarize  # noqa: E402
@@ -159,8 +159,7 @@ def main() -> None:
                 "peak_rss_mb": round(edge.peak_kb / 1024),
             },
         }
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(report, indent=1))
+        write_json(args.out, report, indent=1)
         print(
             json.dumps(
                 {k: v for k, v in report.items() if k not in ("by_kind", "failures", "cases")}, indent=1

@@ -31,7 +31,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _util import SHARED, machine, time_command
+from _util import SHARED, machine, time_command, write_json
 
 from zooctl.cli._common import print_table
 from zooctl.retrieval.benchmark import COLUMNS, loo_benchmark, search_latency, summary_rows, synthetic_bank
@@ -360,8 +360,7 @@ def main() -> None:
             )
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(report, indent=1))
+    write_json(args.out, report, indent=1)
     print(f"machine: {report['machine']}\nwrote {args.out}")
 
 

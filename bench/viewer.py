@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _util import REPO, machine  # noqa: E402
+from _util import REPO, machine, write_json  # noqa: E402
 
 SHORT_FIT = {
     "fit_size": 32,
@@ -190,8 +190,7 @@ def main() -> None:
         print(f"bank gallery, {args.tiles} tiles, file: {results['bank']['median_ms']:.0f} ms", flush=True)
     print(json.dumps(results, indent=2))
     if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(results, indent=2))
+        write_json(args.out, results)
 
 
 if __name__ == "__main__":
