@@ -8,7 +8,7 @@ import pytest
 from cli_helpers import run_inprocess
 from conftest import VIDEOS_DIR, needs_shared_videos
 from PIL import Image
-from video_helpers import iou, moving_object_video
+from video_helpers import iou, moving_object_video, write_pngs
 
 from zooctl.errors import UsageError
 from zooctl.video import cues
@@ -75,10 +75,7 @@ def test_box_on_a_later_frame_tracks_both_ways(synthetic):
 
 def test_cli_box_frame_and_show_report_seeding(store, synthetic, tmp_path, capsys):
     frames, masks = synthetic
-    folder = tmp_path / "clip"
-    folder.mkdir()
-    for i, f in enumerate(frames):
-        Image.fromarray(f).save(folder / f"{i:05d}.png")
+    folder = write_pngs(tmp_path / "clip", frames)
     x, y, w, h = cues.box_of(masks[3])
     r = run_inprocess(capsys, "video", "add", str(folder), "--box-frame", "3", "-q")
     assert r.code == 2 and "--box-frame places --box" in r.err

@@ -6,8 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from cli_helpers import run_inprocess
-from PIL import Image
-from video_helpers import iou, moving_object_video
+from video_helpers import iou, moving_object_video, write_pngs
 
 from zooctl.errors import InputError, UsageError
 from zooctl.plugins import get_registry
@@ -146,10 +145,7 @@ def test_selftrain_bad_options_and_inputs(synthetic):
 
 def test_cli_video_add_with_selftrain(store, synthetic, tmp_path, capsys):
     frames, truth = synthetic
-    folder = tmp_path / "clip"
-    folder.mkdir()
-    for i, f in enumerate(frames):
-        Image.fromarray(f).save(folder / f"{i:05d}.png")
+    folder = write_pngs(tmp_path / "clip", frames)
     r = run_inprocess(
         capsys,
         "video",

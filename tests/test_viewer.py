@@ -233,18 +233,22 @@ def _ctrl_c_default() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
-def test_served_on_localhost_and_stops_on_ctrl_c(fit, browser):
-    store, _ = fit
-    env = dict(os.environ, ZOOCTL_STORE=str(store), COLUMNS="200", NO_COLOR="1")
-    p = subprocess.Popen(
-        [sys.executable, "-m", "zooctl", "view", "walk", "--no-browser", "--port", "0"],
+def _serve(store, *extra: str) -> subprocess.Popen:
+    """`zooctl view walk` serving on a free port, as a terminal starts it; its first line says where."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "zooctl", "view", "walk", "--no-browser", "--port", "0", *extra],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-        env=env,
+        env=dict(os.environ, ZOOCTL_STORE=str(store), COLUMNS="200", NO_COLOR="1"),
         cwd=REPO,
         preexec_fn=_ctrl_c_default,
     )
+
+
+def test_served_on_localhost_and_stops_on_ctrl_c(fit, browser):
+    store, _ = fit
+    p = _serve(store)
     try:
         line = p.stdout.readline()
         assert "serving fit walk at http://127.0.0.1:" in line, line + p.stderr.read()
@@ -262,16 +266,7 @@ def test_served_on_localhost_and_stops_on_ctrl_c(fit, browser):
 
 def test_exposing_the_server_says_so(fit):
     store, _ = fit
-    env = dict(os.environ, ZOOCTL_STORE=str(store), COLUMNS="200", NO_COLOR="1")
-    p = subprocess.Popen(
-        [sys.executable, "-m", "zooctl", "view", "walk", "--no-browser", "--port", "0", "--host", "0.0.0.0"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=env,
-        cwd=REPO,
-        preexec_fn=_ctrl_c_default,
-    )
+    p = _serve(store, "--host", "0.0.0.0")
     try:
         assert "serving fit walk at http://127.0.0.1:" in p.stdout.readline()
     finally:

@@ -56,16 +56,26 @@ def stored_masked_video(tmp_path, name: str = "seq"):
     return root, folder
 
 
+def write_pngs(folder, images: np.ndarray):
+    """Images (T, H, W, 3) uint8 or masks (T, H, W) bool as numbered lossless PNGs in ``folder``
+    (made, as a folder of frames `video add` reads); returns ``folder``."""
+    from PIL import Image
+
+    folder.mkdir(parents=True)
+    for i, img in enumerate(images):
+        Image.fromarray(img.astype(np.uint8) * 255 if img.dtype == bool else img).save(
+            folder / f"{i:05d}.png"
+        )
+    return folder
+
+
 def write_png_davis(folder, frames: np.ndarray, masks: np.ndarray):
     """Frames (T, H, W, 3) uint8 and masks (T, H, W) bool as a DAVIS-style folder of lossless PNGs
     (JPEGImages/, Annotations/); returns ``folder``."""
-    from PIL import Image
-
-    for sub in ("JPEGImages", "Annotations"):
-        (folder / sub).mkdir(parents=True)
-    for i, (f, m) in enumerate(zip(frames, masks, strict=True)):
-        Image.fromarray(f).save(folder / "JPEGImages" / f"{i:05d}.png")
-        Image.fromarray(m.astype(np.uint8) * 255).save(folder / "Annotations" / f"{i:05d}.png")
+    if len(frames) != len(masks):
+        raise ValueError(f"{len(frames)} frames but {len(masks)} masks")
+    write_pngs(folder / "JPEGImages", frames)
+    write_pngs(folder / "Annotations", np.asarray(masks, bool))
     return folder
 
 
