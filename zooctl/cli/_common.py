@@ -132,6 +132,24 @@ def print_table(columns: list[tuple[str, str]], rows: list[list[str]], title: st
     console.file.flush()
 
 
+def print_listing(
+    rows: list[dict[str, Any]],
+    json_out: bool,
+    columns: list[tuple[str, str]],
+    cells: Callable[[dict[str, Any]], list[str]],
+    title: str | None = None,
+    empty: str | None = None,
+) -> None:
+    """A `list` command's output: ``rows`` as JSON, or as a `print_table` of ``columns`` with
+    ``cells(row)`` a row; ``empty``: a line in place of an empty table."""
+    if json_out:
+        print_json(rows)
+    elif not rows and empty is not None:
+        console.print(empty, highlight=False, markup=False)
+    else:
+        print_table(columns, [cells(r) for r in rows], title=title)
+
+
 @contextlib.contextmanager
 def stage_progress(enabled: bool) -> Iterator[object]:
     """A rich progress display with one bar per stage; yields the ``(stage, done, total)`` callback."""

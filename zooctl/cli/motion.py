@@ -7,7 +7,7 @@ import time
 import typer
 
 from ..motion.temperature import default_temperature, draws_diversely
-from ._common import APP_OPTS, DeviceOpt, JsonOpt, console, err_console, print_json, print_table, store_root
+from ._common import APP_OPTS, DeviceOpt, JsonOpt, console, err_console, print_json, print_listing, store_root
 
 app = typer.Typer(
     **APP_OPTS, help="Train and manage generative motion priors (Ponymation).", no_args_is_help=True
@@ -180,43 +180,34 @@ def train(
 @app.command("list")
 def list_(json_out: bool = JsonOpt) -> None:
     """List the trained motion priors."""
-    rows = _store().list()
-    if json_out:
-        print_json(rows)
-        return
-    if not rows:
-        console.print("no motion priors (train one: zooctl motion train --all)", highlight=False)
-        return
-    table = []
-    for c in rows:
+
+    def cells(c: dict) -> list[str]:
         m, t = c.get("model", {}), c.get("training", {})
-        table.append(
-            [
-                c["name"],
-                c.get("plugin", "?"),
-                f"{m.get('width', '?')}x{m.get('layers', '?')}",
-                f"{c.get('parameters', 0) / 1e6:.2f}M",
-                str(len(t.get("skeletons", []))),
-                str(t.get("windows", "?")),
-                str(t.get("steps", "?")),
-                f"{default_temperature(m, t):g}",
-                c.get("created", ""),
-            ]
-        )
-    print_table(
-        [
-            ("name", "left"),
-            ("plugin", "left"),
-            ("width x layers", "left"),
-            ("params", "right"),
-            ("skeletons", "right"),
-            ("windows", "right"),
-            ("steps", "right"),
-            ("temperature", "right"),
-            ("created", "left"),
-        ],
-        table,
-    )
+        return [
+            c["name"],
+            c.get("plugin", "?"),
+            f"{m.get('width', '?')}x{m.get('layers', '?')}",
+            f"{c.get('parameters', 0) / 1e6:.2f}M",
+            str(len(t.get("skeletons", []))),
+            str(t.get("windows", "?")),
+            str(t.get("steps", "?")),
+            f"{default_temperature(m, t):g}",
+            c.get("created", ""),
+        ]
+
+    cols = [
+        ("name", "left"),
+        ("plugin", "left"),
+        ("width x layers", "left"),
+        ("params", "right"),
+        ("skeletons", "right"),
+        ("windows", "right"),
+        ("steps", "right"),
+        ("temperature", "right"),
+        ("created", "left"),
+    ]
+    empty = "no motion priors (train one: zooctl motion train --all)"
+    print_listing(_store().list(), json_out, cols, cells, empty=empty)
 
 
 @app.command("show")

@@ -13,6 +13,7 @@ from ._common import (
     console,
     err_console,
     print_json,
+    print_listing,
     print_table,
     stage_progress,
     store_root,
@@ -171,11 +172,9 @@ def add(
 def list_(json_out: bool = JsonOpt) -> None:
     """List the stored videos."""
     rows = _store().list()
-    if json_out:
-        print_json(rows)
-        return
-    table = [
-        [
+
+    def cells(r: dict) -> list[str]:
+        return [
             r["name"],
             str(r["frames"]),
             f"{r['width']}x{r['height']}",
@@ -184,8 +183,7 @@ def list_(json_out: bool = JsonOpt) -> None:
             r["segmenter"],
             r["source"]["kind"],
         ]
-        for r in rows
-    ]
+
     cols = [
         ("name", "left"),
         ("frames", "right"),
@@ -195,7 +193,7 @@ def list_(json_out: bool = JsonOpt) -> None:
         ("masks", "left"),
         ("source", "left"),
     ]
-    print_table(cols, table, title=f"{len(rows)} videos")
+    print_listing(rows, json_out, cols, cells, title=f"{len(rows)} videos")
 
 
 def _read_stats(store, name: str, stats) -> dict:
