@@ -53,6 +53,26 @@ def run_inprocess(capsys: pytest.CaptureFixture, *args: str) -> Result:
     return Result(code, cap.out, cap.err)
 
 
+def run_in_store(store: Path, *args: str, cwd: Path | None = None) -> int:
+    """``zooctl ARGS`` in-process on ``store`` (``ZOOCTL_STORE``), from ``cwd`` if given; the exit
+    code. The variable and the folder are restored after (usable where monkeypatch is not: a
+    module-scoped fixture)."""
+    from zooctl.cli.main import run
+
+    old, old_cwd = os.environ.get("ZOOCTL_STORE"), os.getcwd()
+    os.environ["ZOOCTL_STORE"] = str(store)
+    try:
+        if cwd is not None:
+            os.chdir(cwd)
+        return run(list(args))
+    finally:
+        os.chdir(old_cwd)
+        if old is None:
+            os.environ.pop("ZOOCTL_STORE", None)
+        else:
+            os.environ["ZOOCTL_STORE"] = old
+
+
 def pip(*args: str) -> None:
     """Run pip in this venv, as a user installing a plugin package would."""
     subprocess.run(

@@ -40,23 +40,15 @@ def animal_video(tmp_path_factory):
 def fitted(animal_video, tmp_path_factory):
     """One real fit through the CLI (in-process), shared by the checks below."""
     store, folder, cfg = animal_video
-    import os
+    from cli_helpers import run_in_store
 
-    from zooctl.cli.main import run
-
-    old, cwd = os.environ.get("ZOOCTL_STORE"), os.getcwd()
-    os.environ["ZOOCTL_STORE"] = str(store)
-    os.chdir(store.parent)  # outputs go to ./fits/NAME by default
-    try:
-        code = run(
-            ["fit", str(folder), "--template", "quadruped", "--config", str(cfg), "--name", "quad", "--json"]
-        )
-    finally:
-        os.chdir(cwd)
-        if old is None:
-            os.environ.pop("ZOOCTL_STORE", None)
-        else:
-            os.environ["ZOOCTL_STORE"] = old
+    code = run_in_store(
+        store,
+        "fit",
+        str(folder),
+        *("--template", "quadruped", "--config", str(cfg), "--name", "quad", "--json"),
+        cwd=store.parent,  # outputs go to ./fits/NAME by default
+    )
     assert code == 0
     rec = json.loads((store / "fits" / "quad" / "record.json").read_text())
     assert Path(rec["out"]) == (store.parent / "fits" / "quad").resolve()

@@ -422,20 +422,15 @@ def small_video(tmp_path_factory):
 
 
 def _fit(store: Path, folder: Path, cfg: Path, name: str, *extra: str) -> dict:
-    from zooctl.cli.main import run
+    from cli_helpers import run_in_store
 
-    old = os.environ.get("ZOOCTL_STORE")
-    os.environ["ZOOCTL_STORE"] = str(store)
-    try:
-        code = run(
-            ["fit", str(folder), "--template", "quadruped", "--config", str(cfg), "--name", name]
-            + ["--out", str(store.parent / name), "--json", *extra]
-        )
-    finally:
-        if old is None:
-            os.environ.pop("ZOOCTL_STORE", None)
-        else:
-            os.environ["ZOOCTL_STORE"] = old
+    code = run_in_store(
+        store,
+        "fit",
+        str(folder),
+        *("--template", "quadruped", "--config", str(cfg), "--name", name),
+        *("--out", str(store.parent / name), "--json", *extra),
+    )
     assert code == 0
     return json.loads((store / "fits" / name / "record.json").read_text())
 
@@ -546,9 +541,9 @@ def test_a_texture_holds_detail_that_vertex_colours_lose(scene):
 def test_resume_follows_no_texture(small_video, tmp_path):
     """A fit interrupted in stage 2 and resumed with --no-texture keeps the template's colours
     (the resumed fit took its whole config from the saved state, --no-texture included)."""
+    from cli_helpers import run_in_store
     from fit_helpers import tiny_fit_config
 
-    from zooctl.cli.main import run
     from zooctl.fit.job import fit_job
     from zooctl.store.bank import Bank
     from zooctl.store.fits import FitStore
@@ -574,15 +569,7 @@ def test_resume_follows_no_texture(small_video, tmp_path):
         fit_job(str(folder), store, cfg, name="paused", template="quadruped", reporter=StopInStage2())
     fits = FitStore(store)
     assert fits.get("paused")["status"] == "interrupted" and fits.load_state("paused")["config"]["texture"]
-    old = os.environ.get("ZOOCTL_STORE")
-    os.environ["ZOOCTL_STORE"] = str(store)
-    try:
-        code = run(["fit", str(folder), "--name", "paused", "--resume", "--no-texture", "--json"])
-    finally:
-        if old is None:
-            os.environ.pop("ZOOCTL_STORE", None)
-        else:
-            os.environ["ZOOCTL_STORE"] = old
+    code = run_in_store(store, "fit", str(folder), "--name", "paused", "--resume", "--no-texture", "--json")
     assert code == 0
     rec = fits.get("paused")
     assert rec["status"] == "done" and rec["texture"] is None and rec["config"]["texture"] is False
