@@ -69,6 +69,14 @@ def _default(o: Any) -> Any:
 
 
 JsonOpt = typer.Option(False, "--json", help="Print JSON instead of a table (for scripts).")
+# bank add and bank seed: unset follows ZOOCTL_VIEWS (`pipelines.bank_import.views_by_default`).
+ViewsOpt = typer.Option(
+    None,
+    "--views/--no-views",
+    help="Render and embed the added assets' retrieval views (default: on; ZOOCTL_VIEWS=0 turns the "
+    "default off). `bank reindex --missing` adds them later.",
+    show_default=False,
+)
 # Components by registered name (`zooctl plugins`): checked when the fit config is validated.
 RendererOpt = typer.Option(None, "--renderer", help="Silhouette renderer: soft (default), fast, a plugin's.")
 ArticulationOpt = typer.Option(

@@ -10,6 +10,7 @@ from . import batch_opts
 from ._common import (
     APP_OPTS,
     JsonOpt,
+    ViewsOpt,
     add_rm_command,
     add_upkeep_commands,
     console,
@@ -56,13 +57,7 @@ def add(
         "views show; `bank label` changes it).",
     ),
     replace: bool = typer.Option(False, "--replace", help="Overwrite an asset of the same name."),
-    views: bool = typer.Option(
-        None,
-        "--views/--no-views",
-        help="Render and embed retrieval views (default: on; ZOOCTL_VIEWS=0 turns the default off). "
-        "`bank reindex --missing` adds them later.",
-        show_default=False,
-    ),
+    views: bool | None = ViewsOpt,
     max_clip_seconds: float = _limit_option(
         "max_clip_seconds", "Refuse a clip longer than this many seconds"
     ),

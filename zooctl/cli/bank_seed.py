@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import typer
 
-from ._common import JsonOpt, console, open_bank, print_json, stage_progress
+from ._common import JsonOpt, ViewsOpt, console, open_bank, print_json, stage_progress
 
 
 def seed(
@@ -28,13 +28,7 @@ def seed(
         False, "--no-variants", help="One animal per plan, without the proportion variants."
     ),
     replace: bool = typer.Option(False, "--replace", help="Overwrite starter animals already in the bank."),
-    views: bool = typer.Option(
-        None,
-        "--views/--no-views",
-        help="Render and embed retrieval views of the added animals (default: on; ZOOCTL_VIEWS=0 turns "
-        "the default off).",
-        show_default=False,
-    ),
+    views: bool | None = ViewsOpt,
     json_out: bool = JsonOpt,
 ) -> None:
     """Add the procedural starter animals, or --random N random ones (rigged, skinned, animated; generated)."""
