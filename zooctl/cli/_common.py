@@ -159,8 +159,9 @@ def print_listing(
 
 
 @contextlib.contextmanager
-def stage_progress(enabled: bool) -> Iterator[object]:
-    """A rich progress display with one bar per stage; yields the ``(stage, done, total)`` callback."""
+def stage_progress(enabled: bool, transient: bool = False) -> Iterator[object]:
+    """A rich progress display with one bar per stage; yields the ``(stage, done, total)`` callback.
+    ``transient``: the bars are cleared when it ends."""
     if not enabled:
         yield None
         return
@@ -180,7 +181,7 @@ def stage_progress(enabled: bool) -> Iterator[object]:
         TimeElapsedColumn(),
         TimeRemainingColumn(),
         console=err_console,
-        transient=False,
+        transient=transient,
     ) as prog:
         tasks: dict[str, object] = {}
 

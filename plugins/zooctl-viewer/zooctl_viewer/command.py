@@ -6,6 +6,7 @@ import signal
 import tempfile
 import webbrowser
 from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
 
 from zooctl.errors import UsageError
@@ -88,29 +89,11 @@ def _build(
 
 @contextmanager
 def _progress():
-    """``bar(description)`` gives a ``progress(done, total)`` callback for one rich task."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+    """``bar(description)`` gives a ``progress(done, total)`` callback for one bar, cleared at the end."""
+    from zooctl.cli._common import stage_progress
 
-    from zooctl.cli._common import err_console
-
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=err_console,
-        transient=True,
-    ) as p:
-
-        def bar(description: str):
-            task = p.add_task(description, total=None)
-
-            def update(done: int, total: int) -> None:
-                p.update(task, completed=done, total=total)
-
-            return update
-
-        yield bar
+    with stage_progress(True, transient=True) as update:
+        yield lambda description: partial(update, description)
 
 
 def _serve(site: Path, host: str, port: int, no_browser: bool, what: str) -> None:
