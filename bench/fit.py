@@ -3,7 +3,7 @@
     python bench/fit.py speed [--preset fast|quality] [--device cpu|cuda]
     python bench/fit.py quality [--assets N] [--frames 60] [--size 320] [--ablation ...]
     python bench/fit.py davis [--store DIR] [--videos dog cows blackswan] [--masks given auto]
-    python bench/fit.py length [--frames 240] [--short 60] [--asset Fox] [--template Wolf]
+    python bench/fit.py length [--frames 240] [--short 60] [--asset Fox] [--template Wolf] [--whole]
 
 ``speed`` renders one 60-frame 320x320 video of a shared Quaternius animal, fits it with another
 animal as the template (`zooctl fit --template`, a fresh process, retrieval excluded only when
@@ -17,7 +17,9 @@ both cases). The template comes from retrieval over a bank of the 28 shared asse
 ``length`` renders one long clip (the asset playing its own clips) and fits it whole and its
 first ``--short`` frames alone (`fit_video`, the fast preset, the same template), then compares
 the two fits on the frames both cover: the 3D metrics on 8 frames spread over them and the mask
-IoU against the rendered (true) masks; with CPU seconds and the stage iterations each ran.
+IoU against the rendered (true) masks; with CPU seconds and the stage iterations each ran. The
+long fits' metrics over all their frames too (``all_frames``). ``--whole`` adds the long clip fitted
+at once (``window_frames`` 0) beside the default windows.
 Results: print a markdown line for BENCHMARKS.md (machine, command, median).
 """
 
@@ -212,13 +214,22 @@ def length(args) -> None:
         video = load_fit_video(vids / args.asset)
         template = Bank(store).get(args.template)
         rows = {}
-        for label, v in (("short", video.truncated(args.short)), ("long", video)):
+        runs = [("short", video.truncated(args.short), None), ("long", video, None)]
+        runs += [("long_whole", video, 0)] if args.whole else []
+        for label, v, window_frames in runs:
             cfg = preset("fast").for_named_template()
+            if window_frames is not None:
+                cfg.window_frames = window_frames
             t, c = time.perf_counter(), cpu()
             res = fit_video(v, template, cfg)
             wall, cpu_s = time.perf_counter() - t, cpu() - c
             m = evaluate_fit(res, frames=8, reanimate_iters=0, within=args.short)
-            iou = input_mask_iou(res)[: args.short]  # bench masks are the rendered truth
+            iou_all = input_mask_iou(res)  # bench masks are the rendered truth
+            iou = iou_all[: args.short]
+            if label != "short":  # the whole clip too, over 8 frames spread over all of it
+                whole = evaluate_fit(res, frames=8, reanimate_iters=0)
+                whole = {k: whole[k] for k in ("miou", "joint", "novel_view_iou")}
+                whole["mask_iou"] = float(np.nanmean(iou_all))
             rows[label] = {
                 "frames": v.num_frames,
                 "iters": [len(res.history["stage1"]), len(res.history["stage2"])],
@@ -228,6 +239,10 @@ def length(args) -> None:
                 **{k: round(float(m[k]), 4) for k in ("miou", "mcham", "joint", "skinning")},
                 "novel_view_iou": None if m["novel_view_iou"] is None else round(m["novel_view_iou"], 4),
             }
+            if label != "short":
+                rows[label]["all_frames"] = {
+                    k: None if x is None else round(float(x), 4) for k, x in whole.items()
+                }
             print(label, json.dumps(rows[label]), flush=True)
         s, lg = rows["short"], rows["long"]
         keys = ("mask_iou", "miou", "novel_view_iou", "joint", "mcham")
@@ -267,5 +282,6 @@ if __name__ == "__main__":
     ln.add_argument("--asset", default="Fox")
     ln.add_argument("--template", default="Wolf")
     ln.add_argument("--seed", type=int, default=0)
+    ln.add_argument("--whole", action="store_true", help="also fit the long clip at once (window_frames 0)")
     a = ap.parse_args()
     {"speed": speed, "quality": quality, "davis": davis, "length": length}[a.cmd](a)

@@ -41,6 +41,14 @@ def test_frame_arrays_read_what_they_are_indexed_with(tmp_path):
         assert (np.asarray(head) == rec.frames[:5]).all()
         with pytest.raises(IndexError):
             head[5]
+        part = sv.frames.part(3, 19)  # a window of a long clip: indexed from its first frame
+        assert part.shape == (16, 24, 32, 3) and (part[0] == rec.frames[3]).all()
+        assert (part[np.array([15, 0])] == rec.frames[[18, 3]]).all() and (part[-1] == rec.frames[18]).all()
+        assert (np.asarray(part.part(2, 5)) == rec.frames[5:8]).all() and (
+            part.head(2)[:] == rec.frames[3:5]
+        ).all()
+        assert (np.concatenate([c for _, c in part.chunks(7)]) == rec.frames[3:19]).all()
+        assert len(sv.frames.part(18, 40)) == 2 and len(sv.frames.part(25, 30)) == 0
         with pytest.raises(TypeError):
             sv.frames[::2]
         copy = pickle.loads(pickle.dumps(sv.flow_valid.head(3)))  # reopens the file

@@ -179,6 +179,7 @@ def initialise_camera(
     principal: tuple[float, float] | None = None,
     image_height: int | None = None,
     camera_rotations: np.ndarray | None = None,
+    start: np.ndarray | None = None,
 ) -> CameraInit:
     """Search focal and viewpoint, track the root rotation, align every frame (module docstring).
 
@@ -186,7 +187,9 @@ def initialise_camera(
     crop of the input around the animal, with ``principal`` the principal point in the crop's
     pixels and ``image_height`` the uncropped height that the focal candidates refer to);
     fit_scale: fit pixels per input pixel; camera_rotations: (T, 3, 3) world-to-camera rotations
-    of the video's camera (OpenCV axes: x right, y down, z forward) when they are known.
+    of the video's camera (OpenCV axes: x right, y down, z forward) when they are known;
+    ``start``: (3, 3) the first frame's root rotation, known (a window of a long clip continuing
+    the one before it): no search, only the tracking and the alignment, at ``cfg.focal``.
     Returns a `CameraInit` in fit pixels.
     """
     T, H, W = masks.shape
@@ -197,6 +200,12 @@ def initialise_camera(
     head = [t for t in present if t < first + max(cfg.track_every, 1)]
     frames = [head[int(round(i))] for i in np.linspace(0, len(head) - 1, min(cfg.search_frames, len(head)))]
     frames = sorted(set(frames))
+    if start is not None:
+        if cfg.focal is None:
+            raise ValueError("a known start rotation needs a known focal")
+        focal = float(cfg.focal)
+        iou = float(scorer.score([start], [first], [focal])[0])
+        return _tracked(scorer, masks, cfg, rest, principal, present, first, start, focal, iou, [], fit_scale)
     if cfg.focal is not None:
         focals = [float(cfg.focal)]
     else:
@@ -256,8 +265,28 @@ def initialise_camera(
             iou,
             key_iou,
         )
-    # Track the root rotation over keyframes.
-    key_rot = {first: view_rotation(*best[:3])}
+    rotation = view_rotation(*best[:3])
+    return _tracked(scorer, masks, cfg, rest, principal, present, first, rotation, focal, iou, top, fit_scale)
+
+
+def _tracked(
+    scorer: SilhouetteScorer,
+    masks: np.ndarray,
+    cfg: CameraConfig,
+    rest: np.ndarray,
+    principal: tuple[float, float],
+    present: list[int],
+    first: int,
+    rotation: np.ndarray,
+    focal: float,
+    iou: float,
+    top: list[dict[str, float]],
+    fit_scale: float,
+) -> CameraInit:
+    """The root rotation tracked over keyframes from ``rotation`` at frame ``first``, every
+    frame aligned to its mask's box (the camera search's last steps)."""
+    T = len(masks)
+    key_rot = {first: rotation}
     key_iou = [iou]
     prev = key_rot[first]
     ts = cfg.track_step

@@ -235,6 +235,14 @@ class FitConfig:
         required=False,
         minimum=0,
     )
+    window_frames: int = spec(
+        100,
+        help="a longer clip is fitted in windows of at most this many frames: the first as a clip of "
+        "its own (body, camera, motion), each later one its frames' motion in its own crop with the body "
+        "and the camera held, continuing from the frames before it (0: the whole clip at once)",
+        required=False,
+        minimum=0,
+    )
     soft_sigma: float = spec(
         0.05,
         help="SoftRas sigma (px^2): small, since dense meshes dilate soft silhouettes",
@@ -296,6 +304,17 @@ class FitConfig:
         if num_frames is None or self.schedule_frames <= 0 or num_frames <= self.schedule_frames:
             return st
         return dataclasses.replace(st, iters=math.ceil(st.iters * num_frames / self.schedule_frames))
+
+    def windows(self, num_frames: int) -> list[tuple[int, int]]:
+        """The (start, end) frame ranges a clip of ``num_frames`` frames is fitted in, in order
+        (see ``window_frames``): the first ``window_frames`` frames, then the rest in equal
+        windows of at most as many."""
+        n = self.window_frames
+        if n <= 0 or num_frames <= n:
+            return [(0, num_frames)]
+        k = math.ceil((num_frames - n) / n)
+        bounds = [0] + [n + ((num_frames - n) * i) // k for i in range(k + 1)]
+        return list(zip(bounds[:-1], bounds[1:], strict=True))
 
     def for_named_template(self) -> FitConfig:
         """This config for a template the user named: stage 2's joints at ``lr_joints_given``

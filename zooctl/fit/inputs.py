@@ -87,35 +87,39 @@ class FitVideo:
     def truncated(self, max_frames: int | None) -> FitVideo:
         if max_frames is None or max_frames >= self.num_frames:
             return self
-        n = max_frames
+        return self.part(0, max_frames)
+
+    def part(self, start: int, stop: int) -> FitVideo:
+        """Frames ``start`` to ``stop`` (and the flow between them) as a video of their own; a
+        stored video's stay unread."""
         return FitVideo(
             self.name,
-            _head(self.frames, n),
-            _head(self.masks, n),
+            _part(self.frames, start, stop),
+            _part(self.masks, start, stop),
             self.fps,
-            None if self.flow is None else _head(self.flow, max(n - 1, 0)),
-            None if self.flow_valid is None else _head(self.flow_valid, max(n - 1, 0)),
+            None if self.flow is None else _part(self.flow, start, max(stop - 1, start)),
+            None if self.flow_valid is None else _part(self.flow_valid, start, max(stop - 1, start)),
             self.intrinsics,
-            {k: _truncate_gt(k, v, n) for k, v in self.gt.items()},
+            {k: _part_gt(k, v, start, stop) for k, v in self.gt.items()},
             self.source,
             self.mask_source,
-            None if self.camera_rotations is None else self.camera_rotations[:n],
+            None if self.camera_rotations is None else self.camera_rotations[start:stop],
         )
 
 
-def _head(a: Any, n: int) -> Any:
-    """The first ``n`` frames of an array, or of a stored video's `FrameArray` (left unread)."""
-    return a.head(n) if hasattr(a, "head") else a[:n]
+def _part(a: Any, start: int, stop: int) -> Any:
+    """Frames ``start`` to ``stop`` of an array, or of a stored video's `FrameArray` (left unread)."""
+    return a.part(start, stop) if hasattr(a, "part") else a[start:stop]
 
 
 _PER_FRAME_GT = {"vertices", "joints", "cam_rotation", "cam_translation"}
 _PER_VIEW_FRAME_GT = {"view_masks", "view_rotation", "view_translation"}  # (C, T, ...)
 
 
-def _truncate_gt(key: str, value: Any, n: int) -> Any:
+def _part_gt(key: str, value: Any, start: int, stop: int) -> Any:
     if key in _PER_FRAME_GT:
-        return value[:n]
-    return value[:, :n] if key in _PER_VIEW_FRAME_GT else value
+        return value[start:stop]
+    return value[:, start:stop] if key in _PER_VIEW_FRAME_GT else value
 
 
 def load_fit_video(

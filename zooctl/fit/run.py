@@ -9,6 +9,7 @@ run is interrupted (Ctrl-C raises ``KeyboardInterrupt`` through here after the s
 from __future__ import annotations
 
 import copy
+import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -30,7 +31,7 @@ from .pose_prior import clip_joint_limits, clip_pose_stats, motion_sequence_prio
 from .scene import FitScene
 from .stages import StageRunner, Targets, make_optimizer, mask_iou, stage_config
 
-STATE_VERSION = 1
+STATE_VERSION = 2
 
 
 class Reporter(Protocol):
@@ -112,18 +113,57 @@ def fit_video(
 ) -> FitResult:
     """Fit ``template`` to ``video`` (see the module docstring). Deterministic for a given seed.
 
+    A clip longer than ``cfg.window_frames`` is fitted in windows (`FitConfig.windows`): the
+    first exactly as a clip of its frames alone (its own crop, camera search and body), each
+    later one in its own crop with the body and the camera held, starting from the frames
+    before it; the result holds the whole clip.
+
     ``pause_at``: stop after that many stage-2 iterations (of the configured schedule, so the
     learning rates are those of the full fit) and return with ``result.paused`` set; fitting on
     from it with ``resume=result.paused`` gives what one uninterrupted fit gives. ``start``:
-    ``search`` (the camera search's start) or ``mirror`` (its depth mirror, `zooctl.fit.view_trial`)."""
+    ``search`` (the camera search's start) or ``mirror`` (its depth mirror, `zooctl.fit.view_trial`).
+    Both concern the first window."""
     rep = reporter or _Silent()
     if start not in ("search", "mirror"):
         raise ValueError(f"start must be search or mirror, not {start!r}")
     cfg.validate()
     check_template(template)
     check_device(cfg.device)
-    torch.manual_seed(cfg.seed)
     video = video.truncated(cfg.max_frames).check()
+    spans = cfg.windows(video.num_frames)
+    if len(spans) == 1:
+        return _fit_window(video, template, cfg, rep, checkpoint, resume, pause_at, start)
+    if resume is not None and resume.get("window", 0) > 0:
+        _check_version(resume)
+        result, next_window = _resumed_whole(resume, video, template, cfg), int(resume["window"])
+    else:
+        first = _fit_window(video.part(*spans[0]), template, cfg, rep, checkpoint, resume, pause_at, start)
+        if first.paused is not None:
+            return first
+        result, next_window = _whole(first, video), 1
+    t = time.perf_counter()
+    for window in range(next_window, len(spans)):
+        _fit_later_window(result, spans, window, rep, checkpoint)
+    t2 = time.perf_counter()
+    result.iou = input_mask_iou(result)
+    result.timings["evaluate"] = result.timings.get("evaluate", 0.0) + time.perf_counter() - t2
+    result.timings["later_windows"] = result.timings.get("later_windows", 0.0) + t2 - t
+    return result
+
+
+def _fit_window(
+    video: FitVideo,
+    template: RiggedAsset,
+    cfg: FitConfig,
+    rep: Reporter,
+    checkpoint: Callable[[dict[str, Any]], None] | None,
+    resume: dict[str, Any] | None,
+    pause_at: int | None,
+    start: str,
+    held: _Held | None = None,
+) -> FitResult:
+    """One window's fit: a whole clip's, or (``held``) a later window's of a long clip."""
+    torch.manual_seed(cfg.seed)
     timings: dict[str, float] = dict(resume.get("timings", {})) if resume else {}
     t0 = time.perf_counter()
     T, H, W = video.masks.shape
@@ -147,30 +187,23 @@ def fit_video(
     focal_given = cfg.camera.focal is not None or video.intrinsics is not None
     if cfg.camera.focal is None and video.intrinsics is not None:
         cfg.camera.focal = float(video.intrinsics[0])
-    scene = FitScene(
-        template,
-        T,
-        h,
-        w,
-        focal=1.0,
-        stretch=cfg.ablation.stretch,
-        displacement=cfg.ablation.displacement,
-        hidden=cfg.hidden,
-        device=dev,
-        principal=((W / 2 - x0) * s, (H / 2 - y0) * s),
-        articulation=cfg.articulation,
-    )
+    scene = new_scene(template, cfg, T, h, w, ((W / 2 - x0) * s, (H / 2 - y0) * s))
     if cfg.pose_prior.kind == "clips":
         scene.clip_stats = clip_pose_stats(template, cfg.pose_prior.min_std_deg, dev)
     elif cfg.pose_prior.kind == "motion":
         scene.sequence_prior = motion_sequence_prior(cfg.pose_prior.motion, template, video.fps, dev)
     if cfg.weights.joint_limits > 0:
         scene.joint_limits = clip_joint_limits(template, cfg.pose_prior.limit_margin_deg, dev)
-        if scene.joint_limits is None:
+        if scene.joint_limits is None and held is None:
             rep.message(
                 f"{template.name} has no clips to learn joint limits from: weights.joint_limits does nothing"
             )
-    if resume is None:
+    if held is not None:
+        held.place(scene, crop, cfg, s, (W / 2 - x0, H / 2 - y0), H)
+        cam_info: dict[str, Any] = {}
+        history: dict[str, list[dict[str, float]]] = {"stage1": [], "stage2": []}
+        start_stage, start_iter, opt_state = 1, 0, None
+    elif resume is None:
         rep.message("searching the camera and viewpoint")
         t1 = time.perf_counter()
         rest = scene.rest_vertices().cpu().numpy()
@@ -194,39 +227,203 @@ def fit_video(
             scene.root_translation.copy_(torch.as_tensor(init.root_translation, dtype=torch.float32))
         timings["camera"] = time.perf_counter() - t1
         cam_info = _camera_info(init, s) | {"elevation_deg": elevation}
-        history: dict[str, list[dict[str, float]]] = {"stage1": [], "stage2": []}
+        history = {"stage1": [], "stage2": []}
         start_stage, start_iter, opt_state = 1, 0, None
     else:
-        if resume.get("version") != STATE_VERSION:
-            raise InputError(
-                "the saved fit state is from another zooctl version",
-                hint="start the fit again without --resume",
-            )
+        _check_version(resume)
         scene.load_state_dict(resume["scene"])
         cam_info = resume["camera_init"]
         history = resume["history"]
         start_stage, start_iter, opt_state = resume["stage"], resume["iteration"], resume.get("optimizer")
     result = FitResult(scene, video, template, cfg, cam_info, s, history, timings)
     if cfg.ablation.optimise:
+        span = (0, T) if held is None else (held.anchors, T)
         for stage in (1, 2):
             if stage < start_stage:
                 continue
-            first = start_iter if stage == start_stage else 0
             _run_stage(
                 result,
                 targets,
                 stage,
-                first,
-                not focal_given,
+                span,
+                held,
+                start_iter if stage == start_stage else 0,
+                not focal_given and held is None,
                 rep,
                 checkpoint,
                 opt_state if stage == start_stage else None,
                 pause_at if stage == 2 else None,
             )
-    t2 = time.perf_counter()
-    result.iou = input_mask_iou(result)
-    timings["evaluate"] = time.perf_counter() - t2
+    if held is None:
+        t2 = time.perf_counter()
+        result.iou = input_mask_iou(result)
+        timings["evaluate"] = time.perf_counter() - t2
     return result
+
+
+def new_scene(
+    template: RiggedAsset, cfg: FitConfig, num_frames: int, h: int, w: int, principal: tuple[float, float]
+) -> FitScene:
+    """A `FitScene` of ``num_frames`` frames in (h, w) fit images as ``cfg`` sets it up."""
+    return FitScene(
+        template,
+        num_frames,
+        h,
+        w,
+        focal=1.0,
+        stretch=cfg.ablation.stretch,
+        displacement=cfg.ablation.displacement,
+        hidden=cfg.hidden,
+        device=cfg.device,
+        principal=principal,
+        articulation=cfg.articulation,
+    )
+
+
+def _check_version(state: dict[str, Any]) -> None:
+    if state.get("version") != STATE_VERSION:
+        raise InputError(
+            "the saved fit state is from another zooctl version", hint="start the fit again without --resume"
+        )
+
+
+_PER_FRAME = ("rotations", "root_rotation", "root_translation")
+
+
+def _whole(first: FitResult, video: FitVideo) -> FitResult:
+    """The result of a long clip's fit holding its first window's: a scene of all its frames at
+    the first window's fit resolution (the later windows' frames filled as they are fitted)."""
+    sc = first.scene
+    n = sc.num_frames
+    scene = new_scene(first.template, first.config, video.num_frames, sc.height, sc.width, sc.principal)
+    state = sc.state_dict()
+    with torch.no_grad():
+        for k, v in scene.state_dict().items():
+            v[:n].copy_(state[k]) if k in _PER_FRAME else v.copy_(state[k])
+    history = {k: list(v) for k, v in first.history.items()}
+    return FitResult(
+        scene,
+        video,
+        first.template,
+        first.config,
+        first.camera_init,
+        first.scale,
+        history,
+        dict(first.timings),
+    )
+
+
+def _resumed_whole(
+    state: dict[str, Any], video: FitVideo, template: RiggedAsset, cfg: FitConfig
+) -> FitResult:
+    g = state["whole"]
+    scene = new_scene(template, cfg, video.num_frames, g["height"], g["width"], tuple(g["principal"]))
+    scene.load_state_dict(state["scene"])
+    return FitResult(
+        scene,
+        video,
+        template,
+        cfg,
+        state["camera_init"],
+        g["scale"],
+        state["history"],
+        dict(state["timings"]),
+    )
+
+
+@dataclass
+class _Held:
+    """What a later window of a long clip holds: the whole clip's result so far, its span in the
+    clip, and how many frames before it (already fitted) it starts with."""
+
+    whole: FitResult
+    span: tuple[int, int]
+    anchors: int
+
+    def place(
+        self,
+        scene: FitScene,
+        crop: MaskWindow,
+        cfg: FitConfig,
+        s: float,
+        principal: tuple[float, float],
+        H: int,
+    ) -> None:
+        """The window's ``scene`` (its first `anchors` frames the fitted ones before it): the
+        body and the focal from the whole clip's fit, the anchors' pose and root, the root
+        tracked on from the last anchor's and each frame aligned to its mask, the joints at the
+        last anchor's pose."""
+        from ..geometry import quat_to_matrix
+
+        whole, a, lo = self.whole.scene, self.anchors, self.span[0]
+        focal_px = float(whole.focal().detach()) / self.whole.scale  # input pixels
+        body = {k: v for k, v in whole.state_dict().items() if k not in _PER_FRAME}
+        scene.load_state_dict(body, strict=False)
+        past = slice(lo - a, lo)
+        q = whole.root_rotation[lo - a].detach().cpu().numpy().astype(np.float64)
+        start = quat_to_matrix(q / np.linalg.norm(q))
+        camera = dataclasses.replace(cfg.camera, focal=focal_px)
+        rest = (scene.rest_vertices() * scene.model.global_scale()).detach().cpu().numpy()
+        init = initialise_camera(
+            rest,
+            self.whole.template.faces,
+            crop,
+            camera,
+            s,
+            cfg.seed,
+            principal,
+            H,
+            None,
+            start=start,
+        )
+        with torch.no_grad():
+            scene.log_focal.fill_(float(np.log(focal_px * s)))
+            scene.root_rotation.copy_(torch.as_tensor(init.root_rotation, dtype=torch.float32))
+            scene.root_translation.copy_(torch.as_tensor(init.root_translation, dtype=torch.float32))
+            for k in _PER_FRAME:
+                getattr(scene, k)[:a] = getattr(whole, k)[past]
+            scene.rotations[a:] = whole.rotations[lo - 1]
+
+
+def _fit_later_window(
+    result: FitResult,
+    spans: list[tuple[int, int]],
+    window: int,
+    rep: Reporter,
+    checkpoint: Callable[[dict[str, Any]], None] | None,
+) -> None:
+    """Fit window ``window`` of a long clip into ``result`` (the whole clip's)."""
+    lo, hi = spans[window]
+    a = min(2, lo)  # the frames before it that its sequence terms see (one of them its steps)
+    state = {
+        "version": STATE_VERSION,
+        "window": window,
+        "stage": 1,
+        "iteration": 0,
+        "scene": result.scene.state_dict(),
+        "whole": {
+            "height": result.scene.height,
+            "width": result.scene.width,
+            "principal": list(result.scene.principal),
+            "scale": result.scale,
+        },
+        "history": result.history,
+        "camera_init": result.camera_init,
+        "config": result.config.to_dict(),
+        "timings": result.timings,
+    }
+    keep = None if checkpoint is None else (lambda _: checkpoint(state))  # resume: from the window's start
+    if keep is not None:
+        keep(None)
+    held = _Held(result, (lo, hi), a)
+    part = _fit_window(
+        result.video.part(lo - a, hi), result.template, result.config, rep, keep, None, None, "search", held
+    )
+    with torch.no_grad():
+        for k in _PER_FRAME:
+            getattr(result.scene, k)[lo:hi] = getattr(part.scene, k)[a:]
+    for k, v in part.history.items():
+        result.history[k].extend(v)
 
 
 def _camera_info(init: CameraInit, s: float) -> dict[str, Any]:
@@ -242,6 +439,8 @@ def _run_stage(
     result: FitResult,
     targets: Targets,
     stage: int,
+    span: tuple[int, int],
+    held: _Held | None,
     first: int,
     learn_focal: bool,
     rep: Reporter,
@@ -250,17 +449,17 @@ def _run_stage(
     pause_at: int | None = None,
 ) -> None:
     cfg, scene = result.config, result.scene
-    st = stage_config(cfg, stage, scene.num_frames)
+    st = stage_config(cfg, stage, span[1] - span[0])
     last = st.iters if pause_at is None else min(st.iters, max(pause_at, first))
-    runner = StageRunner(scene, targets, cfg, stage)
-    opt = make_optimizer(scene, cfg, stage, learn_focal)
+    runner = StageRunner(scene, targets, cfg, stage, span)
+    opt = make_optimizer(scene, cfg, stage, learn_focal, shared=held is None)
     base_lr = [g["lr"] for g in opt.param_groups]
     if opt_state is not None:
         opt.load_state_dict(opt_state)
     key = f"stage{stage}"
-    rep.stage(key, last, first)
+    rep.stage(key if held is None else f"{key}, frames {held.span[0]}-{held.span[1] - 1}", last, first)
     t = time.perf_counter()
-    it = first
+    done = first
 
     def state(next_iter: int) -> dict[str, Any]:
         timings = dict(result.timings)
@@ -287,12 +486,13 @@ def _run_stage(
                 g["lr"] = lr * factor
             terms = runner.step(opt, it)
             result.history[key].append(terms)
+            done = it + 1
             rep.step(terms)
             if checkpoint is not None and cfg.checkpoint_every and (it + 1) % cfg.checkpoint_every == 0:
                 checkpoint(state(it + 1))
     except KeyboardInterrupt:
         if checkpoint is not None:
-            checkpoint(state(len(result.history[key])))
+            checkpoint(state(done))
         raise
     if pause_at is not None:
         result.paused = copy.deepcopy(state(last))

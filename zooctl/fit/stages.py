@@ -63,16 +63,22 @@ def stage_config(cfg: FitConfig, stage: int, num_frames: int | None = None) -> S
     return cfg.stage(stage, num_frames)
 
 
-def make_optimizer(scene: FitScene, cfg: FitConfig, stage: int, learn_focal: bool) -> torch.optim.Adam:
-    """Adam (0.9, 0.999) over the stage's parameters with CASA's learning-rate split."""
+def make_optimizer(
+    scene: FitScene, cfg: FitConfig, stage: int, learn_focal: bool, shared: bool = True
+) -> torch.optim.Adam:
+    """Adam (0.9, 0.999) over the stage's parameters with CASA's learning-rate split; without
+    ``shared``, only the per-frame ones (a later window of a long clip: the body is held)."""
     st = stage_config(cfg, stage)
     groups = [{"params": [scene.root_rotation, scene.root_translation], "lr": st.lr}]
+    if stage == 2:
+        groups.append({"params": [scene.rotations], "lr": st.lr if st.lr_joints is None else st.lr_joints})
+    if not shared:
+        return torch.optim.Adam(groups, betas=(0.9, 0.999))
     if stage == 1:
         groups.append({"params": [scene.model.log_scale], "lr": st.lr_shape})
         if learn_focal:
             groups.append({"params": [scene.log_focal], "lr": st.lr_shape * 0.2})
     else:
-        groups.append({"params": [scene.rotations], "lr": st.lr if st.lr_joints is None else st.lr_joints})
         if cfg.ablation.learn_skinning:
             groups.append({"params": [scene.model.skin.logits], "lr": st.lr * 5})
         groups.append({"params": scene.shape_parameters(), "lr": st.lr_shape})
@@ -90,16 +96,30 @@ def smooth_weight(w: LossWeights, it: int, iters: int) -> float:
 
 
 class StageRunner:
-    """Runs one stage's steps; ``step(it)`` returns that step's loss terms."""
+    """Runs one stage's steps; ``step(it)`` returns that step's loss terms.
 
-    def __init__(self, scene: FitScene, targets: Targets, cfg: FitConfig, stage: int):
+    ``span`` (start, end): the frames it fits (default all). Frames before it are held; the one
+    just before it joins its steps (flow and contact with what was fitted) and the two before it
+    its sequence terms, so a window continues the motion it follows."""
+
+    def __init__(
+        self,
+        scene: FitScene,
+        targets: Targets,
+        cfg: FitConfig,
+        stage: int,
+        span: tuple[int, int] | None = None,
+    ):
         self.scene, self.targets, self.cfg, self.stage = scene, targets, cfg, stage
-        self.st = stage_config(cfg, stage, scene.num_frames)
+        self.lo, self.hi = span or (0, scene.num_frames)
+        self.st = stage_config(cfg, stage, self.hi - self.lo)
         # Terms over the whole sequence are means over its frames, so each frame's share would
         # shrink as a clip grows while a step's data terms (a window) do not: past
         # schedule_frames they are scaled up, holding each frame as firmly as in a clip that long.
-        T, ref = scene.num_frames, cfg.schedule_frames
+        T, ref = self.hi - self.lo, cfg.schedule_frames
         self.sequence_scale = max(1.0, T / ref) if ref > 0 else 1.0
+        self.steps_from = max(self.lo - 1, 0)  # the first frame a step's window may hold
+        self.sequence_from = max(self.lo - 2, 0)
         size = (scene.height, scene.width)
         # Renderers come from the registry (plugins included); soft_sigma is the soft renderer's.
         options = {"sigma": cfg.soft_sigma} if self.st.renderer == "soft" else {}
@@ -107,21 +127,23 @@ class StageRunner:
         self.flow_renderer = get_renderer("flow", size, device=cfg.device)
         self.gen = np.random.default_rng([cfg.seed, stage])
         present = targets.masks.present.cpu().numpy()
-        self.present_idx = np.nonzero(present)[0]
+        self.present_idx = np.nonzero(present[: self.hi])[0]
+        self.present_idx = self.present_idx[self.present_idx >= self.steps_from]
         self._queue: list[int] = []
 
     def window(self) -> Tensor:
         """Stage 1: up to ``batch`` frames spread over the video (random offset). Stage 2: the next
         contiguous window of ``batch`` frames of this epoch (see `_epoch_windows`)."""
-        T = self.scene.num_frames
+        lo = self.lo if self.stage == 1 else self.steps_from
+        T = self.hi - lo
         B = min(self.st.batch, T)
         if self.stage == 1:
             offset = self.gen.uniform(0, T / B)
             idx = np.unique(np.minimum((offset + np.arange(B) * T / B).astype(int), T - 1))
-            return torch.as_tensor(idx, device=self.scene.rotations.device)
+            return torch.as_tensor(lo + idx, device=self.scene.rotations.device)
         if not self._queue:
             self._queue = self._epoch_windows(T, B)
-        start = self._queue.pop()
+        start = lo + self._queue.pop()
         return torch.arange(start, start + B, device=self.scene.rotations.device)
 
     def _epoch_windows(self, T: int, B: int) -> list[int]:
@@ -131,7 +153,7 @@ class StageRunner:
         offset = int(self.gen.integers(B)) if T > B else 0
         starts = sorted({int(np.clip(s, 0, T - B)) for s in range(offset - B, T, B) if s + B > 0})
         present = np.zeros(T, bool)
-        present[self.present_idx] = True
+        present[self.present_idx - self.steps_from] = True
         starts = [s for s in starts if present[s : s + B].any()] or [0]
         return [starts[i] for i in self.gen.permutation(len(starts))]
 
@@ -157,7 +179,11 @@ class StageRunner:
         terms["root_smooth"] = (
             self.sequence_scale
             * w.root_smooth
-            * root_smoothness(scene.root_rotation, scene.root_translation, scene.size)
+            * root_smoothness(
+                scene.root_rotation[self.sequence_from : self.hi],
+                scene.root_translation[self.sequence_from : self.hi],
+                scene.size,
+            )
         )
         terms["scale"] = w.scale_prior * scale_prior(scene.model.log_scale)
         if self.stage == 2:
@@ -169,7 +195,8 @@ class StageRunner:
                 terms["flow"] = w.flow * flow_loss(out["flow"], out["mask"], tg.flow[pairs], valid)
             smooth = smooth_weight(w, it, self.st.iters)
             if ab.smoothness and smooth > 0:
-                q_all = scene.rotations / scene.rotations.norm(dim=-1, keepdim=True)
+                q = scene.rotations[self.sequence_from : self.hi]
+                q_all = q / q.norm(dim=-1, keepdim=True)
                 terms["smooth"] = self.sequence_scale * smooth * scene.model.smoothness_loss(q_all)
             if ab.symmetry and w.symmetry > 0:
                 terms["symmetry"] = w.symmetry * scene.model.symmetry_loss(sample=400) / scene.size**2
@@ -185,7 +212,7 @@ class StageRunner:
                 terms["pose"] = (
                     self.sequence_scale
                     * w.pose_prior
-                    * pose_prior(scene.rotations, scene.model.rest_rotation)
+                    * pose_prior(scene.rotations[self.lo : self.hi], scene.model.rest_rotation)
                 )
             elif kind == "clips":
                 q = scene.rotations[frames]
@@ -208,7 +235,7 @@ class StageRunner:
         # Lazy Adam for per-frame parameters: frames outside the batch keep their values (their
         # stale momentum would otherwise move them without any evidence).
         keep = torch.ones(self.scene.num_frames, dtype=torch.bool, device=frames.device)
-        keep[frames] = False
+        keep[frames[frames >= self.lo]] = False
         saved = [p.detach()[keep].clone() for p in self.scene.per_frame_parameters()]
         opt.step()
         with torch.no_grad():

@@ -33,7 +33,8 @@ class FrameArray:
 
     Indexing reads: ``a[t]``, ``a[s:e]`` (step 1), ``a[index_array]`` and those followed by
     slices of the other axes (``a[s:e, y0:y1, x0:x1]``: only that window is kept) return numpy
-    arrays of ``dtype``; ``head(n)`` is the first ``n`` frames, still unread; iterating yields one
+    arrays of ``dtype``; ``head(n)`` is the first ``n`` frames and ``part(start, stop)`` frames
+    ``start`` to ``stop``, both still unread (indexed from their first frame); iterating yields one
     frame at a time, read `CHUNK` at once; ``np.asarray(a)`` reads it all (within the limit)."""
 
     def __init__(
@@ -43,13 +44,15 @@ class FrameArray:
         dtype: Any,
         convert: Callable[[np.ndarray], np.ndarray] | None = None,
         length: int | None = None,
+        start: int = 0,
     ) -> None:
         self._video, self._key = video, key
         self._ds = video.file[key]
         self.dtype = np.dtype(dtype)
         self._convert = convert
-        n = int(self._ds.shape[0])
-        self._len = n if length is None else min(n, int(length))
+        self._start = min(max(0, int(start)), int(self._ds.shape[0]))
+        n = int(self._ds.shape[0]) - self._start
+        self._len = n if length is None else min(n, max(0, int(length)))
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -64,7 +67,14 @@ class FrameArray:
 
     def head(self, n: int) -> FrameArray:
         """The first ``n`` frames, unread."""
-        return FrameArray(self._video, self._key, self.dtype, self._convert, min(self._len, max(0, int(n))))
+        return self.part(0, n)
+
+    def part(self, start: int, stop: int) -> FrameArray:
+        """Frames ``start`` to ``stop`` (clipped to this array), unread."""
+        start, stop = min(max(0, int(start)), self._len), min(max(0, int(stop)), self._len)
+        return FrameArray(
+            self._video, self._key, self.dtype, self._convert, max(0, stop - start), self._start + start
+        )
 
     def __iter__(self) -> Iterator[np.ndarray]:
         for s in range(0, self._len, CHUNK):
@@ -116,12 +126,14 @@ class FrameArray:
             if isinstance(frames, range) and len(frames):
                 for s in range(frames.start, frames.stop, CHUNK):  # contiguous: whole chunks
                     e = min(s + CHUNK, frames.stop)
-                    out[s - frames.start : e - frames.start] = self._read(np.s_[s:e], window)
+                    out[s - frames.start : e - frames.start] = self._read(
+                        np.s_[self._start + s : self._start + e], window
+                    )
             else:
                 # One read per frame: h5py's point selection over chunked, compressed data is
                 # much slower than plain reads of whole chunks.
                 for n, t in enumerate(frames):
-                    out[n] = self._read(t, window)
+                    out[n] = self._read(self._start + t, window)
         except (OSError, ValueError, TypeError, KeyError) as exc:
             raise StoreError(
                 f"{self._video.what} {self._video.path} is unreadable: {exc}", hint=HINT
@@ -129,7 +141,7 @@ class FrameArray:
         return out[0] if single else out
 
     def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
-        return (FrameArray, (self._video, self._key, self.dtype, self._convert, self._len))
+        return (FrameArray, (self._video, self._key, self.dtype, self._convert, self._len, self._start))
 
     def _read(self, where: Any, window: tuple[slice, ...]) -> np.ndarray:
         a = self._ds[(where, *window)]

@@ -1,0 +1,70 @@
+"""A long clip fitted in windows (`FitConfig.window_frames`): the first window fits the body and
+the camera, later windows hold them and what came before them, and continue from it."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+import torch
+from fit_helpers import tiny_fit_config
+
+PER_FRAME = ("rotations", "root_rotation", "root_translation")
+
+
+@pytest.mark.parametrize("T", [1, 60, 100, 101, 240, 300, 301, 1000])
+def test_windows_cover_the_clip_once_in_order(T):
+    cfg = tiny_fit_config()
+    spans = cfg.windows(T)
+    assert spans[0][0] == 0 and spans[-1][1] == T
+    assert all(a[1] == b[0] for a, b in zip(spans, spans[1:], strict=False))
+    assert all(0 < e - s <= cfg.window_frames for s, e in spans)
+    assert spans[0] == (0, min(T, cfg.window_frames))
+    cfg.window_frames = 0
+    assert cfg.windows(T) == [(0, T)]
+
+
+@pytest.fixture(scope="module")
+def long_fit(tmp_path_factory):
+    """A 12-frame clip fitted in two windows of 6, every step's state kept: (video, template,
+    config, result, states)."""
+    from zooctl.benchdata.make import make_video
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.run import fit_video
+    from zooctl.procedural import build_animal
+
+    asset = build_animal("quadruped", name="quadruped")
+    video = load_fit_video(make_video(asset, tmp_path_factory.mktemp("videos"), frames=12, size=64, seed=3))
+    cfg = tiny_fit_config(iters=3)
+    cfg.window_frames, cfg.checkpoint_every = 6, 1
+    states: list[dict] = []
+    result = fit_video(video, asset, cfg, checkpoint=lambda state: states.append(copy.deepcopy(state)))
+    return video, asset, cfg, result, states
+
+
+def test_the_first_window_is_the_fit_of_its_frames_alone_and_later_ones_move_only_theirs(long_fit):
+    from zooctl.fit.run import fit_video
+
+    video, asset, _, long, states = long_fit
+    assert long.scene.num_frames == 12 and long.iou.shape == (12,) and np.isfinite(long.iou).all()
+    assert [len(long.history[k]) for k in ("stage1", "stage2")] == [6, 6]  # 3 + 3 steps a stage
+    short = fit_video(video.truncated(6), asset, tiny_fit_config(iters=3))
+    fitted, alone = long.scene.state_dict(), short.scene.state_dict()
+    for k, v in alone.items():  # bit for bit: the later window moved nothing of the first's
+        assert torch.equal(fitted[k][:6] if k in PER_FRAME else fitted[k], v), k
+    assert long.camera_init == short.camera_init and long.scale == short.scale
+    later = [s for s in states if s.get("window") == 1]
+    assert later and later[0]["stage"] == 1 and later[0]["iteration"] == 0  # a resume starts the window
+    for k in PER_FRAME:
+        assert not torch.equal(fitted[k][6:], later[0]["scene"][k][6:]), k
+
+
+def test_a_long_fit_resumes_from_the_start_of_its_later_window(long_fit):
+    from zooctl.fit.run import fit_video
+
+    video, asset, cfg, whole, states = long_fit
+    at = next(s for s in states if s.get("window") == 1)
+    resumed = fit_video(video, asset, cfg, resume=at)
+    for k, v in whole.scene.state_dict().items():
+        assert torch.allclose(resumed.scene.state_dict()[k], v, atol=1e-6), k
