@@ -63,8 +63,7 @@ def animate(
     device: str = DeviceOpt,
     json_out: bool = JsonOpt,
 ) -> None:
-    """Sample motions from a trained prior for a bank asset, a fit or a photo; write USD + GLB per
-    motion, a preview video and a contact sheet."""
+    """Sample motions for a bank asset, a fit or a photo: USD + GLB each, a preview, a contact sheet."""
     from ..errors import UsageError
     from ..pipelines.animate import AnimateOptions, fit_image, resolve_target, sample_and_export
 
