@@ -72,3 +72,14 @@ def test_the_fuzz_catches_what_it_looks_for(tmp_path):
     assert fm._judge(case, "library", changed).status == "store_changed"
     big = {"status": "ok", "peak_kb": fm.MAX_RSS_KB + 1}
     assert fm._judge(case, "library", big).status == "memory"
+
+
+def test_a_value_past_float32_is_one_clear_line_through_the_cli(tmp_path):
+    """The full run's one failure (seed 18, case 420, `nan` on the tiny rig): a scale past float32's
+    range printed numpy's overflow warning before the clear error."""
+    cases = fm.mutants(tmp_path / "files", 421, seed=18)
+    case = next(c for c in cases if c.name == "0420_nan_tiny")
+    store = tmp_path / "store"
+    fm.make_store(store)
+    outcomes = fm.run_cli([case], store)
+    assert all(o.passed for o in outcomes), _report(outcomes)

@@ -948,6 +948,7 @@ def _channel(doc: _Doc, ai: int, samplers: list[Any], ch: dict[str, Any], prop: 
     return times, vals, interp
 
 
+@np.errstate(over="ignore", invalid="ignore")  # values past float32 become inf: the clip check names them
 def _clips(doc: _Doc, nodes, node_to_joint, rest, order, fps: float) -> dict[str, Clip]:
     clips: dict[str, Clip] = {}
     rest_t = np.array([rest[n][0] for n in order])
