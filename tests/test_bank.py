@@ -81,6 +81,8 @@ def test_add_list_show_rm_replace(tmp_path):
     assert zooctl("bank", "rm", "worm", store=store).code == 0
     assert zooctl("bank", "list", "--json", store=store).json() == []
     assert not list((store / "bank" / "assets").glob("worm*"))
+    empty = zooctl("bank", "list", store=store)  # a table of nothing says how to fill the bank
+    assert empty.code == 0 and "the bank is empty" in empty.out and "zooctl bank seed" in empty.out
 
 
 BAD = {

@@ -159,6 +159,14 @@ def list_(
     if json_out:
         print_json(rows)
         return
+    if not rows:
+        what = f"no asset tagged {tag!r} in the bank" if tag else "the bank is empty"
+        console.print(
+            f"{what} ({bank.root}): `zooctl bank seed` adds the starter animals, `zooctl bank add FILE` yours",
+            highlight=False,
+            markup=False,
+        )
+        return
     table = []
     for r in rows:
         lo, hi = r["bbox"]
