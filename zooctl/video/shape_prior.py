@@ -67,6 +67,7 @@ def refine_frame(
     if not prior.any():
         return mask.copy()
     labels = trimap(mask, prior, opts)
+    cv2.setRNGSeed(0)  # GrabCut's GMMs start from k-means: the same frame gives the same mask
     out = _grabcut(np.asarray(frame, np.uint8), labels, opts.iterations)
     if not out.any():
         return out
