@@ -68,3 +68,21 @@ def test_a_long_fit_resumes_from_the_start_of_its_later_window(long_fit):
     resumed = fit_video(video, asset, cfg, resume=at)
     for k, v in whole.scene.state_dict().items():
         assert torch.allclose(resumed.scene.state_dict()[k], v, atol=1e-6), k
+
+
+def test_fits_of_one_long_video_share_its_first_window_and_its_flow_targets(long_fit, monkeypatch):
+    """The template trials fit the same video several times: its first window's flow targets are
+    made once."""
+    import zooctl.fit.inputs as inputs
+    from zooctl.fit.run import fit_video
+
+    import dataclasses
+
+    video, asset, cfg, _, _ = long_fit
+    video = dataclasses.replace(video, cache={})
+    calls = []
+    real = inputs._resample_flow
+    monkeypatch.setattr(inputs, "_resample_flow", lambda *a: calls.append(len(a[0].masks)) or real(*a))
+    for _ in range(2):
+        fit_video(video, asset, cfg, pause_at=1)
+    assert calls == [6]

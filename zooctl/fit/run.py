@@ -137,7 +137,9 @@ def fit_video(
         _check_version(resume)
         result, next_window = _resumed_whole(resume, video, template, cfg), int(resume["window"])
     else:
-        first = _fit_window(video.part(*spans[0]), template, cfg, rep, checkpoint, resume, pause_at, start)
+        # One first window per video, so the template trials' fits share its cache (its flow targets).
+        head = video.cache.setdefault(("window", spans[0]), video.part(*spans[0]))
+        first = _fit_window(head, template, cfg, rep, checkpoint, resume, pause_at, start)
         if first.paused is not None:
             return first
         result, next_window = _whole(first, video), 1
