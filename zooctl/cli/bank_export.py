@@ -52,13 +52,15 @@ def export(
         from ..render.preview import fit_camera
 
         names = list(clip) if clip else list(asset.clips)
-        pts = [asset.pose(None)]
-        pts += [
-            asset.pose(c, np.arange(asset.clips[c].num_frames)).reshape(-1, 3)
-            for c in names
-            if c in asset.clips
-        ]
-        options["camera"] = fit_camera(np.concatenate(pts), 720, 1280)
+        # Each pose's bounding box, of at most 64 frames a clip: a long clip's poses are not held.
+        poses = [(None, None)]
+        for c in (c for c in names if c in asset.clips):
+            n = asset.clips[c].num_frames
+            picked = np.unique(np.linspace(0, n - 1, min(n, 64)).round().astype(int))
+            poses += [(c, picked[s : s + 8]) for s in range(0, len(picked), 8)]
+        posed = (asset.pose(c, idx).reshape(-1, asset.num_vertices, 3) for c, idx in poses)
+        corners = [np.stack([p.min(1), p.max(1)], 1).reshape(-1, 3) for p in posed]
+        options["camera"] = fit_camera(np.concatenate(corners), 720, 1280)
     path = export_asset(asset, path, fmt, list(clip) if clip else None, **options)
     seconds = time.perf_counter() - t0
     clips = list(clip) if clip else list(asset.clips)

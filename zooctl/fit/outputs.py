@@ -112,38 +112,42 @@ def overlay_frames(
     from ..render.raster import rasterize
 
     T, H, W = frames.shape[:3]
-    posed = asset.pose("fit", np.arange(T)).astype(np.float32)  # (T, V, 3)
     faces = torch.as_tensor(asset.faces, dtype=torch.long)
     renderer = PreviewRenderer()
-    size = float(np.linalg.norm(posed[0].max(0) - posed[0].min(0)))
 
-    def around(t: int, azimuth: float, elevation: float):
+    def pose(t: int) -> np.ndarray:  # (V, 3), a frame at a time: a long clip's poses are not held
+        return asset.pose("fit", t).astype(np.float32)
+
+    first = pose(0)
+    size = float(np.linalg.norm(first.max(0) - first.min(0)))
+
+    def around(posed: np.ndarray, azimuth: float, elevation: float):
         # Angles from the input camera (at the origin, +Y up) as seen from the animal's centre.
-        centre = 0.5 * (posed[t].max(0) + posed[t].min(0))
+        centre = 0.5 * (posed.max(0) + posed.min(0))
         a0 = math.atan2(-centre[0], -centre[2])
         e0 = math.atan2(-centre[1], math.hypot(centre[0], centre[2]))
         a, e = a0 + math.radians(azimuth), float(np.clip(e0 + math.radians(elevation), -1.4, 1.4))
         eye = centre + 1.6 * size * np.array(
             [math.sin(a) * math.cos(e), math.sin(e), math.cos(a) * math.cos(e)]
         )
-        return renderer.render(
-            posed[t], asset.faces, orbit_camera(eye, centre, H, W, 35.0), asset.vertex_colors
-        )
+        return renderer.render(posed, asset.faces, orbit_camera(eye, centre, H, W, 35.0), asset.vertex_colors)
 
     left_mid = None
     for t, frame in enumerate(frames):
-        shaded = renderer.render(posed[t], asset.faces, camera, asset.vertex_colors)
-        mask = rasterize(torch.as_tensor(posed[t][None]), faces, camera).mask[0].numpy()
+        posed = pose(t)
+        shaded = renderer.render(posed, asset.faces, camera, asset.vertex_colors)
+        mask = rasterize(torch.as_tensor(posed[None]), faces, camera).mask[0].numpy()
         img = np.array(frame, np.uint8)
         img[mask] = (alpha * shaded[mask] + (1 - alpha) * frame[mask]).astype(np.uint8)
         left = _label(_outline(img, mask), "input + fit")
         if t == T // 2:
             left_mid = left
-        yield np.concatenate([left, _label(around(t, 90.0, 20.0), "fit, side view (+90 deg)")], 1)
+        yield np.concatenate([left, _label(around(posed, 90.0, 20.0), "fit, side view (+90 deg)")], 1)
     mid = T // 2
+    posed = pose(mid)
     for k in range(turn_frames):
         ang = 360.0 * k / turn_frames
-        right = _label(around(mid, ang, 0.0), f"fit at frame {mid}, {ang:.0f} deg from the input")
+        right = _label(around(posed, ang, 0.0), f"fit at frame {mid}, {ang:.0f} deg from the input")
         yield np.concatenate([left_mid, right], 1)
 
 
