@@ -17,6 +17,7 @@ from zooctl.render.preview import (
     fit_camera,
     orbit_camera,
     render_asset,
+    render_asset_frames,
     zbuffer_mesh,
 )
 
@@ -73,6 +74,16 @@ def test_render_asset_frames_a_moving_clip():
     assert fg.mean() > 0.1 and xs.min() > 0 and xs.max() < 63  # in frame, not cropped
     with pytest.raises(InputError, match="no clip 'fly'"):
         render_asset(a, "fly")
+
+
+def test_a_clip_renders_a_few_frames_at_a_time_as_it_renders_whole():
+    """`bank render --video` writes frames as they are rendered: posed and drawn in small batches,
+    the camera framing the whole clip all the same."""
+    a = build_animal("fish")
+    whole = render_asset(a, "swim", range(9), size=48, supersample=1, batch=9)
+    stream = render_asset_frames(a, "swim", range(9), size=48, supersample=1, batch=2)
+    assert not isinstance(stream, np.ndarray)
+    assert np.array_equal(np.stack(list(stream)), whole)
 
 
 def test_fit_camera_rejects_nothing_to_frame():

@@ -38,7 +38,7 @@ def render(
 ) -> None:
     """Render shaded previews on the CPU: a still, a clip video, or a contact sheet of the bank."""
     from ..errors import UsageError
-    from ..render.preview import contact_sheet, render_asset, save_png
+    from ..render.preview import contact_sheet, render_asset, render_asset_frames, save_png
 
     bank = open_bank()
     if sheet:
@@ -78,9 +78,9 @@ def render(
             raise UsageError(
                 f"asset {name!r} has no clips to make a video of", hint="render a still (.png) instead"
             )
-        frames = render_asset(asset, c, size=size, azimuth=azimuth, elevation=elevation)
-        write_mp4(out, frames, fps=asset.clips[c].fps)
-        _report(json_out, {"path": str(out), "clip": c, "frames": len(frames)})
+        frames = render_asset_frames(asset, c, size=size, azimuth=azimuth, elevation=elevation)
+        write_mp4(out, frames, fps=asset.clips[c].fps)  # written as rendered: a long clip is not held
+        _report(json_out, {"path": str(out), "clip": c, "frames": asset.clips[c].num_frames})
     elif suffix == ".png":
         if clip is not None and clip in asset.clips and not (0 <= frame < asset.clips[clip].num_frames):
             raise UsageError(

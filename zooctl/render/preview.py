@@ -13,7 +13,7 @@ colours with perspective-correct barycentrics; lighting is two-sided (open meshe
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -411,13 +411,34 @@ def render_asset(
 ) -> np.ndarray:
     """Render an asset (`zooctl.asset.RiggedAsset`) posed at frames of a clip, or its rest pose.
 
-    Returns uint8 (T, size, width or size, 3). The camera is fixed for the whole clip, framing
-    every vertex of every rendered frame, so motion is visible. ``batch``: frames per renderer call
-    (default: all; the renderer rasterises at most about 4 million pixels and 2 million faces per
-    pass).
-    """
+    Returns uint8 (T, size, width or size, 3): `render_asset_frames`, gathered."""
+    return np.stack(
+        list(
+            render_asset_frames(
+                asset, clip, frames, size, width, azimuth, elevation, supersample, device, batch
+            )
+        )
+    )
+
+
+def render_asset_frames(
+    asset,
+    clip: str | None = None,
+    frames: Iterable[int] | None = None,
+    size: int = 256,
+    width: int | None = None,
+    azimuth: float = 30.0,
+    elevation: float = 18.0,
+    supersample: int = 2,
+    device: str = "cpu",
+    batch: int | None = None,
+) -> Iterator[np.ndarray]:
+    """`render_asset`'s frames (size, width or size, 3) uint8 one at a time, posed and rendered
+    ``batch`` frames at once (default: as many as 32 MB of posed vertices hold), so a long clip is
+    never held whole. The camera is fixed for the whole clip, framing every vertex of every
+    rendered frame (a first pass over the poses' bounds), so motion is visible."""
     if clip is None:
-        posed = asset.pose(None)[None]
+        idx = None
     else:
         if clip not in asset.clips:
             raise InputError(
@@ -429,16 +450,17 @@ def render_asset(
         )
         if len(idx) == 0:
             raise InputError("no frames to render")
-        posed = asset.pose(clip, idx)
-    W = width or size
-    batch = len(posed) if batch is None else batch  # the renderer bounds its passes itself
-    cam = fit_camera(posed.reshape(-1, 3), size, W, azimuth, elevation)
+    step = batch or max(1, (32 << 20) // (24 * asset.num_vertices))
+    parts = [None] if idx is None else [idx[s : s + step] for s in range(0, len(idx), step)]
+
+    def posed(part: np.ndarray | None) -> np.ndarray:
+        return asset.pose(None)[None] if part is None else asset.pose(clip, part)
+
+    corners = np.concatenate([np.stack([p.min(1), p.max(1)], 1).reshape(-1, 3) for p in map(posed, parts)])
+    cam = fit_camera(corners, size, width or size, azimuth, elevation)
     renderer = PreviewRenderer(device=device, supersample=supersample)
-    colors = asset.vertex_colors
-    out = [
-        renderer.render(posed[i : i + batch], asset.faces, cam, colors) for i in range(0, len(posed), batch)
-    ]
-    return np.concatenate(out)
+    for part in parts:
+        yield from renderer.render(posed(part), asset.faces, cam, asset.vertex_colors)
 
 
 def contact_sheet(
