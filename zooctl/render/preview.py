@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -397,28 +398,10 @@ def _background(height: int, width: int, device: torch.device) -> torch.Tensor:
 
 
 # -- assets -----------------------------------------------------------------------------------
-def render_asset(
-    asset,
-    clip: str | None = None,
-    frames: Iterable[int] | None = None,
-    size: int = 256,
-    width: int | None = None,
-    azimuth: float = 30.0,
-    elevation: float = 18.0,
-    supersample: int = 2,
-    device: str = "cpu",
-    batch: int | None = None,
-) -> np.ndarray:
-    """Render an asset (`zooctl.asset.RiggedAsset`) posed at frames of a clip, or its rest pose.
-
-    Returns uint8 (T, size, width or size, 3): `render_asset_frames`, gathered."""
-    return np.stack(
-        list(
-            render_asset_frames(
-                asset, clip, frames, size, width, azimuth, elevation, supersample, device, batch
-            )
-        )
-    )
+def render_asset(asset, *args: Any, **kwargs: Any) -> np.ndarray:
+    """Render an asset (`zooctl.asset.RiggedAsset`) posed at frames of a clip, or its rest pose:
+    uint8 (T, size, width or size, 3), `render_asset_frames` (same arguments) gathered."""
+    return np.stack(list(render_asset_frames(asset, *args, **kwargs)))
 
 
 def render_asset_frames(
