@@ -302,7 +302,7 @@ def read_pack(root: Path, embedder: str) -> Pack | None:
         )
         if emb.ndim != 3 or mean.ndim != 2 or not emb.shape[0] == mean.shape[0] == len(names) == len(counts):
             return None
-    except (OSError, ValueError, KeyError, TypeError, AttributeError):  # only a cache: rebuilt
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, EOFError):  # only a cache: rebuilt
         return None
     return Pack(embedder, names, counts, emb, mean, ids)
 
