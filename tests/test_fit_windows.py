@@ -73,10 +73,10 @@ def test_a_long_fit_resumes_from_the_start_of_its_later_window(long_fit):
 def test_fits_of_one_long_video_share_its_first_window_and_its_flow_targets(long_fit, monkeypatch):
     """The template trials fit the same video several times: its first window's flow targets are
     made once."""
+    import dataclasses
+
     import zooctl.fit.inputs as inputs
     from zooctl.fit.run import fit_video
-
-    import dataclasses
 
     video, asset, cfg, _, _ = long_fit
     video = dataclasses.replace(video, cache={})
