@@ -67,7 +67,7 @@ def test_stage2_windows_cover_every_frame_each_epoch():
     present[10:15] = False  # one window's worth of empty masks
     runner = StageRunner.__new__(StageRunner)
     runner.gen = np.random.default_rng(0)
-    runner.present_idx = np.nonzero(present)[0]
+    runner.present_idx, runner.steps_from = np.nonzero(present)[0], 0
     for _ in range(5):
         starts = runner._epoch_windows(T, B)
         seen = np.zeros(T, int)
