@@ -22,6 +22,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -65,13 +66,22 @@ def run(args: list[str], store: Path, limit_s: float | None = None) -> dict:
     p = subprocess.Popen(
         [sys.executable, "-m", "zooctl", *args], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
     )
-    if limit_s is not None:
-        try:
-            p.wait(limit_s)
-        except subprocess.TimeoutExpired:
+    # wait4 reaps the child with its rusage (Popen.wait would reap it first); stderr drains meanwhile
+    chunks: list[bytes] = []
+    reader = threading.Thread(target=lambda: chunks.append(p.stderr.read()), daemon=True)
+    reader.start()
+    while True:
+        pid, status, ru = os.wait4(p.pid, os.WNOHANG)
+        if pid:
+            break
+        if limit_s is not None and time.perf_counter() - t0 > limit_s:
             p.send_signal(signal.SIGKILL)
-    _, status, ru = os.wait4(p.pid, 0)
-    err = p.stderr.read().decode()
+            _, status, ru = os.wait4(p.pid, 0)
+            break
+        time.sleep(0.5)
+    p.returncode = os.waitstatus_to_exitcode(status)  # reaped here: Popen must not wait again
+    reader.join(10)
+    err = b"".join(chunks).decode()
     return {
         "command": "zooctl " + " ".join(args),
         "exit": os.waitstatus_to_exitcode(status),
