@@ -276,3 +276,20 @@ def test_an_image_under_our_limit_opens_without_pils_warning(tmp_path):
         warnings.simplefilter("error")
         with open_image(tmp_path / "big.png") as im:
             assert im.size == (10_000, 10_000)
+
+
+def test_an_end_of_file_inside_a_command_is_said_not_aborted(tmp_path, monkeypatch, capsys):
+    """Click prints only "Aborted!" for an EOFError (np.load of an emptied file raises one): zooctl
+    says what failed, in its own one-line form."""
+    from cli_helpers import run_inprocess
+
+    from zooctl.store.bank import Bank
+
+    def ended(self, *a, **k):
+        raise EOFError("No data left in file")
+
+    monkeypatch.setattr(Bank, "list", ended)
+    monkeypatch.setenv("ZOOCTL_STORE", str(tmp_path / "store"))
+    r = run_inprocess(capsys, "bank", "list")
+    assert r.code == 1 and "Aborted" not in r.err + r.out
+    assert "a file or stream ended early: No data left in file" in r.err

@@ -6,9 +6,12 @@ import os
 import sys
 import traceback
 from pathlib import Path
+from typing import Any
 
+import click
 import typer
 from rich.markup import escape
+from typer.core import TyperGroup
 
 from .. import __version__
 from ..errors import ZooctlError
@@ -18,8 +21,18 @@ from ._common import APP_OPTS, err_console, state
 # (BENCHMARKS.md, "Differentiable renderers"); passive waiting costs nothing when idle.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
+
+class _Group(TyperGroup):
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except EOFError as exc:  # Click would print only "Aborted!" for it
+            raise RuntimeError(f"a file or stream ended early: {exc}") from exc
+
+
 app = typer.Typer(
     **APP_OPTS,
+    cls=_Group,
     name="zooctl",
     help="Rigged 3D characters from casual animal videos, and new motions for them.",
     no_args_is_help=True,
