@@ -17,8 +17,8 @@ from ._common import (
     err_console,
     open_bank,
     print_json,
+    print_listing,
     print_skipped,
-    print_table,
     print_views_pending,
     stage_progress,
 )
@@ -156,33 +156,14 @@ def list_(
     print_views_pending(bank.views_pending(rows))
     if tag:
         rows = [r for r in rows if tag in r.get("tags", [])]
-    if json_out:
-        print_json(rows)
-        return
-    if not rows:
-        what = f"no asset tagged {tag!r} in the bank" if tag else "the bank is empty"
-        console.print(
-            f"{what} ({bank.root}): `zooctl bank seed` adds the starter animals, `zooctl bank add FILE` yours",
-            highlight=False,
-            markup=False,
-        )
-        return
-    table = []
-    for r in rows:
+    what = f"no asset tagged {tag!r} in the bank" if tag else "the bank is empty"
+
+    def cells(r: dict) -> list[str]:
         lo, hi = r["bbox"]
         size = max(h - lo_ for lo_, h in zip(lo, hi))
-        table.append(
-            [
-                r["name"],
-                str(r["vertices"]),
-                str(r["faces"]),
-                str(r["joints"]),
-                str(len(r["clips"])),
-                f"{size:.3g}",
-                r.get("label") or "-",
-                ", ".join(r.get("tags", [])),
-            ]
-        )
+        counts = [str(r[k]) for k in ("vertices", "faces", "joints")] + [str(len(r["clips"]))]
+        return [r["name"], *counts, f"{size:.3g}", r.get("label") or "-", ", ".join(r.get("tags", []))]
+
     cols = [
         ("name", "left"),
         ("vertices", "right"),
@@ -193,7 +174,14 @@ def list_(
         ("label", "left"),
         ("tags", "left"),
     ]
-    print_table(cols, table, title=f"{len(rows)} assets")
+    print_listing(
+        rows,
+        json_out,
+        cols,
+        cells,
+        title=f"{len(rows)} assets",
+        empty=f"{what} ({bank.root}): `zooctl bank seed` adds the starter animals, `zooctl bank add FILE` yours",
+    )
 
 
 @app.command("show")
