@@ -439,11 +439,14 @@ def render_asset_frames(
     def posed(part: np.ndarray | None) -> np.ndarray:
         return asset.pose(None)[None] if part is None else asset.pose(clip, part)
 
-    corners = np.concatenate([np.stack([p.min(1), p.max(1)], 1).reshape(-1, 3) for p in map(posed, parts)])
+    # One batch (a still, a short clip) is posed once; longer clips twice, to keep one batch in memory.
+    kept = [posed(parts[0])] if len(parts) == 1 else None
+    poses = kept or map(posed, parts)
+    corners = np.concatenate([np.stack([p.min(1), p.max(1)], 1).reshape(-1, 3) for p in poses])
     cam = fit_camera(corners, size, width or size, azimuth, elevation)
     renderer = PreviewRenderer(device=device, supersample=supersample)
-    for part in parts:
-        yield from renderer.render(posed(part), asset.faces, cam, asset.vertex_colors)
+    for p in kept or map(posed, parts):
+        yield from renderer.render(p, asset.faces, cam, asset.vertex_colors)
 
 
 def contact_sheet(
