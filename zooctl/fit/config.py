@@ -146,6 +146,22 @@ class LossWeights:
     scale_prior: float = spec(
         0.01, help="log global scale near 0 (the template's size)", required=False, **_WEIGHT
     )
+    # Off by default, like the two below: measured on the benchmark before any became a default
+    # (BENCHMARKS.md, Fit).
+    ground_contact: float = spec(
+        0.0,
+        help="stage 2: no vertex below the ground (a plane of the root's frame at the frames' median "
+        "lowest height) and no sliding along it of the vertices touching it (0: off)",
+        required=False,
+        **_WEIGHT,
+    )
+    smooth_3d: float = spec(
+        0.0,
+        help="stage 2: squared acceleration of the posed vertices in world space over a step's "
+        "frames, relative to the body size squared (0: off)",
+        required=False,
+        **_WEIGHT,
+    )
 
 
 @dataclass

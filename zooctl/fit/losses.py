@@ -11,6 +11,8 @@
 | displacement | `displacement_prior` | ``displacement`` |
 | pose | `pose_prior` (``pose_prior.kind`` rest), `clip_pose_loss` (clips) or the motion prior's ``loss`` (motion; `zooctl.motion.fit_prior`) | ``pose_prior`` |
 | limits | `joint_limit_loss` (the template clips' joint ranges, `zooctl.fit.pose_prior.clip_joint_limits`) | ``joint_limits`` |
+| ground | `sinking_loss` + `foot_sliding_loss` in the root's frame (`body_frame`), the ground from `ground_height` | ``ground_contact`` |
+| smooth_3d | `vertex_acceleration_loss` (the posed vertices in world space) | ``smooth_3d`` |
 | smooth, symmetry, bone_length | the articulation model's ``smoothness_loss``, ``symmetry_loss``, ``bone_length_loss`` (CASA eq. 6, 7; `zooctl.rig.priors`, since they belong to the model) | ``smooth`` (lambda2), ``symmetry`` (lambda3), ``bone_length`` |
 
 `zooctl.fit.stages.StageRunner.loss` weights and sums them; change a weight's default in
@@ -31,7 +33,7 @@ import torch
 import torch.nn.functional as F
 
 from ..render import _kernels
-from ..rig.rotations import quat_conjugate, quat_mul, quat_normalize, quat_to_axis_angle
+from ..rig.rotations import quat_conjugate, quat_mul, quat_normalize, quat_to_axis_angle, quat_to_matrix
 
 if TYPE_CHECKING:
     from .pose_prior import ClipPoseStats, JointLimits
@@ -206,3 +208,68 @@ def joint_limit_loss(rotations: Tensor, rest: Tensor, limits: JointLimits) -> Te
     v = rest_relative_vectors(rotations, rest)
     excess = torch.relu(limits.low - v) + torch.relu(v - limits.high)
     return (excess**2).sum((1, 2)).mean()
+
+
+# -- ground contact and 3D smoothness --------------------------------------------------------
+# The fit has no world but the camera's: the root transform absorbs the camera's motion, so the
+# ground is a plane of the root's frame, normal to the template's up axis (Y). A planted foot
+# holds still in that frame when the animal stands in place (as the benchmark's do while the
+# camera orbits them); a walking animal's stance foot moves back in it, which the sliding term
+# pays for.
+UP_AXIS = 1
+CONTACT_BAND = 0.02  # of the body size: vertices this close above the ground touch it
+
+
+def body_frame(verts: Tensor, root_rotation: Tensor, root_translation: Tensor) -> Tensor:
+    """(B, V, 3) world vertices ``verts`` in their frame's root frame: ``R^T (v - t)`` for
+    root_rotation (B, 4) wxyz and root_translation (B, 3)."""
+    R = quat_to_matrix(root_rotation)  # (B, 3, 3); row vectors: (R^T x)^T = x^T R
+    return (verts - root_translation[:, None, :]) @ R
+
+
+def lowest_heights(body: Tensor) -> Tensor:
+    """(B,) each frame's lowest height along the up axis; body (B, V, 3) in the root frame."""
+    return body[..., UP_AXIS].min(-1).values
+
+
+def ground_height(lowest: Tensor) -> Tensor:
+    """() the ground's height from each frame's lowest height (T,): their median, so the frames
+    whose body dips below where it usually stands sink and the ones lifted (a jump) do not count."""
+    return lowest.median()
+
+
+def sinking_loss(body: Tensor, ground: Tensor | float, size: float) -> Tensor:
+    """Mean squared depth of the vertices below the ground, relative to ``size`` squared; body
+    (B, V, 3) in the root frame, ground its height. Zero when nothing is below it."""
+    depth = torch.relu(ground - body[..., UP_AXIS]) / size  # (B, V)
+    below = (depth > 0).to(depth.dtype)
+    return (depth**2).sum() / below.sum().clamp_min(1.0)
+
+
+def foot_sliding_loss(
+    body: Tensor, ground: Tensor | float, size: float, band: float = CONTACT_BAND
+) -> Tensor:
+    """Mean squared motion along the ground, relative to ``size`` squared, of the vertices touching
+    it in two consecutive frames of body (B, V, 3) (root frame, frames in order). A vertex's
+    contact weight is 1 on (or below) the ground falling to 0 at ``band`` x ``size`` above it,
+    the product of its two frames' and not differentiated: the term moves a foot along the ground,
+    not off it."""
+    if body.shape[0] < 2:
+        return body.sum() * 0.0
+    with torch.no_grad():
+        above = (body[..., UP_AXIS] - ground).clamp_min(0.0) / (band * size)
+        touch = (1.0 - above).clamp_min(0.0)  # (B, V)
+        weight = touch[1:] * touch[:-1]
+    step = body[1:] - body[:-1]  # (B-1, V, 3)
+    along = step.square().sum(-1) - step[..., UP_AXIS].square()  # motion within the ground plane
+    return (along * weight).sum() / weight.sum().clamp_min(1e-6) / size**2
+
+
+def vertex_acceleration_loss(verts: Tensor, size: float) -> Tensor:
+    """Mean squared second difference over consecutive frames of verts (B, V, 3) (frames in
+    order, world space), relative to ``size`` squared: 3D temporal smoothness of the whole
+    surface, root and joints together. Zero under three frames."""
+    if verts.shape[0] < 3:
+        return verts.sum() * 0.0
+    acc = verts[2:] - 2.0 * verts[1:-1] + verts[:-2]
+    return acc.square().sum(-1).mean() / size**2

@@ -13,7 +13,8 @@ transforms, the displacement MLP and the skinning weights, minimising
 with regularisers (every term in `zooctl.fit.losses`, weights in `zooctl.fit.config.LossWeights`): the contour term, root
 smoothness, bone lengths near the template's and left/right equal, skinning weights near the
 template's (KL), small displacements, joint rotations near the rest pose and the global scale
-near the template's. Each step sees a contiguous window of ``batch`` frames (so flow has its
+near the template's; off by default, ground contact and the posed vertices' 3D acceleration
+(`zooctl.fit.losses`). Each step sees a contiguous window of ``batch`` frames (so flow has its
 frame pairs); smoothness always covers the whole sequence (it is cheap: no rendering).
 """
 
@@ -30,16 +31,22 @@ from ..render.base import check_silhouette, get_renderer
 from .config import FitConfig, LossWeights, StageConfig
 from .losses import (
     MaskTargets,
+    body_frame,
     clip_pose_loss,
     contour_loss,
     displacement_prior,
     flow_loss,
+    foot_sliding_loss,
+    ground_height,
     joint_limit_loss,
+    lowest_heights,
     pose_prior,
     root_smoothness,
     scale_prior,
+    sinking_loss,
     skin_prior,
     soft_iou_loss,
+    vertex_acceleration_loss,
 )
 from .scene import FitScene
 
@@ -130,6 +137,19 @@ class StageRunner:
         self.present_idx = np.nonzero(present[: self.hi])[0]
         self.present_idx = self.present_idx[self.present_idx >= self.steps_from]
         self._queue: list[int] = []
+        # Each frame's lowest height in the root frame, refreshed from every step's window (no
+        # extra posing): the ground is their median over the frames (`ground_height`).
+        self.lowest = self._lowest_heights() if stage == 2 and cfg.weights.ground_contact > 0 else None
+
+    @torch.no_grad()
+    def _lowest_heights(self, batch: int = 16) -> Tensor:
+        """(hi - sequence_from,) every frame's lowest height in its root frame, as posed now."""
+        sc, out = self.scene, []
+        for s in range(self.sequence_from, self.hi, batch):
+            idx = torch.arange(s, min(s + batch, self.hi), device=sc.rotations.device)
+            v = sc.pose(idx).vertices
+            out.append(lowest_heights(body_frame(v, sc.root_rotation[idx], sc.root_translation[idx])))
+        return torch.cat(out)
 
     def window(self) -> Tensor:
         """Stage 1: up to ``batch`` frames spread over the video (random offset). Stage 2: the next
@@ -219,6 +239,17 @@ class StageRunner:
                 terms["pose"] = w.pose_prior * clip_pose_loss(q, scene.model.rest_rotation, scene.clip_stats)
             elif kind == "motion":
                 terms["pose"] = w.pose_prior * scene.sequence_prior.loss(scene.rotations, frames)
+            if w.ground_contact > 0 or w.smooth_3d > 0:
+                size = scene.size * float(scene.model.global_scale().detach())
+            if w.ground_contact > 0:
+                body = body_frame(verts, scene.root_rotation[frames], scene.root_translation[frames])
+                self.lowest[frames - self.sequence_from] = lowest_heights(body.detach())
+                ground = ground_height(self.lowest)
+                terms["ground"] = w.ground_contact * (
+                    sinking_loss(body, ground, size) + foot_sliding_loss(body, ground, size)
+                )
+            if w.smooth_3d > 0:
+                terms["smooth_3d"] = w.smooth_3d * vertex_acceleration_loss(verts, size)
             if scene.joint_limits is not None and w.joint_limits > 0:
                 q = scene.rotations[frames]
                 terms["limits"] = w.joint_limits * joint_limit_loss(

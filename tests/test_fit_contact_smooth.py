@@ -1,0 +1,158 @@
+"""Ground contact and 3D smoothness, the fit's terms beyond silhouettes (`zooctl.fit.losses`): what
+each costs, where its gradient goes, and that a fit computes them only when weighted."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+import torch
+from fit_helpers import tiny_overrides
+
+from zooctl.fit.config import FitConfig
+from zooctl.fit.losses import (
+    body_frame,
+    foot_sliding_loss,
+    ground_height,
+    lowest_heights,
+    sinking_loss,
+    vertex_acceleration_loss,
+)
+from zooctl.rig.synthetic import tube_asset
+
+SIZE = 2.0
+
+
+def _feet(T: int = 4, lift: float = 0.5) -> torch.Tensor:
+    """(T, 6, 3) a body in its root frame: four foot vertices on the ground (y = 0) and two
+    ``lift`` above it, still over the frames."""
+    v = torch.tensor([[0.0, 0, 0], [1, 0, 0], [0, 0, 1], [1, 0, 1], [0.5, lift, 0.5], [0.5, lift + 0.3, 0.2]])
+    return v[None].repeat(T, 1, 1)
+
+
+def test_body_frame_undoes_the_root_transform():
+    g = torch.Generator().manual_seed(0)
+    body = torch.randn(3, 5, 3, generator=g, dtype=torch.float64)
+    q = torch.nn.functional.normalize(torch.randn(3, 4, generator=g, dtype=torch.float64), dim=-1)
+    t = torch.randn(3, 3, generator=g, dtype=torch.float64)
+    from zooctl.rig.rotations import quat_to_matrix
+
+    world = (quat_to_matrix(q)[:, None] @ body[..., None]).squeeze(-1) + t[:, None]
+    assert torch.allclose(body_frame(world, q, t), body, atol=1e-12)
+
+
+def test_the_ground_is_the_median_lowest_height():
+    """One frame dipping low or jumping high does not move the ground."""
+    lowest = torch.tensor([0.0, 0.0, -0.4, 0.0, 0.9])
+    assert ground_height(lowest).item() == 0.0
+    assert torch.equal(lowest_heights(_feet(2)), torch.zeros(2))
+
+
+def test_standing_costs_nothing_and_sinking_costs_more_the_deeper():
+    feet = _feet()
+    assert sinking_loss(feet, 0.0, SIZE).item() == 0.0
+    costs = []
+    for depth in (0.05, 0.2):
+        v = feet.clone()
+        v[2, 0, 1] = -depth  # one foot vertex of one frame below the ground
+        costs.append(sinking_loss(v, 0.0, SIZE).item())
+    assert costs[0] == pytest.approx((0.05 / SIZE) ** 2)
+    assert 0 < costs[0] < costs[1]
+
+
+def test_sinking_pushes_up_only_what_is_below():
+    v = _feet().clone()
+    v[1, 2, 1] = -0.1
+    v.requires_grad_(True)
+    sinking_loss(v, 0.0, SIZE).backward()
+    assert v.grad[1, 2, 1] < 0  # descending raises it
+    v.grad[1, 2, 1] = 0.0
+    assert torch.count_nonzero(v.grad) == 0
+
+
+def test_a_still_foot_costs_nothing_and_a_sliding_one_more():
+    feet = _feet()
+    assert foot_sliding_loss(feet, 0.0, SIZE).item() == 0.0
+    costs = []
+    for speed in (0.02, 0.1):
+        v = feet.clone()
+        v[:, 0, 0] += speed * torch.arange(4.0)  # one foot vertex slides along x on the ground
+        costs.append(foot_sliding_loss(v, 0.0, SIZE).item())
+    assert 0 < costs[0] < costs[1]
+    # Lifted vertices may move freely, and so may a foot rising straight off the ground.
+    v = feet.clone()
+    v[:, 4:, 0] += 0.3 * torch.arange(4.0)[:, None]
+    v[:, 1, 1] += 0.01 * torch.arange(4.0)
+    assert foot_sliding_loss(v, 0.0, SIZE).item() == 0.0
+
+
+def test_sliding_gradient_holds_the_foot_in_place():
+    v = _feet().clone()
+    v[:, 0, 0] += 0.05 * torch.arange(4.0)
+    v.requires_grad_(True)
+    foot_sliding_loss(v, 0.0, SIZE).backward()
+    g = v.grad[:, 0, 0]
+    assert g[0] < 0 and g[-1] > 0  # descending moves the first frame's foot forward, the last one's back
+    assert torch.count_nonzero(v.grad[:, 4:]) == 0  # nothing off the ground
+
+
+def test_a_smooth_trajectory_costs_less_than_a_jittered_one():
+    t = torch.linspace(0, 1, 12)
+    path = torch.stack((torch.sin(t), 0.3 * t, torch.cos(t)), -1)  # (12, 3)
+    verts = path[:, None] + torch.randn(1, 20, 3, generator=torch.Generator().manual_seed(1))
+    line = verts.clone()
+    line[:] = verts[0] + 0.1 * torch.arange(12.0)[:, None, None]  # constant velocity: no acceleration
+    assert vertex_acceleration_loss(line, SIZE).item() == pytest.approx(0.0, abs=1e-10)
+    jitter = verts + 0.02 * torch.randn(verts.shape, generator=torch.Generator().manual_seed(2))
+    smooth, rough = vertex_acceleration_loss(verts, SIZE), vertex_acceleration_loss(jitter, SIZE)
+    assert 0 < smooth.item() < rough.item()
+    # Relative to the body size: the same motion at twice the scale costs the same.
+    assert vertex_acceleration_loss(2 * jitter, 2 * SIZE).item() == pytest.approx(rough.item(), rel=1e-5)
+    j = jitter.clone().requires_grad_(True)
+    vertex_acceleration_loss(j, SIZE).backward()
+    assert torch.isfinite(j.grad).all() and j.grad.abs().sum() > 0
+    assert vertex_acceleration_loss(jitter[:2], SIZE).item() == 0.0  # under three frames
+
+
+def test_gradients_reach_the_root_and_joints_through_the_posed_model():
+    """Posed by the articulation model, each term's gradient flows to the joint rotations; the
+    acceleration's to the root transform too (the ground lives in the root frame: none there)."""
+    from zooctl.rig.model import ArticulatedModel
+
+    model = ArticulatedModel(tube_asset(bones=3, name="tube"))
+    T = 4
+    g = torch.Generator().manual_seed(0)
+    rot = model.rest_rotation.detach()[None].repeat(T, 1, 1)
+    rot = (rot + 0.2 * torch.randn(rot.shape, generator=g)).requires_grad_(True)
+    root_q = torch.tensor([[math.cos(0.3), math.sin(0.3), 0.0, 0.0]]).repeat(T, 1).requires_grad_(True)
+    root_t = (0.1 * torch.randn(T, 3, generator=g)).requires_grad_(True)
+    verts = model(rot, root_q, root_t).vertices
+    body = body_frame(verts, root_q, root_t)
+    ground = ground_height(lowest_heights(body.detach())) + 0.05  # some vertices below it
+    loss = sinking_loss(body, ground, SIZE) + foot_sliding_loss(body, ground, SIZE)
+    (grad_rot,) = torch.autograd.grad(loss, rot, retain_graph=True)
+    assert loss.item() > 0 and grad_rot.abs().sum() > 0
+    acc = vertex_acceleration_loss(verts, SIZE)
+    grads = torch.autograd.grad(acc, (rot, root_q, root_t))
+    assert all(gr.abs().sum() > 0 for gr in grads)
+
+
+def test_a_fit_computes_the_terms_only_when_weighted(tmp_path):
+    from zooctl.benchdata.make import make_video
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.run import fit_video
+
+    tiny = tiny_overrides(3) | {"weights": {"ground_contact": 1.0, "smooth_3d": 1.0}}
+    cfg = FitConfig.from_dict(json.loads(json.dumps(tiny)))
+    assert cfg.to_dict()["weights"]["ground_contact"] == 1.0
+    asset = tube_asset(bones=3, name="tube")
+    video = load_fit_video(make_video(asset, tmp_path / "v", frames=4, size=32, seed=0))
+    res = fit_video(video, asset, cfg)
+    hist = res.history["stage2"]
+    assert all("ground" in s and "smooth_3d" in s for s in hist)
+    assert all(math.isfinite(s["ground"]) and s["smooth_3d"] >= 0 for s in hist)
+    off = fit_video(video, asset, FitConfig.from_dict(tiny_overrides(3)))
+    assert all("ground" not in s and "smooth_3d" not in s for s in off.history["stage2"])
+    defaults = FitConfig().weights
+    assert defaults.ground_contact == 0.0 and defaults.smooth_3d == 0.0  # measured, not adopted
