@@ -38,10 +38,12 @@ def test_contour_pulls_vertices_back_from_beyond_the_image():
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 def test_nearest_points_is_the_first_nearest(dtype):
     """Kernel (CPU) and PyTorch path (CUDA's) against float64 brute force: sizes off the kernel's
-    16-lane and 64-query blocks, exact ties (the first index wins), a NaN point (never nearest)."""
+    vector lanes (2 to 16) and 64-query blocks, exact ties in other lanes and in the same lane (the
+    first index wins), a NaN point (never nearest)."""
     g = torch.Generator().manual_seed(3)
     pts = (torch.rand(3, 37, 2, generator=g, dtype=torch.float64) * 40).to(dtype)
     pts[:, 20] = pts[:, 5]  # a duplicate of an earlier point: the tie goes to index 5
+    pts[:, 21] = pts[:, 5]  # another, in index 5's lane for 2, 4, 8 or 16 lanes
     pts[1, 7] = float("nan")
     q = (torch.rand(3, 70, 2, generator=g, dtype=torch.float64) * 40).to(dtype)
     q[:, 0] = pts[:, 20]  # exactly on the duplicated point
