@@ -44,6 +44,7 @@ import numpy as np
 import torch
 
 from ..errors import InputError
+from . import _kernels
 
 Tensor = torch.Tensor
 _FLIP = np.diag([1.0, -1.0, -1.0])
@@ -56,6 +57,8 @@ class Camera:
 
     intrinsics (B, 4) = fx, fy, cx, cy in pixels; rotation (B, 3, 3) and translation (B, 3)
     map world to camera; height, width in pixels; near: the nearest renderable depth.
+    `project` and `to_camera` of CPU float tensors run as C++ kernels (`zooctl.render._kernels`,
+    the same arithmetic, a few times faster with their gradients); elsewhere PyTorch's.
     """
 
     intrinsics: Tensor
@@ -110,16 +113,32 @@ class Camera:
 
     def to_camera(self, points: Tensor) -> Tensor:
         """World points (B, N, 3) -> camera-frame points (B, N, 3)."""
+        tensors = self._kernel_tensors(points, "to_camera_forward")
+        if tensors is not None:
+            return _ToCameraKernel.apply(*tensors[:3])
         return points @ self.rotation.transpose(-1, -2) + self.translation[:, None, :]
 
     def project(self, points: Tensor) -> tuple[Tensor, Tensor]:
         """World points (B, N, 3) -> pixel positions (B, N, 2) and depths z_c (B, N)."""
+        tensors = self._kernel_tensors(points, "project_forward")
+        if tensors is not None:
+            return _ProjectKernel.apply(*tensors)
         pc = self.to_camera(points)
         z = pc[..., 2]
         zs = torch.where(z.abs() < 1e-12, torch.full_like(z, 1e-12), z)
         k = self.intrinsics[:, None, :]
         xy = pc[..., :2] / zs[..., None] * k[..., :2] + k[..., 2:]
         return xy, z
+
+    def _kernel_tensors(self, points: Tensor, name: str) -> tuple[Tensor, Tensor, Tensor, Tensor] | None:
+        """(points, rotation, translation, intrinsics) for the CPU kernel ``name`` (one camera per
+        image of points (B, N, 3)), or None where the PyTorch expressions apply."""
+        if points.dim() != 3 or points.shape[-1] != 3 or self.batch_size not in (1, points.shape[0]):
+            return None
+        if _kernels.kernel_for(name, points, self.rotation, self.translation, self.intrinsics) is None:
+            return None
+        cam = self.expand(points.shape[0])
+        return points, cam.rotation, cam.translation, cam.intrinsics
 
     def centers(self) -> tuple[Tensor, Tensor]:
         """Optical centres (B, 3) in world coordinates, and viewing directions (B, 3)."""
@@ -217,3 +236,52 @@ def from_usd(
     cy = height / 2 + vertical_aperture_offset * height / vertical_aperture
     tt = lambda a: torch.as_tensor(np.asarray(a)[None], dtype=dtype)  # noqa: E731
     return Camera(tt([fx, fy, cx, cy]), tt(R), tt(t), height, width)
+
+
+class _ToCameraKernel(torch.autograd.Function):
+    """CPU kernel of `Camera.to_camera`: points (B, N, 3), rotation (B, 3, 3), translation (B, 3)."""
+
+    @staticmethod
+    def forward(ctx, points: Tensor, rotation: Tensor, translation: Tensor) -> Tensor:  # type: ignore[override]
+        p, R, t = (x.detach().contiguous() for x in (points, rotation, translation))
+        B, N = p.shape[:2]
+        out = p.new_empty(B, N, 3)
+        _kernels.kernel_for("to_camera_forward", p)(p, R, t, B, N, out)
+        ctx.save_for_backward(p, R)
+        return out
+
+    @staticmethod
+    def backward(ctx, g_pc: Tensor):  # type: ignore[override]
+        p, R = ctx.saved_tensors
+        B, N = p.shape[:2]
+        g_pc = g_pc.to(p.dtype).contiguous()
+        g_p, g_R, g_t = torch.empty_like(p), torch.empty_like(R), p.new_empty(B, 3)
+        _kernels.kernel_for("to_camera_backward", p)(p, R, g_pc, B, N, g_p, g_R, g_t)
+        return g_p, g_R, g_t
+
+
+class _ProjectKernel(torch.autograd.Function):
+    """CPU kernel of `Camera.project`: points (B, N, 3) and one camera per image -> xy, z."""
+
+    @staticmethod
+    def forward(ctx, points: Tensor, rotation: Tensor, translation: Tensor, intrinsics: Tensor):  # type: ignore[override]
+        p, R, t, K = (x.detach().contiguous() for x in (points, rotation, translation, intrinsics))
+        B, N = p.shape[:2]
+        xy, z = p.new_empty(B, N, 2), p.new_empty(B, N)
+        _kernels.kernel_for("project_forward", p)(p, R, t, K, B, N, xy, z)
+        ctx.save_for_backward(p, R, t, K)
+        return xy, z
+
+    @staticmethod
+    def backward(ctx, g_xy: Tensor, g_z: Tensor):  # type: ignore[override]
+        p, R, t, K = ctx.saved_tensors
+        B, N = p.shape[:2]
+        g_xy, g_z = g_xy.to(p.dtype).contiguous(), g_z.to(p.dtype).contiguous()
+        g_p, g_R, g_t, g_K = (
+            torch.empty_like(p),
+            torch.empty_like(R),
+            torch.empty_like(t),
+            torch.empty_like(K),
+        )
+        _kernels.kernel_for("project_backward", p)(p, R, t, K, g_xy, g_z, B, N, g_p, g_R, g_t, g_K)
+        return g_p, g_R, g_t, g_K

@@ -1,4 +1,5 @@
-"""CPU kernels of the renderers (and of the contour loss's nearest-vertex search): plain C++
+"""CPU kernels of the renderers (the camera projection included, and the contour loss's
+nearest-vertex search): plain C++
 compiled with the system compiler on first use.
 
 Why not ``torch.utils.cpp_extension.load_inline``: building against the PyTorch headers takes
@@ -82,6 +83,10 @@ _SIGNATURES = {
     "splat_finish_forward": [_P, _P, _I, _D, _I, _I, _I, _P, _I],
     "splat_finish_backward": [_P, _P, _P, _I, _D, _I, _I, _I, _P, _I],
     "nearest_points": [_P, _P, _I, _I, _I, _P, _I],
+    "to_camera_forward": [_P, _P, _P, _I, _I, _P, _I],
+    "to_camera_backward": [_P, _P, _P, _I, _I, _P, _P, _P, _I],
+    "project_forward": [_P, _P, _P, _P, _I, _I, _P, _P, _I],
+    "project_backward": [_P, _P, _P, _P, _P, _P, _I, _I, _P, _P, _P, _P, _I],
 }
 
 

@@ -1,0 +1,70 @@
+"""The CPU projection kernels (`Camera.project`, `Camera.to_camera`) against Camera's PyTorch
+expressions: values and the gradients of points, rotation, translation and intrinsics."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from zooctl.render import _kernels
+from zooctl.render.camera import Camera
+
+pytestmark = pytest.mark.skipif(not _kernels.available(), reason="no C++ compiler: the kernels are not built")
+
+
+def _inputs(dtype, B=3, N=41, shared=False, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    pts = (
+        torch.randn(B, N, 3, generator=g, dtype=torch.float64)
+        + torch.tensor([0.0, 0.0, 4.0], dtype=torch.float64)
+    ).to(dtype)
+    pts[0, 3, 2] = -2.0  # behind the camera
+    pts[1, 5] = torch.tensor([0.3, -0.2, 1e-14], dtype=dtype)  # on the camera plane: the depth clamp
+    C = 1 if shared else B
+    q, _ = torch.linalg.qr(torch.randn(C, 3, 3, generator=g, dtype=torch.float64))
+    R = q.to(dtype)
+    t = (0.1 * torch.randn(C, 3, generator=g, dtype=torch.float64)).to(dtype)
+    K = torch.tensor([[120.0, 110.0, 32.0, 24.0]], dtype=torch.float64).repeat(C, 1).to(dtype)
+    K = K + torch.rand(C, 4, generator=g, dtype=torch.float64).to(dtype)
+    return [x.requires_grad_() for x in (pts, R, t, K)]
+
+
+def _run(fn, dtype, shared, seed):
+    leaves = _inputs(dtype, shared=shared, seed=seed)
+    pts, R, t, K = leaves
+    cam = Camera(K, R, t, 48, 64)
+    outs = fn(cam, pts)
+    g = torch.Generator().manual_seed(seed + 100)
+    loss = sum((o * torch.randn(o.shape, generator=g, dtype=torch.float64).to(dtype)).sum() for o in outs)
+    loss.backward()
+    return [o.detach() for o in outs], [x.grad for x in leaves]
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("shared", [False, True])
+@pytest.mark.parametrize("which", ["project", "to_camera"])
+def test_projection_kernel_matches_pytorch(dtype, shared, which):
+    def fn(cam, pts):
+        return cam.project(pts) if which == "project" else (cam.to_camera(pts),)
+
+    outs, grads = _run(fn, dtype, shared, seed=1)
+    with _kernels.disabled():
+        ref_outs, ref_grads = _run(fn, dtype, shared, seed=1)
+    rtol = 1e-5 if dtype == torch.float32 else 1e-12
+    for a, b in zip(outs, ref_outs, strict=True):
+        torch.testing.assert_close(a, b, rtol=rtol, atol=rtol * b.abs().max().item())
+    for name, a, b in zip(("points", "rotation", "translation", "intrinsics"), grads, ref_grads, strict=True):
+        if b is None:  # to_camera does not use the intrinsics
+            assert a is None, name
+            continue
+        torch.testing.assert_close(a, b, rtol=rtol, atol=rtol * b.abs().max().item(), msg=name)
+
+
+def test_projection_kernel_is_used_and_differs_from_a_wrong_camera():
+    """The kernel path is taken for CPU float tensors (a changed translation changes its output)."""
+    pts, R, t, K = _inputs(torch.float32)
+    cam = Camera(K, R, t, 48, 64)
+    assert cam._kernel_tensors(pts, "project_forward") is not None
+    xy, _ = cam.project(pts)
+    moved = Camera(K, R, t + 0.5, 48, 64).project(pts)[0]
+    assert (xy - moved).abs().max() > 1.0
