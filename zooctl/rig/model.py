@@ -60,6 +60,14 @@ class Pose:
     transforms: Tensor
 
 
+def _rotate_shared(points: Tensor, R: Tensor) -> Tensor:
+    """points (V, 3) turned by each rotation R (..., 3, 3) -> (..., V, 3), in one (V, 3) @ (3, 3 x
+    rotations) product rather than a batched product over copies of the points."""
+    batch = R.shape[:-2]
+    cols = R.reshape(-1, 3, 3).permute(2, 0, 1).reshape(3, -1)  # column (n, i) = R[n, i, c]
+    return (points @ cols).view(points.shape[0], -1, 3).transpose(0, 1).reshape(batch + points.shape)
+
+
 class ArticulatedModel(nn.Module):
     """CASA's articulation model for one `RiggedAsset` (Y-up, bind-space template).
 
@@ -187,23 +195,35 @@ class ArticulatedModel(nn.Module):
             trans = trans + child_offset_shift(s, self.parents, self.child_e, self.inverse_bind)
         G = forward_kinematics(compose_trs(trans, rot, scl), self.tree)
         mats = G @ self.inverse_bind
-        v = self.skinning(
-            self.points, mats, self.skin.bones, self.skin(), s, self.endpoint if s is not None else None
-        )
         u = self.global_scale()
-        v = u * v
-        joints = u * G[..., :3, 3]
+        R = None if root_rotation is None else quat_to_matrix(root_rotation)  # (..., 3, 3)
+        skin = (self.points, self.skin.bones, self.skin(), s, self.endpoint if s is not None else None)
         d = self.displacement_offsets()
-        if d is not None:
-            v = v + d
-            # The field's mean moves the whole mesh (a fit drifts into one: the root translation
-            # can take it just as well); the skeleton goes with it, so it stays where the template
-            # has it inside the mesh, as in the exported rig (`zooctl.fit.fitted_asset`).
-            joints = joints + d.mean(0)
-        if root_rotation is not None:
-            R = quat_to_matrix(root_rotation)[..., None, :, :]
-            v = (R @ v[..., None]).squeeze(-1)
-            joints = (R @ joints[..., None]).squeeze(-1)
+        # The field's mean moves the whole mesh (a fit drifts into one: the root translation can
+        # take it just as well); the skeleton goes with it, so it stays where the template has it
+        # inside the mesh, as in the exported rig (`zooctl.fit.fitted_asset`).
+        if self.skinning is linear_blend_skinning:
+            # LBS is linear in its matrices: skinning with u R M_k scales and turns the mesh in the
+            # same product (no pass over every posed vertex for each); the field is turned alone.
+            uR = u * (torch.eye(3, dtype=mats.dtype, device=mats.device) if R is None else R)
+            turned = torch.cat((uR[..., None, :, :] @ mats[..., :3, :], mats[..., 3:, :]), -2)
+            v = self.skinning(skin[0], turned, *skin[1:])
+            joints = G[..., :3, 3] @ uR.transpose(-1, -2)
+            if d is not None:
+                dm = d.mean(0)
+                if R is not None:
+                    d, dm = _rotate_shared(d, R), dm @ R.transpose(-1, -2)
+                v = v + d
+                joints = joints + dm[..., None, :]
+        else:
+            v = u * self.skinning(skin[0], mats, *skin[1:])
+            joints = u * G[..., :3, 3]
+            if d is not None:
+                v = v + d
+                joints = joints + d.mean(0)
+            if R is not None:
+                v = v @ R.transpose(-1, -2)
+                joints = joints @ R.transpose(-1, -2)
         if root_translation is not None:
             v = v + root_translation[..., None, :]
             joints = joints + root_translation[..., None, :]

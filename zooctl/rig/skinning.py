@@ -121,6 +121,8 @@ def linear_blend_skinning(
     """
     A = mats[..., :3, :]  # (..., J, 3, 4): affine part only
     J = mats.shape[-3]
+    if J <= DENSE_MAX_JOINTS and points.dim() == 2 and weights.dim() == 2 and _batch_holds(mats, stretch):
+        return _shared_weights_skinning(points, A, bones, weights, stretch, endpoint)
     if J <= DENSE_MAX_JOINTS:
         # Scatter the K candidates into dense (V, J) weights and blend with one matmul: faster
         # forward + backward than gathering (V, K, 3, 4) matrices, whose backward is a scatter-add
@@ -134,6 +136,43 @@ def linear_blend_skinning(
     if stretch is not None:
         out = out + stretch_offsets(mats, bones, weights, stretch, endpoint)
     return out
+
+
+def _batch_holds(mats: Tensor, stretch: Tensor | None) -> bool:
+    """Whether the stretch vectors broadcast to the matrices' batch without widening it."""
+    if stretch is None:
+        return True
+    batch = mats.shape[:-3]
+    try:
+        return torch.broadcast_shapes(stretch.shape[:-2], batch) == batch
+    except RuntimeError:
+        return False
+
+
+def _dense_weights(weights: Tensor, bones: Tensor, num_joints: int) -> Tensor:
+    """(V, J) dense weights from (V, K) candidate weights (repeated candidates add up)."""
+    return weights.new_zeros(weights.shape[0], num_joints).scatter_add_(1, bones, weights)
+
+
+def _shared_weights_skinning(
+    points: Tensor, A: Tensor, bones: Tensor, weights: Tensor, stretch: Tensor | None, endpoint: Tensor | None
+) -> Tensor:
+    """`linear_blend_skinning` for points (V, 3) and weights (V, K) shared by every pose of the
+    batch: all poses' matrices side by side in one (V, J) @ (J, 4 x poses x 3) product, its four
+    column blocks (x, y, z, 1) weighted by each point's homogeneous coordinates. One large product
+    instead of a batched one over broadcast copies of the weights, and no per-vertex 3x3 products.
+    A (..., J, 3, 4) affine parts of the skinning matrices."""
+    batch, J, V = A.shape[:-3], A.shape[-3], points.shape[0]
+    A = A.reshape(-1, J, 3, 4)
+    N = A.shape[0]
+    cols = A.permute(1, 3, 0, 2).reshape(J, 4 * N * 3)  # column (c, n, i) = A[n, j, i, c]
+    ph = torch.cat((points, points.new_ones(V, 1)), -1)  # (V, 4)
+    out = ((_dense_weights(weights, bones, J) @ cols).view(V, 4, N * 3) * ph[:, :, None]).sum(1)
+    if stretch is not None:
+        s = stretch.expand(batch + stretch.shape[-2:]).reshape(N, J, 3)
+        moved = (A[..., :3] @ s[..., None]).squeeze(-1)  # (N, J, 3): L_k s_k
+        out = out + _dense_weights(weights * endpoint, bones, J) @ moved.transpose(0, 1).reshape(J, N * 3)
+    return out.view(V, N, 3).transpose(0, 1).reshape(batch + (V, 3))
 
 
 def stretch_offsets(
