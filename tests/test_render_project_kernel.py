@@ -12,7 +12,7 @@ from zooctl.render.camera import Camera
 pytestmark = pytest.mark.skipif(not _kernels.available(), reason="no C++ compiler: the kernels are not built")
 
 
-def _inputs(dtype, B=3, N=41, shared=False, seed=0):
+def _inputs(dtype, B=3, N=41, shared=False, seed=0, fixed_pose=False):
     g = torch.Generator().manual_seed(seed)
     pts = (
         torch.randn(B, N, 3, generator=g, dtype=torch.float64)
@@ -26,11 +26,12 @@ def _inputs(dtype, B=3, N=41, shared=False, seed=0):
     t = (0.1 * torch.randn(C, 3, generator=g, dtype=torch.float64)).to(dtype)
     K = torch.tensor([[120.0, 110.0, 32.0, 24.0]], dtype=torch.float64).repeat(C, 1).to(dtype)
     K = K + torch.rand(C, 4, generator=g, dtype=torch.float64).to(dtype)
-    return [x.requires_grad_() for x in (pts, R, t, K)]
+    pose = not fixed_pose  # a fit's camera: rotation and translation constant
+    return [x.requires_grad_(grad) for x, grad in zip((pts, R, t, K), (True, pose, pose, True), strict=True)]
 
 
-def _run(fn, dtype, shared, seed):
-    leaves = _inputs(dtype, shared=shared, seed=seed)
+def _run(fn, dtype, shared, seed, fixed_pose=False):
+    leaves = _inputs(dtype, shared=shared, seed=seed, fixed_pose=fixed_pose)
     pts, R, t, K = leaves
     cam = Camera(K, R, t, 48, 64)
     outs = fn(cam, pts)
@@ -42,19 +43,20 @@ def _run(fn, dtype, shared, seed):
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 @pytest.mark.parametrize("shared", [False, True])
-@pytest.mark.parametrize("which", ["project", "to_camera"])
+@pytest.mark.parametrize("which", ["project", "to_camera", "project, fixed pose"])
 def test_projection_kernel_matches_pytorch(dtype, shared, which):
     def fn(cam, pts):
-        return cam.project(pts) if which == "project" else (cam.to_camera(pts),)
+        return (cam.to_camera(pts),) if which == "to_camera" else cam.project(pts)
 
-    outs, grads = _run(fn, dtype, shared, seed=1)
+    fixed = which.endswith("fixed pose")
+    outs, grads = _run(fn, dtype, shared, seed=1, fixed_pose=fixed)
     with _kernels.disabled():
-        ref_outs, ref_grads = _run(fn, dtype, shared, seed=1)
+        ref_outs, ref_grads = _run(fn, dtype, shared, seed=1, fixed_pose=fixed)
     rtol = 1e-5 if dtype == torch.float32 else 1e-12
     for a, b in zip(outs, ref_outs, strict=True):
         torch.testing.assert_close(a, b, rtol=rtol, atol=rtol * b.abs().max().item())
     for name, a, b in zip(("points", "rotation", "translation", "intrinsics"), grads, ref_grads, strict=True):
-        if b is None:  # to_camera does not use the intrinsics
+        if b is None:  # to_camera does not use the intrinsics; a fixed pose has no gradient
             assert a is None, name
             continue
         torch.testing.assert_close(a, b, rtol=rtol, atol=rtol * b.abs().max().item(), msg=name)

@@ -283,5 +283,8 @@ class _ProjectKernel(torch.autograd.Function):
             torch.empty_like(t),
             torch.empty_like(K),
         )
-        _kernels.kernel_for("project_backward", p)(p, R, t, K, g_xy, g_z, B, N, g_p, g_R, g_t, g_K)
-        return g_p, g_R, g_t, g_K
+        pose_grads = int(ctx.needs_input_grad[1] or ctx.needs_input_grad[2])
+        _kernels.kernel_for("project_backward", p)(
+            p, R, t, K, g_xy, g_z, B, N, pose_grads, g_p, g_R, g_t, g_K
+        )
+        return g_p, g_R if pose_grads else None, g_t if pose_grads else None, g_K

@@ -7,8 +7,9 @@
 //   project:   z = pc_z, zs = z unless |z| < 1e-12 (then 1e-12), xy = pc_xy / zs * f + c
 //                                                             -> xy (B, N, 2), z (B, N)
 // The arithmetic follows Camera's PyTorch expressions term by term (no fused multiply-add: the
-// library is built with -ffp-contract=off). Backward: the gradients of every input; the camera's
-// sums over points accumulate in double. Images in parallel, points in order within an image
+// library is built with -ffp-contract=off). Backward: the gradients of every input (of the camera's
+// rotation and translation only when pose_grads is set: zeros otherwise); the camera's sums over
+// points accumulate in double. Images in parallel, points in order within an image
 // (deterministic for any thread count).
 #include <cmath>
 #include <cstdint>
@@ -73,7 +74,7 @@ void to_camera_backward(const T* pts, const T* R, const T* g_pc, int64_t B, int6
 
 template <typename T>
 void project_backward(const T* pts, const T* R, const T* t, const T* K, const T* g_xy, const T* g_z, int64_t B,
-                      int64_t N, T* g_pts, T* g_R, T* g_t, T* g_K, int64_t threads) {
+                      int64_t N, int64_t pose_grads, T* g_pts, T* g_R, T* g_t, T* g_K, int64_t threads) {
   zk::parallel_for(B, threads, [&](int64_t b) {
     const T* k = K + 4 * b;
     double gR[9] = {0}, gt[3] = {0}, gK[4] = {0};
@@ -91,7 +92,12 @@ void project_backward(const T* pts, const T* R, const T* t, const T* K, const T*
       const T hx = gx * k[0], hy = gy * k[1];  // dL/dq
       T gpc[3] = {hx / zs, hy / zs, g_z[n]};
       if (!clamped) gpc[2] -= (hx * qx + hy * qy) / zs;
-      transform_backward(R + 9 * b, pts + 3 * n, gpc, g_pts + 3 * n, gR, gt);
+      if (pose_grads) {
+        transform_backward(R + 9 * b, pts + 3 * n, gpc, g_pts + 3 * n, gR, gt);
+      } else {  // the camera's rotation and translation are constants (a fit's camera)
+        const T* r = R + 9 * b;
+        for (int c = 0; c < 3; ++c) g_pts[3 * n + c] = r[c] * gpc[0] + r[3 + c] * gpc[1] + r[6 + c] * gpc[2];
+      }
     }
     for (int i = 0; i < 9; ++i) g_R[9 * b + i] = T(gR[i]);
     for (int i = 0; i < 3; ++i) g_t[3 * b + i] = T(gt[i]);
@@ -117,8 +123,9 @@ extern "C" {
     project<T>(pts, R, t, K, B, N, xy, z, threads);                                                             \
   }                                                                                                             \
   void zk_project_backward_##S(const T* pts, const T* R, const T* t, const T* K, const T* g_xy, const T* g_z,   \
-                               int64_t B, int64_t N, T* g_pts, T* g_R, T* g_t, T* g_K, int64_t threads) {       \
-    project_backward<T>(pts, R, t, K, g_xy, g_z, B, N, g_pts, g_R, g_t, g_K, threads);                          \
+                               int64_t B, int64_t N, int64_t pose_grads, T* g_pts, T* g_R, T* g_t, T* g_K,      \
+                               int64_t threads) {                                                               \
+    project_backward<T>(pts, R, t, K, g_xy, g_z, B, N, pose_grads, g_pts, g_R, g_t, g_K, threads);              \
   }
 
 ZK_PROJECT(float, f32)
