@@ -1,0 +1,94 @@
+"""Fit configurations compared per video, and which one to use chosen leave-one-video-out.
+
+    python bench/fit_cues.py NAME=RUN.json [NAME=RUN.json ...] [--metric novel_view_iou]
+
+Each RUN.json is the output of `zooctl bench run DIR --json` (one ablation, the same videos) for
+one configuration, e.g. ``--config`` files switching a loss term on; the first is the baseline.
+Prints a markdown table for BENCHMARKS.md: per video and on the mean, each configuration's input
+mask IoU, novel-view IoU, mIoU and Joint error; then the leave-one-video-out choice: for each
+video, the configuration with the best mean ``--metric`` on the other videos (the baseline on a
+tie), scored on that video; for every other configuration alone against the baseline (on/off)
+and among all of them. In-sample beside it: the configuration best on all videos.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+METRICS = (("mask_iou", "input IoU"), ("novel_view_iou", "novel view"), ("miou", "mIoU"), ("joint", "Joint"))
+LOWER_IS_BETTER = {"joint", "mcham"}
+
+
+def load(spec: str) -> tuple[str, dict[str, dict]]:
+    name, path = spec.split("=", 1)
+    rows = json.loads(Path(path).read_text())["rows"]
+    return name, {r["video"]: r for r in rows if "error" not in r}
+
+
+def score(rows: dict[str, dict], videos: list[str], metric: str) -> float:
+    sign = -1.0 if metric in LOWER_IS_BETTER else 1.0
+    return sign * float(np.mean([rows[v][metric] for v in videos]))
+
+
+def choose(runs: dict[str, dict[str, dict]], names: list[str], videos: list[str], metric: str) -> str:
+    """The configuration of ``names`` best on ``videos`` by ``metric``; the first (baseline) on a tie."""
+    best = names[0]
+    for n in names[1:]:
+        if score(runs[n], videos, metric) > score(runs[best], videos, metric) + 1e-9:
+            best = n
+    return best
+
+
+def loo(runs, names, videos, metric) -> tuple[dict[str, str], dict[str, float]]:
+    """Per held-out video the configuration chosen on the others, and the means of every metric
+    of those choices."""
+    picked = {v: choose(runs, names, [u for u in videos if u != v], metric) for v in videos}
+    means = {k: float(np.mean([runs[picked[v]][v][k] for v in videos])) for k, _ in METRICS}
+    return picked, means
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("runs", nargs="+", help="NAME=RUN.json, the baseline first")
+    ap.add_argument("--metric", default="novel_view_iou", help="what the leave-one-out choice maximises")
+    args = ap.parse_args()
+    runs = dict(load(s) for s in args.runs)
+    names = list(runs)
+    videos = sorted(set.intersection(*(set(r) for r in runs.values())))
+    if len(videos) < 2:
+        raise SystemExit("the runs share fewer than two fitted videos: nothing to leave out")
+    head = "| video | " + " | ".join(f"{lab}: {' / '.join(names)}" for _, lab in METRICS) + " |"
+    print(head)
+    print("|---" * (1 + len(METRICS)) + "|")
+    for v in videos + ["mean"]:
+        cells = []
+        for k, _ in METRICS:
+            vals = [
+                runs[n][v][k] if v != "mean" else float(np.mean([runs[n][u][k] for u in videos]))
+                for n in names
+            ]
+            cells.append(" / ".join(f"{x:.3f}" for x in vals))
+        print(f"| {v} | " + " | ".join(cells) + " |")
+    print(f"\nchoice by {args.metric}, {len(videos)} videos:\n")
+    print(
+        "| choice among | in-sample (best on all) | "
+        + " | ".join(f"{lab} in / loo" for _, lab in METRICS)
+        + " | picked per held-out video |"
+    )
+    print("|---" * (3 + len(METRICS)) + "|")
+    sets = [[names[0], n] for n in names[1:]] + ([names] if len(names) > 2 else [])
+    for group in sets:
+        best = choose(runs, group, videos, args.metric)
+        picked, means = loo(runs, group, videos, args.metric)
+        ins = {k: float(np.mean([runs[best][v][k] for v in videos])) for k, _ in METRICS}
+        cells = " | ".join(f"{ins[k]:.3f} / {means[k]:.3f}" for k, _ in METRICS)
+        per = ", ".join(f"{v} {picked[v]}" for v in videos)
+        print(f"| {', '.join(group)} | {best} | {cells} | {per} |")
+
+
+if __name__ == "__main__":
+    main()
