@@ -1,5 +1,6 @@
 """The CPU projection kernels (`Camera.project`, `Camera.to_camera`) against Camera's PyTorch
-expressions: values and the gradients of points, rotation, translation and intrinsics."""
+expressions: values and the gradients of points, rotation, translation and intrinsics; the face
+window kernel against `face_windows`."""
 
 from __future__ import annotations
 
@@ -70,3 +71,25 @@ def test_projection_kernel_is_used_and_differs_from_a_wrong_camera():
     xy, _ = cam.project(pts)
     moved = Camera(K, R, t + 0.5, 48, 64).project(pts)[0]
     assert (xy - moved).abs().max() > 1.0
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("margin", [0.0, 1.52])
+def test_face_windows_kernel_matches_pytorch(dtype, margin):
+    """Windows of faces inside, across and beyond the image borders, tiny and invalid ones, exactly
+    the PyTorch expression's."""
+    from zooctl.render.windows import ScreenFaces, face_windows, face_windows_int32
+
+    g = torch.Generator().manual_seed(2)
+    H, W, B, F = 30, 41, 2, 600
+    tri = (torch.rand(B * F, 3, 2, generator=g, dtype=torch.float64) * 70 - 15).to(dtype)
+    tri[:50] = tri[:50, :1] + 0.01 * tri[:50]  # tiny faces: windows of a pixel or none
+    tri[50:60] += 1000.0  # far beyond the image: empty
+    valid = torch.rand(B * F, generator=g) > 0.1
+    tri[~valid] = float("nan")  # invalid faces may hold NaN corners
+    sf = ScreenFaces(tri, torch.ones(B * F, 3, dtype=dtype), valid, B, F)
+    ref = face_windows(sf, H, W, margin).to(torch.int32)
+    got = face_windows_int32(sf, H, W, margin)
+    assert got.dtype == torch.int32 and got.is_contiguous()
+    assert torch.equal(got, ref)
+    assert (ref[:, 2] >= ref[:, 0]).sum() > 100 and (ref[valid, 2] < ref[valid, 0]).any()

@@ -28,7 +28,7 @@ from torch import nn
 from ..errors import InputError
 from . import _kernels
 from .camera import Camera
-from .windows import ScreenFaces, check_face_indices, face_pixel_pairs, face_windows, project_faces
+from .windows import ScreenFaces, check_face_indices, face_pixel_pairs, face_windows_int32, project_faces
 
 Tensor = torch.Tensor
 
@@ -73,7 +73,7 @@ def _zbuffer_kernel(sf: ScreenFaces, H: int, W: int) -> tuple[Tensor, Tensor] | 
     kernel = _kernels.kernel_for("zbuffer", tri, depth)
     if kernel is None:
         return None
-    win = face_windows(sf, H, W, 0.0).to(torch.int32).contiguous()
+    win = face_windows_int32(sf, H, W, 0.0)
     n = sf.batch * H * W
     winner, face_ids = torch.empty(n, dtype=torch.long), torch.empty(n, dtype=torch.long)
     kernel(tri, depth, win, sf.batch, sf.num_faces, H, W, winner, torch.empty(n, dtype=tri.dtype), face_ids)

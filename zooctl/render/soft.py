@@ -36,7 +36,7 @@ from torch import nn
 
 from . import _kernels
 from .camera import Camera
-from .windows import face_pixel_pairs, face_windows, project_faces
+from .windows import face_pixel_pairs, face_windows_int32, project_faces
 
 Tensor = torch.Tensor
 
@@ -138,7 +138,7 @@ class SoftSilhouette(nn.Module):
         H, W = camera.height, camera.width
         sf = project_faces(vertices, faces, camera)
         if _kernels.kernel_for("soft_forward", sf.tri) is not None:
-            win = face_windows(sf, H, W, self.margin).to(torch.int32).contiguous()
+            win = face_windows_int32(sf, H, W, self.margin)
             return _SoftSilhouetteKernel.apply(sf.tri, win, sf.batch, H, W, self.sigma).view(sf.batch, H, W)
         pairs = face_pixel_pairs(sf, H, W, self.margin)
         val = _SoftCoverage.apply(sf.tri, pairs.face, pairs.px, pairs.py, self.sigma)

@@ -119,6 +119,20 @@ def face_windows(sf: ScreenFaces, height: int, width: int, margin: float) -> Ten
 
 
 @torch.no_grad()
+def face_windows_int32(sf: ScreenFaces, height: int, width: int, margin: float) -> Tensor:
+    """`face_windows` as a contiguous (B*F, 4) int32 tensor, what the CPU kernels read; on CPU
+    float tensors computed by a kernel (the same float steps, so the same windows)."""
+    tri = sf.tri.detach()
+    kernel = _kernels.kernel_for("face_windows", tri)
+    if kernel is None or sf.valid.dtype != torch.bool:
+        return face_windows(sf, height, width, margin).to(torch.int32).contiguous()
+    win = torch.empty(tri.shape[0], 4, dtype=torch.int32)
+    valid = sf.valid.contiguous().view(torch.uint8)
+    kernel(tri.contiguous(), valid, tri.shape[0], height, width, float(margin), win)
+    return win
+
+
+@torch.no_grad()
 def face_pixel_pairs(sf: ScreenFaces, height: int, width: int, margin: float) -> Pairs:
     """Every (face, pixel) pair with the pixel centre within ``margin`` px of the face's box."""
     win = face_windows(sf, height, width, margin)

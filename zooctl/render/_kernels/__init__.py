@@ -85,6 +85,7 @@ _SIGNATURES = {
     "nearest_points": [_P, _P, _I, _I, _I, _P, _I],
     "to_camera_forward": [_P, _P, _P, _I, _I, _P, _I],
     "to_camera_backward": [_P, _P, _P, _I, _I, _P, _P, _P, _I],
+    "face_windows": [_P, _P, _I, _I, _I, _D, _P, _I],
     "project_forward": [_P, _P, _P, _P, _I, _I, _P, _P, _I],
     "project_backward": [_P, _P, _P, _P, _P, _P, _I, _I, _I, _P, _P, _P, _P, _I],
 }
