@@ -149,8 +149,9 @@ def flow_loss(rendered: Tensor, rendered_mask: Tensor, observed: Tensor, valid: 
     rendered, observed (B, h, w, 2) pixels; rendered_mask, valid (B, h, w) bool.
     """
     m = (rendered_mask & valid).to(rendered.dtype)
-    err = F.smooth_l1_loss(rendered, observed, reduction="none", beta=1.0).sum(-1)
-    return (err * m).sum() / m.sum().clamp_min(1.0)
+    err = F.smooth_l1_loss(rendered, observed, reduction="none", beta=1.0)  # (B, h, w, 2)
+    # Both components weighted at once (no reduction over the last, 2-wide axis first).
+    return (err * m[..., None]).sum() / m.sum().clamp_min(1.0)
 
 
 def root_smoothness(root_rotation: Tensor, root_translation: Tensor, size: float) -> Tensor:

@@ -65,7 +65,9 @@ def _rotate_shared(points: Tensor, R: Tensor) -> Tensor:
     rotations) product rather than a batched product over copies of the points."""
     batch = R.shape[:-2]
     cols = R.reshape(-1, 3, 3).permute(2, 0, 1).reshape(3, -1)  # column (n, i) = R[n, i, c]
-    return (points @ cols).view(points.shape[0], -1, 3).transpose(0, 1).reshape(batch + points.shape)
+    return (
+        (points @ cols).view(points.shape[0], -1, 3).transpose(0, 1).contiguous().view(batch + points.shape)
+    )
 
 
 class ArticulatedModel(nn.Module):

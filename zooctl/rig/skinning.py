@@ -172,7 +172,8 @@ def _shared_weights_skinning(
         s = stretch.expand(batch + stretch.shape[-2:]).reshape(N, J, 3)
         moved = (A[..., :3] @ s[..., None]).squeeze(-1)  # (N, J, 3): L_k s_k
         out = out + _dense_weights(weights * endpoint, bones, J) @ moved.transpose(0, 1).reshape(J, N * 3)
-    return out.view(V, N, 3).transpose(0, 1).reshape(batch + (V, 3))
+    # Contiguous once here, rather than copied by each kernel that reads the posed vertices.
+    return out.view(V, N, 3).transpose(0, 1).contiguous().view(batch + (V, 3))
 
 
 def stretch_offsets(
