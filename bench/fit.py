@@ -1,6 +1,6 @@
 """CASA fit benchmark: speed (60 frames, 320 px, ~4,000-vertex template) and quality (bench run).
 
-    python bench/fit.py speed [--preset fast|quality] [--device cpu|cuda]
+    python bench/fit.py speed [--preset fast|quality] [--device cpu|cuda] [--repeat N] [--threads N]
     python bench/fit.py quality [--assets N] [--frames 60] [--size 320] [--ablation ...]
     python bench/fit.py davis [--store DIR] [--videos dog cows blackswan] [--masks given auto]
     python bench/fit.py length [--frames 240] [--short 60] [--asset Fox] [--template Wolf] [--whole]
@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -39,10 +41,23 @@ from _util import SHARED, machine  # noqa: E402
 ASSETS = SHARED / "assets" / "quaternius"
 
 
-def zooctl(*args: str, store: Path) -> subprocess.CompletedProcess:
+# Passed on to zooctl when set: thread counts, and PYTHONPATH (to time another checkout's code,
+# e.g. a `git worktree` of an older commit, with this virtualenv).
+PASSED_ENV = ("OMP_NUM_THREADS", "ZOOCTL_TORCH_THREADS", "PYTHONPATH")
+
+
+def zooctl(*args: str, store: Path, threads: int | None = None) -> subprocess.CompletedProcess:
     exe = Path(sys.executable).with_name("zooctl")
     env = {"ZOOCTL_STORE": str(store), "PATH": "/usr/bin:/bin"}
+    env |= {k: os.environ[k] for k in PASSED_ENV if k in os.environ}
+    if threads is not None:
+        env["OMP_NUM_THREADS"] = str(threads)
     return subprocess.run([str(exe), *args], capture_output=True, text=True, env=env)
+
+
+def _children_cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
 
 
 def speed(args) -> None:
@@ -63,9 +78,9 @@ def speed(args) -> None:
             str(args.size),
             store=store,
         )
-        times = []
+        times, cpu, stage2 = [], [], []
         for i in range(args.repeat):
-            t = time.perf_counter()
+            t, c = time.perf_counter(), _children_cpu()
             p = zooctl(
                 "fit",
                 str(vids / "Fox"),
@@ -79,15 +94,21 @@ def speed(args) -> None:
                 f"s{i}",
                 "--json",
                 store=store,
+                threads=args.threads,
             )
             times.append(time.perf_counter() - t)
+            cpu.append(_children_cpu() - c)
             if p.returncode != 0:
                 sys.exit(p.stderr)
             rec = json.loads(p.stdout)
-        times.sort()
+            stage2.append(rec["timings"].get("stage2", float("nan")))
+        med = lambda xs: sorted(xs)[len(xs) // 2]  # noqa: E731
+        threads = os.environ.get("OMP_NUM_THREADS", "default") if args.threads is None else args.threads
         print(
-            f"| {machine()} | zooctl fit (Fox video {args.frames}x{args.size}px, template Wolf 3,994 vertices, --preset {args.preset}, {args.device}) | "
-            f"median {times[len(times) // 2]:.1f} s of {args.repeat} ({', '.join(f'{x:.1f}' for x in times)}) | mask IoU {rec['metrics']['mask_iou']:.3f}, mIoU {rec['metrics'].get('miou')} |"
+            f"| {machine()} | zooctl fit (Fox video {args.frames}x{args.size}px, template Wolf 3,994 vertices, --preset {args.preset}, {args.device}, threads {threads}) | "
+            f"median {med(times):.1f} s of {args.repeat} ({', '.join(f'{x:.1f}' for x in times)}), "
+            f"CPU {med(cpu):.1f} s, stage 2 {med(stage2):.1f} s ({', '.join(f'{x:.1f}' for x in stage2)}) | "
+            f"mask IoU {rec['metrics']['mask_iou']:.3f}, mIoU {rec['metrics'].get('miou')} |"
         )
         print(json.dumps(rec["timings"]))
 
@@ -262,6 +283,7 @@ if __name__ == "__main__":
     s.add_argument("--frames", type=int, default=60)
     s.add_argument("--size", type=int, default=320)
     s.add_argument("--repeat", type=int, default=1)
+    s.add_argument("--threads", type=int, default=None, help="torch threads of each fit (OMP_NUM_THREADS)")
     q = sub.add_parser("quality")
     q.add_argument("--assets", type=int, default=28)
     q.add_argument("--frames", type=int, default=60)
