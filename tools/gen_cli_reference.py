@@ -48,6 +48,10 @@ ENVIRONMENT: dict[str, tuple[str, str]] = {
         "zooctl",
         "Weights of the `procnet` embedder (default `STORE/models/procnet.npz`, written by `embed train`).",
     ),
+    "ZOOCTL_ANIMALNET_WEIGHTS": (
+        "zooctl",
+        "Weights of the `animalnet` segmenter (default `STORE/models/animalnet.npz`, written by `segment train`).",
+    ),
     "ZOOCTL_TORCH_THREADS": ("zooctl", "Threads of the embedders' CPU inference (default: torch's)."),
     "ZOOCTL_RENDER_KERNELS": (
         "zooctl",

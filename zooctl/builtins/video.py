@@ -1,4 +1,5 @@
-"""Built-in video components: segmenters (`masks`, `grabcut`, `selftrain`, `onnx`) and the `dis` flow estimator.
+"""Built-in video components: segmenters (`masks`, `grabcut`, `selftrain`, `animalnet`, `onnx`) and the `dis`
+flow estimator.
 
 Factories import their modules lazily so that `zooctl --help` does not pay for OpenCV.
 """
@@ -25,6 +26,12 @@ def _selftrain(**options):
     from ..video.selftrain import SelfTrainedSegmenter
 
     return SelfTrainedSegmenter(**options)
+
+
+def _animalnet(**options):
+    from ..video.animalnet import AnimalNetSegmenter
+
+    return AnimalNetSegmenter(**options)
 
 
 def _onnx(**options):
@@ -62,6 +69,15 @@ def register_segmenters(register):
             _selftrain,
             "grabcut, then a classifier learned from this video's sure pixels (EfficientNet-Lite0 features + "
             "colour) decides every frame again (a leak or a dropped part on some frames is repaired); CPU, no weights",
+        )
+    )
+    register(
+        ComponentSpec(
+            "segmenter",
+            "animalnet",
+            _animalnet,
+            "grabcut, then a network trained on synthetic animals (`zooctl segment train`; EfficientNet-Lite0 "
+            "features + motion) decides every frame again; CPU, weights from the store or weights=PATH",
         )
     )
     register(

@@ -91,13 +91,14 @@ def _register_groups() -> None:
     in one process by tests, and each copy of a group slowed every later call)."""
     if app.registered_groups:
         return
-    from . import animate, bank, bench, embed, motion, plugins_cmd, video
+    from . import animate, bank, bench, embed, motion, plugins_cmd, segment, video
 
     app.add_typer(bank.app, name="bank")
     app.add_typer(bench.app, name="bench")
     app.add_typer(video.app, name="video")
     app.add_typer(motion.app, name="motion")
     app.add_typer(embed.app, name="embed")
+    app.add_typer(segment.app, name="segment")
     app.command("animate")(animate.animate)
     app.command("plugins")(plugins_cmd.plugins)
     from . import fit, fits

@@ -258,27 +258,9 @@ class SelfTrainedSegmenter:
         box_frame: int = 0,
     ) -> np.ndarray:
         """(T, H, W, 3) uint8 RGB frames, optional box on frame ``box_frame`` -> (T, H, W) bool masks."""
-        from .flow import DISFlow, VideoFlow, compute_video_flow
-        from .grabcut import resize_flows
-        from .scratch import Resized
-
         t, h, w = frames.shape[:3]
-        if t < 2:
-            raise InputError("the selftrain segmenter needs at least 2 frames (it uses motion)")
-        sw, sh = self.flow_size(w, h)
-        if flow is None:
-            flow = compute_video_flow(DISFlow(self.tracker.flow_preset), np.asarray(frames))
-        if tuple(flow.forward.shape[1:3]) != (sh, sw):
-            flow = VideoFlow(
-                *(resize_flows(f, sw, sh, frames) for f in (flow.forward, flow.backward)), None, None
-            )
-        tracked = self.tracker.segment(
-            frames,
-            box=box,
-            progress=(lambda d, n: progress(d, 2 * n)) if progress else None,
-            flow=flow,
-            box_frame=box_frame,
-        )
+        flow, tracked = track(self.tracker, frames, box, progress, flow, box_frame, "selftrain")
+        sh, sw = flow.forward.shape[1:3]
         self.report = dict(self.tracker.report)
         small = working(frames, t, (sh, sw, 3), np.uint8)
         prior = working(frames, t, (sh, sw), bool)
@@ -297,16 +279,7 @@ class SelfTrainedSegmenter:
         masks = self._relabel(small, prior, flow, lambda d: progress(t + d, 2 * t) if progress else None)
         if masks is None:  # nothing sure to learn from: the tracker's masks stand
             return tracked
-        if (sw, sh) == (w, h):
-            return masks
-        if isinstance(frames, np.ndarray):
-            return np.stack(
-                [
-                    cv2.resize(m.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR) > 0.5
-                    for m in masks
-                ]
-            )
-        return Resized(masks, w, h)
+        return at_frame_size(masks, frames)
 
     # -- the steps --------------------------------------------------------------------------------
 
@@ -381,18 +354,7 @@ class SelfTrainedSegmenter:
         deep = working(frames, t, (h, w), np.float32)
         for k, i in enumerate(looked):
             deep[i] = grid_to_pixels(np.asarray(feats[k], np.float32) @ wt + bias, w, h, (iw, ih))
-        seen = set(looked)
-        for i in range(t):  # the frames between: their neighbours' output carried along the flow
-            if i in seen:
-                continue
-            a, b = max(j for j in looked if j < i), min(j for j in looked if j > i)
-            pa = deep[a]
-            for j in range(a, i):
-                pa = warp(pa, flow.backward[j])
-            pb = deep[b]
-            for j in range(b - 1, i - 1, -1):
-                pb = warp(pb, flow.forward[j])
-            deep[i] = ((b - i) * pa + (i - a) * pb) / (b - a)
+        carry_between(deep, looked, flow)
         out = working(frames, t, (h, w), bool)
         changed = 0
         for i in range(t):
@@ -409,6 +371,64 @@ class SelfTrainedSegmenter:
             changed / max(int(sum(np.asarray(prior[i]).sum() for i in range(t))), 1), 4
         )
         return out
+
+
+def track(tracker, frames, box, progress, flow, box_frame: int, who: str):
+    """The tracker's masks of (T, H, W, 3) ``frames`` and the flow at its working size, for a
+    segmenter that decides again after it (half of its ``progress``) -> (flow, tracked masks)."""
+    from .flow import DISFlow, VideoFlow, compute_video_flow
+    from .grabcut import resize_flows
+
+    t, h, w = frames.shape[:3]
+    if t < 2:
+        raise InputError(f"the {who} segmenter needs at least 2 frames (it uses motion)")
+    sw, sh = tracker.flow_size(w, h)
+    if flow is None:
+        flow = compute_video_flow(DISFlow(tracker.flow_preset), np.asarray(frames))
+    if tuple(flow.forward.shape[1:3]) != (sh, sw):
+        flow = VideoFlow(
+            *(resize_flows(f, sw, sh, frames) for f in (flow.forward, flow.backward)), None, None
+        )
+    tracked = tracker.segment(
+        frames,
+        box=box,
+        progress=(lambda d, n: progress(d, 2 * n)) if progress else None,
+        flow=flow,
+        box_frame=box_frame,
+    )
+    return flow, tracked
+
+
+def at_frame_size(masks, frames):
+    """(T, h, w) bool masks at the working size -> at the (T, H, W) frames' size."""
+    from .scratch import Resized
+
+    h, w = frames.shape[1:3]
+    if masks.shape[1:3] == (h, w):
+        return masks
+    if isinstance(frames, np.ndarray):
+        return np.stack(
+            [cv2.resize(m.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR) > 0.5 for m in masks]
+        )
+    return Resized(masks, w, h)
+
+
+def carry_between(values, looked: list[int], flow) -> None:
+    """Fill ``values`` (T, h, w) in place at the frames not in ``looked`` (sorted, holding the first
+    and last frame): the two nearest looked frames' values carried along the flow and blended by
+    distance."""
+    seen = set(looked)
+    for i in range(len(values)):
+        if i in seen:
+            continue
+        a, b = max(j for j in looked if j < i), min(j for j in looked if j > i)
+        pa = values[a]
+        for j in range(a, i):
+            pa = warp(pa, flow.backward[j])
+        pb = values[b]
+        for j in range(b - 1, i - 1, -1):
+            pb = warp(pb, flow.forward[j])
+        values[i] = ((b - i) * pa + (i - a) * pb) / (b - a)
 
 
 def main_animal(logit: np.ndarray) -> np.ndarray:

@@ -1,0 +1,146 @@
+"""The learned segmenter: its synthetic composites, the numpy head against the torch one it was
+trained as, training end to end, the segmenter through the hook, and `zooctl segment train`."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from cli_helpers import run_inprocess
+from video_helpers import iou, moving_object_video
+
+from zooctl.errors import InputError
+from zooctl.plugins import get_registry
+
+
+@pytest.fixture(scope="module")
+def animals():
+    from zooctl.benchdata.composites import procedural_assets
+
+    return procedural_assets(3, seed=1)
+
+
+def test_composites_hold_an_animal_its_mask_and_a_moving_second_frame(animals):
+    from zooctl.benchdata.composites import composite
+
+    rng = np.random.default_rng(3)
+    shown = 0
+    for _ in range(6):
+        s = composite(animals, rng, (96, 72))
+        assert s.frames.shape == (2, 72, 96, 3) and s.frames.dtype == np.uint8
+        assert s.mask.shape == (72, 96) and s.mask.dtype == bool
+        shown += int(s.mask.any())
+        assert not np.array_equal(s.frames[0], s.frames[1])  # the camera pans, the animal moves
+    assert shown >= 5  # an occluder or a far corner may hide one, not most
+    # the same seed gives the same sample (training sets are reproducible)
+    a = composite(animals, np.random.default_rng(9), (96, 72))
+    b = composite(animals, np.random.default_rng(9), (96, 72))
+    assert np.array_equal(a.frames, b.frames) and np.array_equal(a.mask, b.mask)
+
+
+def test_numpy_head_matches_the_torch_model_it_was_trained_as(tmp_path):
+    import torch
+
+    from zooctl.pipelines.segment_train import _model, save_weights
+    from zooctl.video.animalnet import IN_CHANNELS, AnimalNet
+
+    torch.manual_seed(0)
+    p = 20
+    model = _model(p + 1)
+    for prm in model.parameters():  # not the initialisation's near-zero biases: every term counts
+        prm.data.normal_(0, 0.3)
+    rng = np.random.default_rng(0)
+    mean = rng.normal(size=IN_CHANNELS - 1).astype(np.float32)
+    std = rng.uniform(0.5, 2, IN_CHANNELS - 1).astype(np.float32)
+    proj = rng.normal(size=(IN_CHANNELS - 1, p)).astype(np.float32) / 10
+    params = {k: v.detach().numpy() for k, v in model.state_dict().items()}
+    path = save_weights(
+        tmp_path / "w.npz", {**params, "mean": mean, "std": std, "proj": proj}, {"feature_width": 64}
+    )
+    x = rng.normal(size=(11, 13, IN_CHANNELS)).astype(np.float32)
+    got = AnimalNet(path).logits(x)
+    a = ((x[..., :-1] - mean) / std) @ proj
+    t = torch.as_tensor(np.concatenate([a, x[..., -1:]], -1)).permute(2, 0, 1)[None]
+    want = model(t)[0, 0].detach().numpy()
+    assert got.shape == (11, 13)
+    np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-4)
+
+
+def test_bad_weights_are_one_clear_error(tmp_path, monkeypatch):
+    from zooctl.video.animalnet import AnimalNet
+
+    monkeypatch.setenv("ZOOCTL_ANIMALNET_WEIGHTS", str(tmp_path / "none.npz"))
+    with pytest.raises(InputError, match="do not exist"):
+        AnimalNet()
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, info=np.array("{}"), x=np.zeros(2))
+    with pytest.raises(InputError, match="not an animalnet weights file"):
+        AnimalNet(bad)
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory, animals):
+    """Weights from a small training run (its numbers mean nothing; that it runs and learns does)."""
+    from zooctl.pipelines.segment_train import SegmentTrainConfig, train
+
+    out = tmp_path_factory.mktemp("animalnet") / "w.npz"
+    cfg = SegmentTrainConfig(samples=12, steps=30, batch=4, size=(96, 64), components=8, crop=(6, 8))
+    seen = []
+    info = train(animals, out, cfg, {"licence": "test"}, lambda s, i, n: seen.append(s))
+    return out, info, seen
+
+
+def test_training_runs_end_to_end_and_learns(trained):
+    out, info, seen = trained
+    assert out.is_file() and {"composites", "training"} <= set(seen)
+    r = info["report"]
+    assert r["loss_last"] < r["loss_first"]
+    assert info["sources"] == {"licence": "test"} and info["config"]["samples"] == 12
+
+
+def test_segmenter_through_the_hook_keeps_a_tracked_animal(trained):
+    frames, truth = moving_object_video(t=6, h=72, w=96)
+    # a network trained this briefly knows nothing: at weight 0 the tracker's masks stand
+    seg = get_registry().get("segmenter", "animalnet").create(weights=str(trained[0]), net_weight=0.0)
+    masks = np.asarray(seg.segment(frames), bool)
+    assert masks.shape == truth.shape
+    assert np.mean([iou(m, t) for m, t in zip(masks, truth)]) > 0.6
+    assert "animalnet" in seg.report and seg.report["animalnet"]["weights"] == str(trained[0])
+    # the network's evidence decides against a weak tracker prior
+    ev = np.full((72, 96), -5.0, np.float32)
+    ev[20:40, 30:60] = 5.0
+    tracked = np.zeros((72, 96), bool)
+    tracked[50:70, 0:20] = True
+    seg.net_weight, seg.prior_weight, seg.erase = 1.0, 1.0, True
+    got = seg.decide(ev, tracked)
+    assert got[30, 45] and not got[60, 10]
+    # by default the network only adds: its "no" does not erase a tracked animal it cannot see
+    seg.erase = False
+    ev[:] = -5.0
+    got = seg.decide(ev, tracked)
+    assert got[60, 10] and not got[30, 45]
+    seg.erase = True
+    assert not seg.decide(ev, tracked).any()
+
+
+def test_cli_trains_and_refuses_bad_input(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("ZOOCTL_STORE", str(tmp_path / "store"))
+    r = run_inprocess(capsys, "segment", "train", "--samples", "3")
+    assert r.code != 0 and "--samples >= 10" in r.err and "Traceback" not in r.err
+    r = run_inprocess(capsys, "segment", "train", "--procedural", "0", "--samples", "10")
+    assert r.code != 0 and "nothing to train on" in r.err
+
+
+def test_cli_trains_weights_the_segmenter_loads(tmp_path, capsys, monkeypatch):
+    from zooctl.video.animalnet import AnimalNet
+
+    monkeypatch.setenv("ZOOCTL_STORE", str(tmp_path / "store"))
+    args = ("segment", "train", "--samples", "10", "--steps", "3", "--procedural", "2", "--no-bank", "--json")
+    r = run_inprocess(capsys, *args)
+    assert r.code == 0, r.err
+    import json
+
+    res = json.loads(r.out)
+    path = tmp_path / "store" / "models" / "animalnet.npz"
+    assert res["weights"] == str(path) and path.is_file()
+    assert res["sources"]["procedural_animals"] == 2 and res["sources"]["bank_assets"] == []
+    assert AnimalNet(path).info["config"]["steps"] == 3
