@@ -103,22 +103,26 @@ def quality(sequences, max_size: int, preset: str, out: Path, cache, grid: dict,
     return report
 
 
-def selftrain_quality(sequences, max_size: int, preset: str, out: Path, cache) -> dict:
-    """`selftrain` against `grabcut` on the shared videos, its settings chosen leave-one-video-out
-    (`video_selftrain`); the table goes to selftrain.md."""
-    import video_selftrain
+def learned_quality(module: str, sequences, max_size: int, preset: str, out: Path, cache, **kw) -> dict:
+    """A learned segmenter against `grabcut` on the shared videos, its settings chosen
+    leave-one-video-out: ``module`` `video_selftrain` (`selftrain`) or `video_animalnet`
+    (`animalnet`, ``weights=`` from `zooctl segment train`); the table goes to NAME.md."""
+    import importlib
 
     from zooctl.video.decode import decode
+
+    bench = importlib.import_module(module)
+    name = module.removeprefix("video_")
 
     def load(seq):
         dv = decode(VIDEOS / seq, max_size=max_size)
         return dv.frames, load_truth(seq, dv.frames.shape)
 
-    report = video_selftrain.run(sequences, load, cache, SEG_OPTIONS, preset, FLOW_SIZE, out)
+    report = bench.run(sequences, load, cache, SEG_OPTIONS, preset, FLOW_SIZE, out, **kw)
     if len(sequences) >= 2:
-        text, report["leave_one_out"] = video_selftrain.table(report)
-        (out / "selftrain.md").write_text(text)
-        (out / "selftrain.json").write_text(json.dumps(report, indent=1))
+        text, report["leave_one_out"] = bench.table(report)
+        (out / f"{name}.md").write_text(text)
+        (out / f"{name}.json").write_text(json.dumps(report, indent=1))
         print(text, file=sys.stderr)
     return report
 
@@ -496,9 +500,13 @@ def main() -> None:
     ap.add_argument("--box", action="store_true", help="quality part: also the first true mask's box")
     ap.add_argument(
         "--segmenter",
-        choices=("grabcut", "selftrain"),
+        choices=("grabcut", "selftrain", "animalnet"),
         default="grabcut",
-        help="quality part: selftrain also runs the learned segmenter and its grid (bench/video_selftrain.py)",
+        help="quality part: selftrain (bench/video_selftrain.py) or animalnet (bench/video_animalnet.py, "
+        "needs --weights) also runs that learned segmenter and its grid",
+    )
+    ap.add_argument(
+        "--weights", type=Path, default=None, help="animalnet weights .npz (zooctl segment train)"
     )
     ap.add_argument(
         "--seg-option", action="append", default=[], metavar="K=V", help="grabcut option to measure"
@@ -536,8 +544,21 @@ def main() -> None:
             )
         if args.sequences and args.segmenter == "selftrain":
             print("quality of selftrain (no box; each of its grid settings varied alone):", file=sys.stderr)
-            report["selftrain"] = selftrain_quality(
-                args.sequences.split(","), args.max_size, args.preset, args.out, cache
+            report["selftrain"] = learned_quality(
+                "video_selftrain", args.sequences.split(","), args.max_size, args.preset, args.out, cache
+            )
+        if args.sequences and args.segmenter == "animalnet":
+            if args.weights is None:
+                sys.exit("--segmenter animalnet needs --weights W.npz (from `zooctl segment train`)")
+            print("quality of animalnet (no box; its weights chosen leave-one-out):", file=sys.stderr)
+            report["animalnet"] = learned_quality(
+                "video_animalnet",
+                args.sequences.split(","),
+                args.max_size,
+                args.preset,
+                args.out,
+                cache,
+                weights=args.weights,
             )
         if args.composited:
             print("quality on rendered animals over painted-out DAVIS backgrounds:", file=sys.stderr)
