@@ -3,6 +3,7 @@
     .venv/bin/python bench/video.py                      # quality and throughput
     .venv/bin/python bench/video.py --part quality       # J per video, grid chosen leave-one-out
     .venv/bin/python bench/video.py --part quality --segmenter selftrain  # and the learned segmenter
+    .venv/bin/python bench/video.py --part quality --segmenter animalnet --weights W.npz  # zooctl segment train's
     .venv/bin/python bench/video.py --part throughput --repeats 3
     .venv/bin/python bench/video.py --part quality --seg-option key_every=5 --flow-size 480  # variants
     .venv/bin/python bench/video.py --part length --lengths 5,20,60 --repeats 1   # `video add` by length
