@@ -75,6 +75,14 @@ def test_bad_weights_are_one_clear_error(tmp_path, monkeypatch):
     np.savez(bad, info=np.array("{}"), x=np.zeros(2))
     with pytest.raises(InputError, match="not an animalnet weights file"):
         AnimalNet(bad)
+    from zooctl.pipelines.segment_train import _model, save_weights
+    from zooctl.video.animalnet import IN_CHANNELS
+
+    params = {k: v.detach().numpy() for k, v in _model(9).state_dict().items()}
+    ok = {"mean": np.zeros(IN_CHANNELS - 1), "std": np.ones(IN_CHANNELS - 1)}
+    wrong = save_weights(tmp_path / "w.npz", {**params, **ok, "proj": np.zeros((IN_CHANNELS - 1, 4))}, {})
+    with pytest.raises(InputError, match="shapes differ"):
+        AnimalNet(wrong)
 
 
 @pytest.fixture(scope="module")

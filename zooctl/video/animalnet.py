@@ -8,7 +8,7 @@ width, squashed). Output: the log-odds that the cell is an animal, from a head o
 3x3 convolutions (`HEAD`), trained on synthetic composites (`zooctl.benchdata.composites`, by
 `zooctl segment train`) and applied here in numpy (a video add stays torch-free).
 
-Weights (``.npz``): the head's convolutions, the input standardisation, and ``info`` (JSON: the
+Weights (``.npz``): the head's convolutions, the input standardisation and projection, and ``info`` (JSON: the
 feature width, what the weights were trained on and its licence). Loaded from the path given,
 else ``ZOOCTL_ANIMALNET_WEIGHTS``, else ``STORE/models/animalnet.npz``.
 """
@@ -105,6 +105,18 @@ class AnimalNet:
         missing += [k for k in ("mean", "std", "proj") if k not in self.params]
         if missing:
             raise InputError(f"{path} is not an animalnet weights file (missing {', '.join(missing)})")
+        p = self.params
+        cin = IN_CHANNELS - 1
+        shapes_ok = (
+            p["mean"].shape == (cin,)
+            and p["std"].shape == (cin,)
+            and p["proj"].ndim == 2
+            and p["proj"].shape[0] == cin
+            and p["c0.weight"].ndim == 4
+            and p["c0.weight"].shape[1] == p["proj"].shape[1] + 1
+        )
+        if not shapes_ok:
+            raise InputError(f"{path} is not an animalnet weights file for this version (its shapes differ)")
         self.path = path
 
     def logits(self, inputs: np.ndarray) -> np.ndarray:
