@@ -14,9 +14,9 @@ from zooctl.plugins import get_registry
 
 @pytest.fixture(scope="module")
 def animals():
-    from zooctl.benchdata.composites import procedural_assets
+    from zooctl.procedural.random import random_assets
 
-    return procedural_assets(3, seed=1)
+    return random_assets(3, seed=1, any_hue=True)
 
 
 def test_composites_hold_an_animal_its_mask_and_a_moving_second_frame(animals):

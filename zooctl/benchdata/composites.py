@@ -349,14 +349,3 @@ def composite(
             ]
         )
     return Sample(frames=frames, mask=mask)
-
-
-def procedural_assets(count: int, seed: int = 0) -> list[RiggedAsset]:
-    """``count`` random procedural animals over every body plan (`zooctl.procedural.random`)."""
-    from ..procedural.random import LABELS, random_animal
-
-    rng = np.random.default_rng(seed)
-    return [
-        random_animal(rng, LABELS[k % len(LABELS)], f"composite-{k}", seed=seed + k, any_hue=True)
-        for k in range(count)
-    ]

@@ -33,9 +33,9 @@ def train(
         )
     from rich.progress import Progress
 
-    from ..benchdata.composites import procedural_assets
     from ..pipelines.segment_train import SegmentTrainConfig
     from ..pipelines.segment_train import train as train_job
+    from ..procedural.random import random_assets
     from ..store.bank import Bank
 
     root = store_root()
@@ -45,7 +45,7 @@ def train(
         b = Bank.open(root)
         names = b.names()
         assets = [b.get(n) for n in names]
-    assets += procedural_assets(procedural, seed)
+    assets += random_assets(procedural, seed, any_hue=True)
     if not assets:
         raise UsageError(
             "nothing to train on: the bank is empty and --procedural is 0",

@@ -152,16 +152,13 @@ def train_head(
     gh, gw = y.shape[1:]
     ch, cw = min(gh, cfg.crop[0]), min(gw, cfg.crop[1])
 
-    def batch_in(idx):
-        return xt[idx]
-
     losses = []
     for step in range(cfg.steps):
         idx = torch.as_tensor(used[torch.randint(len(used), (cfg.batch,), generator=g).numpy()], device=dev)
         # a random window of the grid each step: the head is convolutional, the cost is in the cells
         oy = int(torch.randint(gh - ch + 1, (1,), generator=g))
         ox = int(torch.randint(gw - cw + 1, (1,), generator=g))
-        xb, yb = batch_in(idx)[..., oy : oy + ch, ox : ox + cw], yt[idx][:, oy : oy + ch, ox : ox + cw]
+        xb, yb = xt[idx][..., oy : oy + ch, ox : ox + cw], yt[idx][:, oy : oy + ch, ox : ox + cw]
         if step % 2:  # left-right flips: an animal facing the other way is still one
             xb, yb = xb.flip(-1), yb.flip(-1)
         logit = model(xb)[:, 0]
@@ -182,7 +179,7 @@ def train_head(
         ious = []
         for k in range(0, len(held), 64):
             idx = torch.as_tensor(held[k : k + 64], device=dev)
-            p = model(batch_in(idx))[:, 0] > 0
+            p = model(xt[idx])[:, 0] > 0
             t = yt[idx] > 0.5
             ious += ((p & t).sum((1, 2)) / (p | t).sum((1, 2)).clamp(min=1)).tolist()
     params = {k: v.detach().cpu().numpy().astype(np.float32) for k, v in model.state_dict().items()}
