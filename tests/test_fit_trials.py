@@ -221,3 +221,76 @@ def test_bench_run_counts_the_right_body_plans(tmp_path, store, monkeypatch):
     assert ("(right plan)" if plan["right"] else "(other plan)") in table
     own = run_benchmark(tmp_path / "v", store, own_template=True, overrides=TINY)
     assert "plan" not in own["rows"][0] and "plan" not in own["summary"]["full"]
+
+
+def test_kept_trials_are_those_within_the_margin_of_the_best_score():
+    from zooctl.fit.template import TRIAL_SEMANTIC_WEIGHT, kept_trials
+
+    assert kept_trials([0.80, 0.83, 0.70], [0.0, 0.0, 0.0], 0.05) == [0, 1]
+    assert kept_trials([0.80, 0.83, 0.70], [0.0, 0.0, 0.0], 0.0) == [1]
+    assert kept_trials([0.80, 0.83, 0.70], [0.0, 0.0, 0.0], 0.2) == [0, 1, 2]
+    # the semantic term counts as in pick_trial: a sure classifier keeps a lower trial IoU in
+    assert kept_trials([0.80, 0.83], [1.0, 0.0], 0.0) == [0] and TRIAL_SEMANTIC_WEIGHT > 0.03
+
+
+def _trial_cfg(**trials):
+    return FitConfig.from_dict(
+        {**json.loads(json.dumps(TINY)), "trials": {"candidates": 2, "iters": 2, **trials}}
+    )
+
+
+def test_trials_stopped_at_a_checkpoint_and_resumed_are_the_full_trials(tmp_path, store):
+    """With ``prune_at`` and no trial pruned, every trial pauses at the checkpoint and goes on from
+    there: the same trial IoUs, winner and state as trials run in one go, and the same full fit."""
+    import torch
+
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.run import fit_video
+    from zooctl.fit.template import try_candidates
+
+    bank, thin = _bank_with_views(store)
+    video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
+    runs = []
+    for cfg in (_trial_cfg(), _trial_cfg(prune_at=1, prune_margin=0.99)):
+        cands = [{"name": "fat", "score": -2.0}, {"name": "thin", "score": -1.0}]
+        asset, out, state = try_candidates(bank, video, cands, cfg)
+        runs.append((asset.name, out, state, fit_video(video, asset, cfg, resume=state)))
+    (name_a, out_a, state_a, fit_a), (name_b, out_b, state_b, fit_b) = runs
+    assert name_a == name_b == "thin"
+    assert [c["trial_iou"] for c in out_a] == [c["trial_iou"] for c in out_b]
+    assert not any("pruned_at" in c for c in out_b)
+    assert state_b["iteration"] == state_a["iteration"] == 2
+    assert state_b["history"] == state_a["history"]
+    assert all(torch.equal(state_a["scene"][k], state_b["scene"][k]) for k in state_a["scene"])
+    assert fit_a.history == fit_b.history and fit_a.camera_init == fit_b.camera_init
+    a, b = fit_a.scene.state_dict(), fit_b.scene.state_dict()
+    assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_a_clearly_worse_trial_stops_at_the_checkpoint(tmp_path, store, monkeypatch):
+    """A trial behind the best by more than ``prune_margin`` at ``prune_at`` runs no further; the
+    winner's trial goes on to ``trials.iters``, and the record says where the other stopped."""
+    import zooctl.fit.view_trial as view_trial
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.template import try_candidates
+
+    bank, thin = _bank_with_views(store)
+    video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
+    continued = []
+    real = view_trial.continue_trial
+    monkeypatch.setattr(
+        view_trial, "continue_trial", lambda v, a, *rest: continued.append(a.name) or real(v, a, *rest)
+    )
+    cands = [{"name": "fat", "score": -2.0}, {"name": "thin", "score": -1.0}]
+    asset, out, state = try_candidates(bank, video, cands, _trial_cfg(prune_at=1, prune_margin=0.0))
+    assert asset.name == "thin" and continued == ["thin"]
+    assert out[0]["pruned_at"] == 1 and "pruned_at" not in out[1]
+    assert out[1]["trial_iou"] > out[0]["trial_iou"]
+    assert state["iteration"] == 2 and len(state["history"]["stage2"]) == 2
+
+
+def test_a_trial_stopped_at_the_checkpoint_is_no_close_call():
+    cands = [{"name": "a", "trial_iou": 0.80}, {"name": "b", "trial_iou": 0.795, "pruned_at": 0}]
+    assert close_trials_note(cands, "a", "v") is None  # b's IoU is of fewer iterations
+    del cands[1]["pruned_at"]
+    assert close_trials_note(cands, "a", "v") is not None

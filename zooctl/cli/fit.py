@@ -192,7 +192,9 @@ def fit(
             "template candidates: "
             + ", ".join(
                 f"{escape(c['name'])} ({c['score']:.3f}"
-                + (f", trial IoU {c['trial_iou']:.3f})" if "trial_iou" in c else ")")
+                + (f", trial IoU {c['trial_iou']:.3f}" if "trial_iou" in c else "")
+                + (f" at iteration {c['pruned_at']}, stopped" if "pruned_at" in c else "")
+                + ")"
                 for c in rec["retrieval"][:5]
             ),
             highlight=False,

@@ -187,6 +187,19 @@ class TemplateTrials:
         minimum=0,
         exclusiveMaximum=1,
     )
+    # Successive halving: the trials all stop at a checkpoint, and those clearly behind there
+    # (their pick score, as the winner's, more than the margin below the best) go no further.
+    prune_at: int | None = spec(
+        None,
+        help="stage-2 iterations after which a trial whose score (trial mask IoU plus the semantic "
+        "term) is more than prune_margin below the best stops; the rest go on to iters. null: "
+        "every trial runs to iters",
+        required=False,
+        minimum=0,
+    )
+    prune_margin: float = spec(
+        0.05, help="how far below the best trial's score a trial stops at prune_at", required=False, minimum=0
+    )
 
 
 @dataclass

@@ -151,24 +151,45 @@ def try_candidates(
     stage-2 iterations of the configured schedule), paused, from the search's start (or its depth
     mirror with ``camera.mirror_trial`` ``always``: `zooctl.fit.view_trial`); the state returned continues the
     winner's fit exactly where its trial stopped (`fit_video`'s ``resume``). The winner is
-    `pick_trial`'s (``cfg.trials.margin``)."""
-    from .view_trial import mirror_wanted, trial_with_mirror
+    `pick_trial`'s (``cfg.trials.margin``). With ``cfg.trials.prune_at`` every trial first stops
+    there, and only those `kept_trials` keeps (``cfg.trials.prune_margin``) go on to
+    ``cfg.trials.iters`` and compete; the others' candidates get ``pruned_at`` beside the trial IoU
+    they stopped at. A depth-mirror check then compares at the checkpoint."""
+    from .view_trial import continue_trial, mirror_wanted, trial_with_mirror
 
     tried = candidates[: cfg.trials.candidates]
     if len(tried) < 2:
         return bank.get(candidates[0]["name"]), candidates, None
+    semantic = [float(c.get("semantic") or 0.0) for c in tried]
+    prune_at = cfg.trials.prune_at
+    first = cfg.trials.iters if prune_at is None else min(prune_at, cfg.trials.iters)
     trials = []  # (asset, trial IoU, paused state) in retrieval order
     mirror = mirror_wanted(cfg, template_given=False)
     for i, cand in enumerate(tried):
         if reporter is not None:
             reporter.message(f"trial fit {i + 1}/{len(tried)}: template {cand['name']}")
         asset = bank.get(cand["name"])
-        iou, paused, view = trial_with_mirror(video, asset, cfg, reporter, mirror=mirror)  # no checkpoints
+        iou, paused, view = trial_with_mirror(
+            video, asset, cfg, reporter, mirror=mirror, pause_at=first
+        )  # no checkpoints
         cand["trial_iou"] = round(iou, 4)
         cand["view_trial"] = view
         trials.append((asset, iou, paused))
-    semantic = [float(c.get("semantic") or 0.0) for c in tried]
-    best, best_iou, best_state = trials[pick_trial([t[1] for t in trials], cfg.trials.margin, semantic)]
+    on = list(range(len(tried)))  # the trials that go on to cfg.trials.iters
+    if first < cfg.trials.iters:
+        on = kept_trials([t[1] for t in trials], semantic, cfg.trials.prune_margin)
+        for i, cand in enumerate(tried):
+            asset, iou, paused = trials[i]
+            if i not in on:
+                cand["pruned_at"] = first  # its trial_iou is the one at the checkpoint
+                continue
+            if reporter is not None:
+                reporter.message(f"trial fit of {cand['name']} goes on to {cfg.trials.iters} iterations")
+            iou, paused = continue_trial(video, asset, cfg, paused, cfg.trials.iters, reporter)
+            cand["trial_iou"] = round(iou, 4)
+            trials[i] = (asset, iou, paused)
+    win = on[pick_trial([trials[i][1] for i in on], cfg.trials.margin, [semantic[i] for i in on])]
+    best, best_iou, best_state = trials[win]
     if reporter is not None:
         reporter.message(f"template {best.name}: trial mask IoU {best_iou:.3f}")
     if best_state is not None:
@@ -187,7 +208,8 @@ def close_trials_note(candidates: list[dict[str, Any]], chosen: str, source: str
     """A note for the user when another tried template's trial IoU is within `TRIAL_NOISE` of the
     chosen one's: the trials could not tell them apart, and the other may be the better animal
     (an input-view IoU says little about the sides the camera does not see)."""
-    tried = {c["name"]: c["trial_iou"] for c in candidates if "trial_iou" in c}
+    # a trial stopped at the checkpoint has an IoU of fewer iterations, and was behind there
+    tried = {c["name"]: c["trial_iou"] for c in candidates if "trial_iou" in c and "pruned_at" not in c}
     if chosen not in tried:
         return None
     close = [n for n, iou in tried.items() if n != chosen and abs(iou - tried[chosen]) <= TRIAL_NOISE]
@@ -199,6 +221,14 @@ def close_trials_note(candidates: list[dict[str, Any]], chosen: str, source: str
         f"within {TRIAL_NOISE}, the trials' own noise. Look at overlay.mp4's side view, and fit "
         f"the other with `zooctl fit {source} --template {close[0]}` if it is the better animal"
     )
+
+
+def kept_trials(ious: list[float], semantic: list[float], margin: float) -> list[int]:
+    """Indices of the trials whose score (as `pick_trial`'s: trial IoU plus `TRIAL_SEMANTIC_WEIGHT`
+    times the semantic score) is within ``margin`` of the best: those that go on past the
+    checkpoint (``trials.prune_at``)."""
+    score = [iou + TRIAL_SEMANTIC_WEIGHT * s for iou, s in zip(ious, semantic, strict=True)]
+    return [i for i, x in enumerate(score) if x >= max(score) - margin]
 
 
 def pick_trial(ious: list[float], margin: float = 0.0, semantic: list[float] | None = None) -> int:

@@ -51,16 +51,18 @@ def trial_with_mirror(
     reporter: Reporter | None = None,
     checkpoint: Callable[[dict[str, Any]], None] | None = None,
     mirror: bool = True,
+    pause_at: int | None = None,
 ) -> tuple[float, dict[str, Any] | None, dict[str, Any]]:
-    """The template's trial (`fit_video` paused after ``cfg.trials.iters`` stage-2 iterations)
-    and, when ``mirror`` and its start sees the animal from below, its depth mirror's (module
-    docstring).
+    """The template's trial (`fit_video` paused after ``pause_at`` stage-2 iterations, by default
+    ``cfg.trials.iters``) and, when ``mirror`` and its start sees the animal from below, its depth
+    mirror's, compared at that pause (module docstring).
 
     Returns (the kept trial's IoU, its paused state to continue from, what was tried: also
     stored in the state's ``camera_init["view_trial"]`` for fit.json). ``checkpoint``: as
     `fit_video`'s, for both trials (each is a fit that a resume can finish)."""
+    pause_at = cfg.trials.iters if pause_at is None else pause_at
     t = time.perf_counter()
-    search = fit_video(video, template, cfg, reporter, checkpoint, pause_at=cfg.trials.iters)
+    search = fit_video(video, template, cfg, reporter, checkpoint, pause_at=pause_at)
     search_s = time.perf_counter() - t
     iou = trial_iou(search)
     elevation = float(search.camera_init["elevation_deg"])
@@ -72,9 +74,7 @@ def trial_with_mirror(
                 f"the start sees {template.name} from below ({elevation:.0f} deg): trying its depth mirror"
             )
         t = time.perf_counter()
-        mirrored = fit_video(
-            video, template, cfg, reporter, checkpoint, pause_at=cfg.trials.iters, start="mirror"
-        )
+        mirrored = fit_video(video, template, cfg, reporter, checkpoint, pause_at=pause_at, start="mirror")
         mirror_s = time.perf_counter() - t
         m_iou = trial_iou(mirrored)
         info["trial_iou"] = {"search": round(iou, 4), "mirror": round(m_iou, 4)}
@@ -88,3 +88,17 @@ def trial_with_mirror(
     if state is not None:
         state["camera_init"] = dict(state["camera_init"], view_trial=info)
     return iou, state, info
+
+
+def continue_trial(
+    video: FitVideo,
+    template: RiggedAsset,
+    cfg: FitConfig,
+    state: dict[str, Any],
+    pause_at: int,
+    reporter: Reporter | None = None,
+) -> tuple[float, dict[str, Any] | None]:
+    """A paused trial (``state``) fitted on to ``pause_at`` stage-2 iterations and paused again:
+    (its trial IoU there, its state). The same fit as a trial paused there in one go."""
+    res = fit_video(video, template, cfg, reporter, resume=state, pause_at=pause_at)
+    return trial_iou(res), res.paused
