@@ -61,6 +61,9 @@ def one_thread():
 
 @pytest.fixture(autouse=True)
 def _quiet_env(monkeypatch):
+    from zooctl.paths import use_store
+
+    use_store(None)  # an earlier in-process CLI call's --store does not carry into this test
     monkeypatch.delenv("ZOOCTL_DEBUG", raising=False)
     monkeypatch.setenv("COLUMNS", "200")
     # `bank add` renders and embeds retrieval views (~2 s of CPU per asset); tests that need

@@ -6,6 +6,14 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+_chosen: Path | None = None  # the CLI's --store, for this process
+
+
+def use_store(path: Path | None) -> None:
+    """Make `default_store` answer ``path`` (the CLI's ``--store``); None: back to the defaults."""
+    global _chosen
+    _chosen = None if path is None else Path(path).expanduser()
+
 
 def _checkout_root() -> Path | None:
     """The zooctl source checkout this package runs from, if it is one (editable install)."""
@@ -16,6 +24,8 @@ def _checkout_root() -> Path | None:
 
 
 def default_store() -> Path:
+    if _chosen is not None:
+        return _chosen
     env = os.environ.get("ZOOCTL_STORE")
     if env:
         return Path(env).expanduser()

@@ -68,9 +68,11 @@ def main(
         False, "--version", callback=_version, is_eager=True, help="Print the version and exit."
     ),
 ) -> None:
+    from ..paths import use_store
     from ..store import fs
 
     state.store = store
+    use_store(store)  # model weights kept in the store (STORE/models) follow --store too
     if wait is not None:
         fs.set_lock_timeout(wait)
     fs.on_lock_wait = _tell_lock_wait
