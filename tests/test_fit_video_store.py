@@ -43,7 +43,7 @@ def test_fit_of_a_path_stores_the_video_once(davis_folder, store):
     assert rec2["stored_video"] == "tubecam" and videos.names() == ["tubecam"]  # reused, not re-added
     assert videos.path("tubecam").stat().st_mtime_ns == before
 
-    # Automatic masks (GrabCut from a first-frame box) for the same frames are another stored
+    # Automatic masks (the default segmenter from a first-frame box) for the same frames are another stored
     # video; the first one stays as it was, and the same request again reuses the second.
     ys, xs = np.nonzero(masks[0])
     box = (int(xs.min()) - 2, int(ys.min()) - 2, int(np.ptp(xs)) + 5, int(np.ptp(ys)) + 5)
@@ -51,7 +51,7 @@ def test_fit_of_a_path_stores_the_video_once(davis_folder, store):
     rec3 = fit_job(str(folder), store, tiny_fit_config(), name="c", **auto)
     assert rec3["stored_video"] == "tubecam-2" and videos.names() == ["tubecam", "tubecam-2"]
     assert fit_job(str(folder), store, tiny_fit_config(), name="c2", **auto)["stored_video"] == "tubecam-2"
-    assert videos.get("tubecam-2").segmenter["name"] == "grabcut"
+    assert videos.get("tubecam-2").segmenter["name"] == "animalnet"  # the default segmenter
     assert np.array_equal(videos.get("tubecam").masks, masks)
 
     # A stored video can be fitted by name.
@@ -59,7 +59,7 @@ def test_fit_of_a_path_stores_the_video_once(davis_folder, store):
     assert rec4["stored_video"] == "tubecam" and sorted(FitStore(store).names()) == ["a", "b", "c", "c2", "d"]
 
 
-def test_box_needs_grabcut(davis_folder, store):
+def test_box_needs_automatic_masks(davis_folder, store):
     asset, folder, _ = davis_folder
     Bank(store).add(asset)
     with pytest.raises(UsageError, match="--box"):

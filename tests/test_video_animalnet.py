@@ -152,3 +152,60 @@ def test_cli_trains_weights_the_segmenter_loads(tmp_path, capsys, monkeypatch):
     assert res["weights"] == str(path) and path.is_file()
     assert res["sources"]["procedural_animals"] == 2 and res["sources"]["bank_assets"] == []
     assert AnimalNet(path).info["config"]["steps"] == 3
+
+
+def test_weights_come_from_the_store_named_else_the_shipped_ones(tmp_path, capsys, monkeypatch):
+    from zooctl.paths import use_store
+    from zooctl.video.animalnet import SHIPPED_WEIGHTS, AnimalNet, weights_file
+
+    monkeypatch.delenv("ZOOCTL_ANIMALNET_WEIGHTS", raising=False)
+    monkeypatch.setenv("ZOOCTL_STORE", str(tmp_path / "empty"))
+    assert weights_file() == SHIPPED_WEIGHTS
+    info = AnimalNet().info  # the shipped weights say what they were made from
+    assert info["sources"]["bank_assets"] == [] and "no video frames" in info["sources"]["scenes"]
+    # `segment train` into the store named by --store: that store's weights are used from then on
+    other = tmp_path / "other"
+    args = ("--store", str(other), "segment", "train", "--samples", "10", "--steps", "2", "--procedural", "2")
+    assert run_inprocess(capsys, *args, "--no-bank", "--json").code == 0
+    use_store(other)
+    assert weights_file() == other / "models" / "animalnet.npz"
+
+
+def test_motion_contrast_tells_a_moving_region_from_the_still_ground():
+    from zooctl.video.animalnet import motion_contrast
+
+    residual = np.zeros((60, 80), np.float32)
+    residual[20:40, 30:50] = 3.0  # a region moving against the camera
+    moving = np.zeros((60, 80), bool)
+    moving[20:40, 30:50] = True
+    still = np.zeros((60, 80), bool)
+    still[5:15, 5:25] = True
+    assert motion_contrast(moving, residual) == pytest.approx(3.0)
+    assert motion_contrast(still, residual) == pytest.approx(0.0)
+    assert motion_contrast(np.zeros((60, 80), bool), residual) == 0.0  # no region, no claim
+
+
+def test_a_tracker_lost_on_the_ground_gives_way_to_the_animal_the_network_sees_moving(animals):
+    """With the shipped weights, on synthetic composites (camera panning, the animal moving): masks
+    held on a patch of still ground are replaced by the network's animal where it finds one, and masks
+    on the animal itself are never replaced."""
+    from zooctl.benchdata.composites import composite
+    from zooctl.video.animalnet import AnimalNetSegmenter
+    from zooctl.video.flow import DISFlow, compute_video_flow
+
+    seg = AnimalNetSegmenter(relabel=False)
+    replaced, found = [], []
+    for seed in range(6):
+        s = composite(animals, np.random.default_rng(seed), (320, 240))
+        flow = compute_video_flow(DISFlow("medium"), s.frames)
+        truth = np.stack([s.mask, s.mask])
+        seg.decide_video(s.frames, truth, flow)
+        assert not seg.report["animalnet"]["network_replaced_tracker"], seed
+        lost = np.zeros_like(truth)
+        lost[:, 10:60, 10:80] = True
+        lost &= ~truth
+        got = np.asarray(seg.decide_video(s.frames, lost, flow), bool)
+        if seg.report["animalnet"]["network_replaced_tracker"]:
+            replaced.append(seed)
+            found.append(iou(got[0], s.mask))
+    assert len(replaced) >= 2 and min(found) > 0.5, (replaced, found)

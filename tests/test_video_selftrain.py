@@ -102,7 +102,7 @@ def test_a_leak_and_a_dropped_part_are_repaired_from_what_the_video_teaches(synt
         prior[i][y + 4 : y + h - 4, x + w - 4 : x + w + 18] = True
         prior[i][:, x : x + w // 4] = False
     seg = SelfTrainedSegmenter(feature_width=128, feature_every=1)
-    out = seg._relabel(frames, prior, flow, lambda d: None)
+    out = seg.relabel(frames, prior, flow, lambda d: None)
     assert out.shape == truth.shape and out.dtype == bool
     for i in (6, 7, 8):
         assert iou(prior[i], truth[i]) < 0.6 and iou(out[i], truth[i]) > 0.75, (i, iou(out[i], truth[i]))
@@ -110,6 +110,10 @@ def test_a_leak_and_a_dropped_part_are_repaired_from_what_the_video_teaches(synt
     info = seg.report["self_training"]
     assert info["animal_cells"] > 0 and info["background_cells"] > info["animal_cells"]
     assert info["frames_looked_at"] == 10
+    # a frame the tracker left empty (the animal out of frame) stays empty: nothing is made up there
+    prior[4] = False
+    out = seg.relabel(frames, prior, flow, lambda d: None)
+    assert not out[4].any() and iou(out[3], truth[3]) > 0.95
 
 
 def test_selftrain_through_the_segmenter_hook(synthetic):

@@ -210,7 +210,7 @@ def test_cli_end_to_end(store, synthetic_folder, tmp_path, capsys):
     assert (
         set(rows) == {"syn", "syn-mp4", "auto"}
         and rows["auto"]["frames"] == 3
-        and rows["auto"]["segmenter"] == "grabcut"
+        and rows["auto"]["segmenter"] == "animalnet"
     )
     preview = tmp_path / "prev.mp4"
     r = run_inprocess(capsys, "video", "show", "syn", "--preview", str(preview), "--json")

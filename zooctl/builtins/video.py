@@ -76,8 +76,9 @@ def register_segmenters(register):
             "segmenter",
             "animalnet",
             _animalnet,
-            "grabcut, then a network trained on synthetic animals (`zooctl segment train`; EfficientNet-Lite0 "
-            "features + motion) decides every frame again; CPU, weights from the store or weights=PATH",
+            "the default: grabcut, checked by a network trained on synthetic animals (EfficientNet-Lite0 features + "
+            "motion; replaces a tracker lost on the background), then relabelled per video as selftrain; CPU, "
+            "shipped weights (procedural animals only), the store's from `zooctl segment train`, or weights=PATH",
         )
     )
     register(

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import typer
@@ -68,7 +67,7 @@ def add(
     segmenter: str = typer.Option(
         None,
         "--segmenter",
-        help="masks | grabcut | selftrain | animalnet | onnx | a plugin's (default: masks when given, else grabcut).",
+        help="masks | animalnet | grabcut | selftrain | onnx | a plugin's (default: masks when given, else animalnet).",
     ),
     box: str = typer.Option(
         None,
@@ -119,12 +118,6 @@ def add(
     from ..video.ingest import AddOptions, add_video, parse_box
 
     seg_opts = _parse_options(seg_option, "--seg-option")
-    if (
-        segmenter == "animalnet"
-        and "weights" not in seg_opts
-        and not os.environ.get("ZOOCTL_ANIMALNET_WEIGHTS")
-    ):
-        seg_opts["weights"] = store_root() / "models" / "animalnet.npz"  # this store's, as --store names it
     if model is not None:
         seg_opts["model"] = model
         segmenter = segmenter or "onnx"

@@ -183,20 +183,23 @@ def plan_stored_video(
     already from the same file with the same masks, else ``(a free name, False, opts)`` with the
     `zooctl.video.ingest.AddOptions` to preprocess it. ``taken``: names reserved besides the store's."""
     from ..store.videos import VideoStore
-    from ..video.ingest import AddOptions, default_name
+    from ..video.ingest import DEFAULT_SEGMENTER, AddOptions, default_name
 
     opts = AddOptions(box=box)
     if masks == "auto":
-        opts.segmenter = "grabcut"
+        opts.segmenter = DEFAULT_SEGMENTER
     elif masks is not None:
         mp = Path(masks).expanduser()
         if not mp.exists():
             raise InputError(f"--masks {masks}: no such folder or video", hint="give mask images, or 'auto'")
         opts.masks = mp
     has_annotations = path.is_dir() and (path / "Annotations").is_dir()
-    segmenter = "masks" if opts.masks is not None or (has_annotations and masks is None) else "grabcut"
-    if box is not None and segmenter != "grabcut":
-        raise UsageError("--box seeds GrabCut: use it with --masks auto (or a video without masks)")
+    automatic = opts.masks is None and not (has_annotations and masks is None)
+    segmenter = DEFAULT_SEGMENTER if automatic else "masks"
+    if box is not None and not automatic:
+        raise UsageError(
+            "--box seeds the automatic masks: use it with --masks auto (or a video without masks)"
+        )
     # What the masks segmenter records as its source: the mask folder, or the DAVIS folder itself.
     wanted_masks = str((opts.masks or path).resolve()) if segmenter == "masks" else None
     vs = VideoStore.open(store_root)
@@ -224,18 +227,16 @@ def _same_video(
         return False
     if segmenter == "masks":
         return seg.get("options", {}).get("path") == masks
-    if segmenter == "grabcut":
-        from ..video.ingest import scale_box
+    from ..video.ingest import scale_box
 
-        stored_box = seg.get("box")
-        if (stored_box is None) != (box is None):
-            return False
-        if box is None:
-            return True
-        original = (int(rec.source.get("original_width", 0)), int(rec.source.get("original_height", 0)))
-        scaled = scale_box(box, original, (int(summary["width"]), int(summary["height"])))
-        return bool(np.allclose(scaled, stored_box, atol=1))
-    return True
+    stored_box = seg.get("box")  # automatic masks: the same box hint, or none on both
+    if (stored_box is None) != (box is None):
+        return False
+    if box is None:
+        return True
+    original = (int(rec.source.get("original_width", 0)), int(rec.source.get("original_height", 0)))
+    scaled = scale_box(box, original, (int(summary["width"]), int(summary["height"])))
+    return bool(np.allclose(scaled, stored_box, atol=1))
 
 
 def fit_job(

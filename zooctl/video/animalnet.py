@@ -10,7 +10,9 @@ width, squashed). Output: the log-odds that the cell is an animal, from a head o
 
 Weights (``.npz``): the head's convolutions, the input standardisation and projection, and ``info`` (JSON: the
 feature width, what the weights were trained on and its licence). Loaded from the path given,
-else ``ZOOCTL_ANIMALNET_WEIGHTS``, else ``STORE/models/animalnet.npz``.
+else ``ZOOCTL_ANIMALNET_WEIGHTS``, else ``STORE/models/animalnet.npz`` when `zooctl segment train`
+made it, else the shipped ones (``weights/animalnet.npz``: procedural animals only, see
+``weights/README.md``).
 """
 
 from __future__ import annotations
@@ -44,9 +46,16 @@ def default_weights() -> Path:
     return default_store() / "models" / "animalnet.npz"
 
 
+SHIPPED_WEIGHTS = Path(__file__).resolve().parent / "weights" / "animalnet.npz"
+
+
 def weights_file(weights: str | Path | None = None) -> Path:
-    """The weights to load: the argument, ZOOCTL_ANIMALNET_WEIGHTS, else `default_weights`."""
-    p = Path(weights or os.environ.get("ZOOCTL_ANIMALNET_WEIGHTS") or default_weights()).expanduser()
+    """The weights to load: the argument, else ZOOCTL_ANIMALNET_WEIGHTS, else the store's
+    (`default_weights`) when trained there, else the shipped ones (``weights/README.md``)."""
+    chosen = weights or os.environ.get("ZOOCTL_ANIMALNET_WEIGHTS")
+    if chosen is None:
+        return default_weights() if default_weights().is_file() else SHIPPED_WEIGHTS
+    p = Path(chosen).expanduser()
     if not p.is_file():
         raise InputError(
             f"animalnet weights {p} do not exist",
@@ -58,12 +67,17 @@ def weights_file(weights: str | Path | None = None) -> Path:
 def motion_grid(flow: np.ndarray | None, grid: tuple[int, int]) -> np.ndarray:
     """(H, W, 2) flow of a frame (or None: no motion known) -> (gh, gw) float32 in [0, 1): the
     motion the camera does not explain, in hundredths of the frame's width, squashed by tanh(x/2)."""
-    gh, gw = grid
     if flow is None:
         return np.zeros(grid, np.float32)
     from .cues import background_motion_residual
 
-    r = background_motion_residual(np.ascontiguousarray(flow, np.float32)) * (100.0 / flow.shape[1])
+    return residual_grid(background_motion_residual(np.ascontiguousarray(flow, np.float32)), grid)
+
+
+def residual_grid(residual: np.ndarray, grid: tuple[int, int]) -> np.ndarray:
+    """(H, W) pixels of motion the camera does not explain -> `motion_grid`'s (gh, gw) input."""
+    gh, gw = grid
+    r = residual * (100.0 / residual.shape[1])
     return np.tanh(cv2.resize(r, (gw, gh), interpolation=cv2.INTER_AREA) / 2.0).astype(np.float32)
 
 
@@ -73,6 +87,21 @@ def frame_inputs(net, frame: np.ndarray, flow: np.ndarray | None) -> np.ndarray:
     feats, cam = net.features(frame)
     motion = motion_grid(flow, cam.shape)
     return np.concatenate([feats, cam[..., None], motion[..., None]], -1)
+
+
+def motion_contrast(mask: np.ndarray, residual: np.ndarray) -> float:
+    """How much more a region moves against the camera than what lies around it: the median of
+    ``residual`` (H, W) inside ``mask`` (H, W) bool minus its median in a ring around the mask (0.15
+    of the region's size wide, at least 3 pixels); 0 for a region under 20 pixels."""
+    area = int(mask.sum())
+    if area < 20:
+        return 0.0
+    r = max(int(0.15 * np.sqrt(area)), 3)
+    grown = cv2.dilate(mask.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1,) * 2))
+    ring = (grown > 0) & ~mask
+    if not ring.any():
+        return 0.0
+    return float(np.median(residual[mask]) - np.median(residual[ring]))
 
 
 def _conv(x: np.ndarray, w: np.ndarray, b: np.ndarray, dilation: int) -> np.ndarray:
@@ -132,17 +161,27 @@ class AnimalNet:
 
 class AnimalNetSegmenter:
     """``segment(frames, box, progress, flow, box_frame) -> (T, H, W) bool``: the `grabcut` tracker's
-    masks decided again with the network's evidence.
+    masks, checked and decided again with the network, then learned per video as `selftrain` does.
 
-    Every ``feature_every``-th frame (and the last) the network gives each cell's log-odds that an
-    animal is there (the frames between: their neighbours' carried along the flow, as `selftrain`
-    does); per pixel at the tracker's working size, the animal's log-odds are ``net_weight`` x the
-    network's where it sees an animal (and where it sees none too, with ``erase``) plus
-    ``prior_weight`` inside the tracked mask (minus it outside), and the connected part over even odds
-    that holds the most probability is the animal. Without ``erase`` the network can add what the
-    tracker lost but not remove what it holds (a large animal unlike any it was trained on). ``weights``: the head's ``.npz``
-    (`weights_file`). Other options go to the tracker (`zooctl.video.grabcut.GrabCutTracker`).
-    ``report``: the tracker's, with ``animalnet`` added (weights, share of mask pixels changed).
+    1. The tracker (`zooctl.video.grabcut.GrabCutTracker`) gives every frame a mask.
+    2. Every ``feature_every``-th frame (and the last) the network gives each cell's log-odds that an
+       animal is there, and its main animal (`zooctl.video.selftrain.main_animal`).
+    3. A tracker that has slid onto the background keeps a region that moves with the camera, while
+       the animal it lost moves against it: when, over the frames looked at, the median of the
+       network's animal's `motion_contrast` minus the tracked mask's exceeds ``switch_motion``
+       hundredths of the frame's width, the network's animal replaces the tracker's masks on every
+       frame (the frames between looks then looked at too). ``switch_motion`` < 0: never.
+    4. Otherwise the tracked masks stand, or with ``net_weight`` > 0 are decided again from
+       ``net_weight`` x the network's log-odds where it sees an animal (everywhere with ``erase``)
+       plus ``prior_weight`` inside the tracked mask (minus it outside).
+    5. With ``relabel``, `selftrain`'s per-video classifier and colour model, taught by those masks,
+       decide every frame again (`SelfTrainedSegmenter.relabel`, on the features step 2 computed;
+       ``relabel_options``: its ``band``, ``deep_weight``, ``prior_weight`` (here 1 by default,
+       chosen on the shared videos with the leave-one-out estimate beside it: BENCHMARKS.md), ...).
+
+    ``weights``: the head's ``.npz`` (`weights_file`). Other options go to the tracker.
+    ``report``: the tracker's, with ``animalnet`` added (weights, the motion margin measured, whether
+    the network's masks replaced the tracker's, share of mask pixels changed).
     """
 
     name = "animalnet"
@@ -151,8 +190,11 @@ class AnimalNetSegmenter:
     def __init__(
         self,
         weights: str | Path | None = None,
-        feature_every: int = 1,
-        net_weight: float = 1.0,
+        feature_every: int = 3,
+        switch_motion: float = 0.5,
+        relabel: bool = True,
+        relabel_options: dict | None = None,
+        net_weight: float = 0.0,
         prior_weight: float = 2.0,
         erase: bool = False,
         **tracker_options,
@@ -165,6 +207,9 @@ class AnimalNetSegmenter:
         self.net = AnimalNet(weights)  # before the slow part: missing weights are refused at once
         self.tracker = GrabCutTracker(**tracker_options)
         self.feature_every = feature_every
+        self.switch_motion = switch_motion
+        self.relabel = relabel
+        self.relabel_options = {"prior_weight": 1.0, **(relabel_options or {})}
         self.net_weight = net_weight
         self.prior_weight = prior_weight
         self.erase = erase
@@ -175,61 +220,152 @@ class AnimalNetSegmenter:
         """(w, h) the tracker (and this segmenter) works at: the flow it reads, at that size."""
         return self.tracker.flow_size(w, h)
 
+    def _feature_net(self):
+        from .selftrain import FeatureNet
+
+        if self._features is None:
+            self._features = FeatureNet(int(self.net.info.get("feature_width", FEATURE_WIDTH)))
+        return self._features
+
+    def look(self, frame: np.ndarray, motion: np.ndarray) -> tuple[np.ndarray, tuple, np.ndarray]:
+        """One (h, w, 3) frame at the working size and its (h, w, 2) flow to a neighbour -> ((h, w)
+        network log-odds, the frame's `FeatureNet.features`, (h, w) residual motion in pixels)."""
+        from .cues import background_motion_residual
+        from .selftrain import grid_to_pixels
+
+        h, w = frame.shape[:2]
+        fnet = self._feature_net()
+        feats, cam = fnet.features(frame)
+        residual = background_motion_residual(np.ascontiguousarray(motion, np.float32))
+        inputs = np.concatenate([feats, cam[..., None], residual_grid(residual, cam.shape)[..., None]], -1)
+        grid = self.net.logits(inputs)
+        return grid_to_pixels(grid, w, h, fnet.input_size(w, h)), (feats, cam), residual
+
     def evidence(self, frames, flow, progress=None) -> np.ndarray:
-        """(T, h, w) float32 network log-odds at the flow's size for (T, H, W, 3) frames; ``flow``
-        a `zooctl.video.flow.VideoFlow` at the working size."""
+        """(T, h, w) float32 network log-odds at the flow's size for (T, H, W, 3) frames (every
+        ``feature_every``-th looked at; the frames between carried along the
+        flow); ``flow`` a `zooctl.video.flow.VideoFlow` at the working size."""
         from .scratch import working
-        from .selftrain import FeatureNet, carry_between, grid_to_pixels
+        from .selftrain import carry_between
 
         t = len(frames)
         h, w = flow.forward.shape[1:3]
-        if self._features is None:
-            self._features = FeatureNet(int(self.net.info.get("feature_width", FEATURE_WIDTH)))
         looked = sorted(set(range(0, t, self.feature_every)) | {t - 1})
         out = working(frames, t, (h, w), np.float32)
         for k, i in enumerate(looked):
             frame = frames[i]
             if frame.shape[:2] != (h, w):
                 frame = cv2.resize(frame, (w, h), interpolation=cv2.INTER_AREA)
-            motion = flow.forward[i] if i < t - 1 else -np.asarray(flow.backward[i - 1])
-            grid = self.net.logits(frame_inputs(self._features, frame, motion))
-            out[i] = grid_to_pixels(grid, w, h, self._features.input_size(w, h))
+            out[i] = self.look(frame, _motion(flow, i, t))[0]
             if progress:
                 progress(k + 1, len(looked))
-        carry_between(out, looked, flow)
+        if len(looked) < t:
+            carry_between(out, looked, flow)
         return out
 
     def decide(self, evidence: np.ndarray, tracked: np.ndarray) -> np.ndarray:
-        """(h, w) network log-odds and (h, w) bool tracked mask -> (h, w) bool mask."""
+        """(h, w) network log-odds and (h, w) bool tracked mask -> (h, w) bool mask (step 4)."""
         from .selftrain import main_animal
 
+        if self.net_weight <= 0:
+            return tracked
         prior = np.where(tracked, self.prior_weight, -self.prior_weight)
         net = evidence if self.erase else np.maximum(evidence, 0.0)
         return main_animal(self.net_weight * net + prior)
+
+    def decide_video(self, small, tracked, flow, progress=None) -> np.ndarray:
+        """Steps 2-5 on (T, h, w, 3) frames and (T, h, w) bool tracked masks at the working size and
+        their flow -> (T, h, w) bool masks; sets ``report["animalnet"]``."""
+        from .scratch import working
+        from .selftrain import SelfTrainedSegmenter, carry_between, main_animal
+
+        t, h, w = small.shape[:3]
+        looked = sorted(set(range(0, t, self.feature_every)) | {t - 1})
+        ev = working(small, t, (h, w), np.float32)
+        seen: dict[int, tuple] = {}
+        margins = []
+        for k, i in enumerate(looked):
+            ev[i], f, residual = self.look(small[i], _motion(flow, i, t))
+            seen[i] = (f[0].astype(np.float16), f[1])  # float16: as `relabel` keeps them
+            animal = main_animal(ev[i])
+            margins.append(
+                motion_contrast(animal, residual) - motion_contrast(np.asarray(tracked[i], bool), residual)
+                if animal.any()
+                else -np.inf
+            )
+            if progress:
+                progress(k + 1, 2 * len(looked))
+        margin = float(np.median(margins)) * 100.0 / w
+        switched = self.switch_motion >= 0 and margin > self.switch_motion
+        prior = working(small, t, (h, w), bool)
+        if switched:
+            for i in range(t):
+                if i not in seen:
+                    ev[i] = self.look(small[i], _motion(flow, i, t))[0]
+                prior[i] = main_animal(ev[i])
+        else:
+            if self.net_weight > 0 and len(looked) < t:
+                carry_between(ev, looked, flow)
+            for i in range(t):
+                prior[i] = self.decide(ev[i], np.asarray(tracked[i], bool))
+        masks = prior
+        if self.relabel:
+            fnet = self._feature_net()
+            learner = SelfTrainedSegmenter(
+                **{**self.relabel_options, "feature_width": fnet.width, "feature_every": self.feature_every}
+            )
+            relabelled = learner.relabel(
+                small,
+                prior,
+                flow,
+                (lambda d: progress(len(looked) + d * len(looked) // max(t, 1), 2 * len(looked)))
+                if progress
+                else (lambda d: None),
+                seen=seen,
+                net=fnet,
+            )
+            if relabelled is not None:
+                masks = relabelled
+        changed = sum(int((np.asarray(masks[i]) != np.asarray(tracked[i], bool)).sum()) for i in range(t))
+        total = sum(int(np.asarray(tracked[i], bool).sum()) for i in range(t))
+        self.report["animalnet"] = {
+            "weights": str(self.net.path),
+            "motion_margin": round(margin, 3) if np.isfinite(margin) else None,
+            "network_replaced_tracker": bool(switched),
+            "relabelled": bool(self.relabel),
+            "changed": round(changed / max(total, 1), 4),
+        }
+        return masks
 
     def segment(self, frames, box=None, progress=None, flow=None, box_frame: int = 0) -> np.ndarray:
         """(T, H, W, 3) uint8 RGB frames, optional box on frame ``box_frame`` -> (T, H, W) bool masks."""
         from .scratch import working
         from .selftrain import at_frame_size, track
 
-        t = len(frames)
+        t, fh, fw = frames.shape[:3]
         flow, tracked = track(self.tracker, frames, box, progress, flow, box_frame, "animalnet")
         sh, sw = flow.forward.shape[1:3]
         self.report = dict(self.tracker.report)
-        evidence = self.evidence(
-            frames, flow, (lambda d, n: progress(t + d * t // n, 2 * t)) if progress else None
-        )
-        out = working(frames, t, (sh, sw), bool)
-        changed = total = 0
+        small = working(frames, t, (sh, sw, 3), np.uint8)
+        prior = working(frames, t, (sh, sw), bool)
         for i in range(t):
+            small[i] = (
+                frames[i]
+                if (fh, fw) == (sh, sw)
+                else cv2.resize(frames[i], (sw, sh), interpolation=cv2.INTER_AREA)
+            )
             m = np.asarray(tracked[i], bool)
-            if m.shape != (sh, sw):
-                m = cv2.resize(m.astype(np.float32), (sw, sh), interpolation=cv2.INTER_AREA) > 0.5
-            out[i] = self.decide(evidence[i], m)
-            changed += int((out[i] != m).sum())
-            total += int(m.sum())
-        self.report["animalnet"] = {
-            "weights": str(self.net.path),
-            "changed": round(changed / max(total, 1), 4),
-        }
-        return at_frame_size(out, frames)
+            prior[i] = (
+                m
+                if m.shape == (sh, sw)
+                else cv2.resize(m.astype(np.float32), (sw, sh), interpolation=cv2.INTER_AREA) > 0.5
+            )
+        masks = self.decide_video(
+            small, prior, flow, (lambda d, n: progress(t + d * t // n, 2 * t)) if progress else None
+        )
+        return at_frame_size(masks, frames)
+
+
+def _motion(flow, i: int, t: int) -> np.ndarray:
+    """Frame ``i``'s flow to a neighbour: forward, or for the last frame the backward flow reversed."""
+    return flow.forward[i] if i < t - 1 else -np.asarray(flow.backward[i - 1])

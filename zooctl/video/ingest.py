@@ -63,6 +63,9 @@ def default_name(path: Path) -> str:
 # BUDGET_FRAMES frames; a longer one one frame in k (the least k that brings the rate to at most
 # BUDGET_FPS) and its first BUDGET_SECONDS. 15 fps still samples a trot's stride (2-3 Hz) five
 # times or more; 300 frames keep a fit to minutes on a CPU (its time grows with the frames).
+# The automatic segmenter when neither --segmenter nor masks are given: the one that wins on the
+# shared real videos with its settings chosen leave-one-video-out (BENCHMARKS.md, Video store).
+DEFAULT_SEGMENTER = "animalnet"
 BUDGET_FRAMES = 300
 BUDGET_FPS = 15.0
 BUDGET_SECONDS = 20.0
@@ -229,7 +232,12 @@ def ingest(
             if "box_frame" not in inspect.signature(segmenter.segment).parameters:
                 raise UsageError(f"the {seg_name} segmenter takes its box on the first frame only")
             kwargs["box_frame"] = opts.box_frame
-        masks = segmenter.segment(writer.frames, **kwargs)
+        from threadpoolctl import threadpool_limits
+
+        # The segmenters' numpy networks multiply small matrices one frame at a time: a second BLAS
+        # thread gains little and, on a busy machine, spins (BENCHMARKS.md, Video store).
+        with threadpool_limits(1, user_api="blas"):
+            masks = segmenter.segment(writer.frames, **kwargs)
         if not hasattr(masks, "shape"):
             masks = np.asarray(masks, dtype=bool)
         if tuple(masks.shape) != (t, h, w):
@@ -391,7 +399,7 @@ def _choose_segmenter(path: Path, opts: AddOptions) -> tuple[str, dict[str, Any]
         return "masks", seg_opts
     has_annotations = path.is_dir() and (path / "Annotations").is_dir()
     if opts.segmenter is None:
-        return ("masks" if has_annotations else "grabcut"), seg_opts
+        return ("masks" if has_annotations else DEFAULT_SEGMENTER), seg_opts
     if opts.segmenter == "masks" and not has_annotations:
         raise UsageError(
             "the masks segmenter needs masks", hint="pass --masks DIR|VIDEO (or a folder with Annotations/)"

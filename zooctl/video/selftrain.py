@@ -18,7 +18,8 @@ frame again with that knowledge:
    every frame): nothing but the video itself is learned from, so no weights ship;
 4. every frame gets the classifier's log-odds (frames between two looks: their neighbours' carried
    along the flow), plus the colour model's, plus a prior for the tracker's own mask; the
-   connected part over even odds that holds the most probability is the animal.
+   connected part over even odds that holds the most probability is the animal. A frame the tracker
+   left empty (the animal hidden or out of frame) stays empty.
 
 What it does not do: a mask that has slid off the animal onto the background for many frames
 teaches the classifier that background, and is kept (measured in BENCHMARKS.md, Video store).
@@ -276,20 +277,23 @@ class SelfTrainedSegmenter:
                 if (sw, sh) == (w, h)
                 else cv2.resize(m.astype(np.float32), (sw, sh), interpolation=cv2.INTER_AREA) > 0.5
             )
-        masks = self._relabel(small, prior, flow, lambda d: progress(t + d, 2 * t) if progress else None)
+        masks = self.relabel(small, prior, flow, lambda d: progress(t + d, 2 * t) if progress else None)
         if masks is None:  # nothing sure to learn from: the tracker's masks stand
             return tracked
         return at_frame_size(masks, frames)
 
     # -- the steps --------------------------------------------------------------------------------
 
-    def _relabel(self, frames, prior, flow, progress: Callable[[int], None]):
+    def relabel(self, frames, prior, flow, progress: Callable[[int], None], seen=None, net=None):
         """Frames and tracked masks at the working size -> new masks (T, h, w) bool, or None when the
-        tracked masks hold no sure animal pixel."""
+        tracked masks hold no sure animal pixel. ``seen``: {frame index: `FeatureNet.features` of
+        that frame} already computed by ``net`` (a `FeatureNet` of this ``feature_width``), reused."""
         t, h, w = frames.shape[:3]
-        if self._net is None or self._net.width != self.feature_width:
-            self._net = FeatureNet(self.feature_width)
-        net = self._net
+        seen = seen or {}
+        if net is None or net.width != self.feature_width:
+            if self._net is None or self._net.width != self.feature_width:
+                self._net = FeatureNet(self.feature_width)
+            net, seen = self._net, {}
         looked = sorted(set(range(0, t, self.feature_every)) | {t - 1})
         looked_at = {i: k for k, i in enumerate(looked)}
         iw, ih = net.input_size(w, h)
@@ -306,7 +310,7 @@ class SelfTrainedSegmenter:
         for i in range(t):
             mask = np.asarray(prior[i], bool)
             if i in looked_at:
-                f, animal = net.features(frames[i])
+                f, animal = seen[i] if i in seen else net.features(frames[i])
                 if feats is None:
                     feats = working(frames, len(looked), (*grid, f.shape[-1]), np.float16)
                 feats[looked_at[i]] = f
@@ -359,6 +363,10 @@ class SelfTrainedSegmenter:
         changed = 0
         for i in range(t):
             p = np.asarray(prior[i], bool)
+            if not p.any():  # the teacher saw no animal here (hidden, or out of frame): none is made up
+                out[i] = False
+                progress(t // 2 + t * (i + 1) // (2 * t))
+                continue
             logit = (
                 self.deep_weight * deep[i]
                 + colour[bins[i]]
