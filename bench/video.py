@@ -3,7 +3,8 @@
     .venv/bin/python bench/video.py                      # quality and throughput
     .venv/bin/python bench/video.py --part quality       # J per video, grid chosen leave-one-out
     .venv/bin/python bench/video.py --part quality --segmenter selftrain  # and the learned segmenter
-    .venv/bin/python bench/video.py --part quality --segmenter animalnet --weights W.npz  # zooctl segment train's
+    .venv/bin/python bench/video.py --part quality --segmenter animalnet  # the default; --weights W.npz: other weights
+    .venv/bin/python bench/video.py --part hard          # panning off the animal, every third frame
     .venv/bin/python bench/video.py --part throughput --repeats 3
     .venv/bin/python bench/video.py --part quality --seg-option key_every=5 --flow-size 480  # variants
     .venv/bin/python bench/video.py --part length --lengths 5,20,60 --repeats 1   # `video add` by length
@@ -450,7 +451,7 @@ def _value(text: str):
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--part", choices=("all", "quality", "throughput", "length"), default="all")
+    ap.add_argument("--part", choices=("all", "quality", "hard", "throughput", "length"), default="all")
     ap.add_argument("--lengths", default="5,20,60", help="clip lengths in seconds for --part length")
     ap.add_argument("--fit", action="store_true", help="length part: also `zooctl fit CLIP` once per length")
     ap.add_argument(
@@ -507,7 +508,10 @@ def main() -> None:
         "needs --weights) also runs that learned segmenter and its grid",
     )
     ap.add_argument(
-        "--weights", type=Path, default=None, help="animalnet weights .npz (zooctl segment train)"
+        "--weights",
+        type=Path,
+        default=None,
+        help="animalnet weights .npz (zooctl segment train; default: the shipped ones)",
     )
     ap.add_argument(
         "--seg-option", action="append", default=[], metavar="K=V", help="grabcut option to measure"
@@ -549,8 +553,6 @@ def main() -> None:
                 "video_selftrain", args.sequences.split(","), args.max_size, args.preset, args.out, cache
             )
         if args.sequences and args.segmenter == "animalnet":
-            if args.weights is None:
-                sys.exit("--segmenter animalnet needs --weights W.npz (from `zooctl segment train`)")
             print("quality of animalnet (no box; its weights chosen leave-one-out):", file=sys.stderr)
             report["animalnet"] = learned_quality(
                 "video_animalnet",
@@ -574,6 +576,31 @@ def main() -> None:
             )
             print(f"  mean J, no box: {c['no_box']['mean_J']:.3f}", file=sys.stderr)
         (args.out / "quality.json").write_text(json.dumps(report, indent=1))
+    if args.part == "hard" and args.sequences:
+        import video_hard
+
+        from zooctl.video.decode import decode
+
+        def load(seq):
+            dv = decode(VIDEOS / seq, max_size=args.max_size)
+            return dv.frames, load_truth(seq, dv.frames.shape)
+
+        args.out.mkdir(parents=True, exist_ok=True)
+        print("hard cases made from the shared videos (grabcut and the default animalnet):", file=sys.stderr)
+        report["hard"] = video_hard.run(
+            args.sequences.split(","),
+            load,
+            cache,
+            SEG_OPTIONS,
+            args.preset,
+            FLOW_SIZE,
+            args.out,
+            args.weights,
+        )
+        text = video_hard.table(report["hard"])
+        (args.out / "hard.md").write_text(text)
+        (args.out / "hard.json").write_text(json.dumps(report["hard"], indent=1))
+        print(text, file=sys.stderr)
     if args.part in ("all", "throughput"):
         print(f"throughput ({args.throughput_sequence}, median of {args.repeats}):", file=sys.stderr)
         report["throughput"] = throughput(

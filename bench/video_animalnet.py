@@ -63,11 +63,12 @@ def run(sequences, load, cache, base: dict, preset, flow_size, out: Path, weight
     from video_quality import _save, curve_plot, overlay_sheet, say, scored, segmenter_flow
     from video_quality import segment_video as grabcut_video
 
-    from zooctl.video.animalnet import AnimalNetSegmenter
+    from zooctl.video.animalnet import AnimalNetSegmenter, weights_file
     from zooctl.video.flow import VideoFlow
     from zooctl.video.grabcut import resize_flows
     from zooctl.video.selftrain import main_animal
 
+    weights = weights_file(weights)
     seg = AnimalNetSegmenter(weights, **base)
     source = _digest(REPO / "zooctl" / "video" / "animalnet.py") + _digest(Path(weights))
     results: dict = {}

@@ -1,0 +1,114 @@
+"""Hard cases made from the shared real videos, `grabcut` against the default `animalnet`; used by
+``bench/video.py --part hard``.
+
+Each of the seven DAVIS videos (with its ground truth) becomes:
+
+- ``pan``: a window half the frame's width pans at constant speed from around the animal on the
+  first frame to the far side of the frame, so the animal leaves the view on many videos (a camera
+  that loses it). Frames where the truth is empty must be stored empty.
+- ``fast``: every third frame only (the animal moves three times as far between frames: a fast
+  animal, or a low frame rate).
+
+The windows and the step were fixed before any run; nothing in either segmenter was chosen on these.
+J per frame as DAVIS counts it (a frame where both masks are empty counts 1, a mask on a frame
+without the animal 0). Also counted: the frames without the animal, and how many were left empty.
+Flow and the tracker's masks are cached as ``--part quality``'s. Written into the output folder:
+``hard.md`` (the table), ``hard.json`` and ``overlays/hard-CASE-VIDEO.png``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+CASES = ("pan", "fast")
+
+
+def make_case(case: str, frames: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(T, H, W, 3) frames and (T, H, W) truth -> the ``case``'s frames and truth."""
+    if case == "fast":
+        return frames[::3].copy(), truth[::3].copy()
+    t, _, w = truth.shape
+    ww = w // 2
+    xs = np.flatnonzero(truth[0].any(0))
+    cx = float(xs.mean()) if len(xs) else w / 2
+    x0 = int(np.clip(cx - ww / 2, 0, w - ww))
+    x1 = 0 if cx > w / 2 else w - ww
+    pos = np.round(np.linspace(x0, x1, t)).astype(int)
+    return (
+        np.stack([frames[i, :, p : p + ww] for i, p in enumerate(pos)]),
+        np.stack([truth[i, :, p : p + ww] for i, p in enumerate(pos)]),
+    )
+
+
+def run(sequences, load, cache, base: dict, preset, flow_size, out: Path, weights) -> dict:
+    """``load(seq)`` -> (frames, truth). {case: {video: {segmenter: result}}}."""
+    import cv2
+    from video_quality import overlay_sheet, say, scored, segmenter_flow
+    from video_quality import segment_video as grabcut_video
+
+    from zooctl.video.animalnet import AnimalNetSegmenter
+    from zooctl.video.flow import VideoFlow
+    from zooctl.video.grabcut import resize_flows
+
+    seg = AnimalNetSegmenter(weights, **base)
+    results: dict = {case: {} for case in CASES}
+    for seq in sequences:
+        frames0, truth0 = load(seq)
+        for case in CASES:
+            frames, truth = make_case(case, frames0, truth0)
+            t, h, w = frames.shape[:3]
+            tracked, g = grabcut_video(f"{case}-{seq}", frames, truth, cache, base, {}, preset, flow_size)
+            flow, _ = segmenter_flow(cache, seg, frames, preset, flow_size)
+            sw, sh = seg.flow_size(w, h)
+            if tuple(flow.forward.shape[1:3]) != (sh, sw):
+                flow = VideoFlow(
+                    *(resize_flows(f, sw, sh, frames) for f in (flow.forward, flow.backward)), None, None
+                )
+            small_frames = np.stack([cv2.resize(f, (sw, sh), interpolation=cv2.INTER_AREA) for f in frames])
+            small = np.stack(
+                [
+                    cv2.resize(np.asarray(m, np.float32), (sw, sh), interpolation=cv2.INTER_AREA) > 0.5
+                    for m in tracked
+                ]
+            )
+            got = seg.decide_video(small_frames, small, flow)
+            masks = np.stack(
+                [cv2.resize(m.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR) > 0.5 for m in got]
+            )
+            a = scored(masks, truth, dict(seg.report["animalnet"]))
+            absent = ~truth.reshape(t, -1).any(1)
+            res = {"grabcut": g, "animalnet": a, "frames_without_animal": int(absent.sum())}
+            for name, m in (("grabcut", np.asarray(tracked, bool)), ("animalnet", masks)):
+                res[name]["left_empty"] = int((absent & ~m.reshape(t, -1).any(1)).sum())
+            results[case][seq] = res
+            say(
+                f"  {case:5s} {seq:14s} frames {t:3d} (no animal on {int(absent.sum())}): grabcut "
+                f"{g['J']:.3f}, animalnet {a['J']:.3f} (left empty {res['grabcut']['left_empty']} / "
+                f"{res['animalnet']['left_empty']}), replaced {a['network_replaced_tracker']}"
+            )
+            overlay_sheet(out / "overlays" / f"hard-{case}-{seq}.png", frames, masks, truth, a["per_frame"])
+    return results
+
+
+def table(results: dict) -> str:
+    """Markdown: per case and video, J of both and the frames without the animal left empty."""
+    rows = [
+        "| case | video | frames | without the animal | `grabcut` J | default `animalnet` J | left empty, `grabcut` / `animalnet` |",
+        "|---|---|---:|---:|---:|---:|---:|",
+    ]
+    for case, per in results.items():
+        for seq, r in per.items():
+            rows.append(
+                f"| {case} | {seq} | {r['grabcut']['frames']} | {r['frames_without_animal']} | "
+                f"{r['grabcut']['J']:.3f} | {r['animalnet']['J']:.3f} | "
+                f"{r['grabcut']['left_empty']} / {r['animalnet']['left_empty']} |"
+            )
+        g = np.mean([r["grabcut"]["J"] for r in per.values()])
+        a = np.mean([r["animalnet"]["J"] for r in per.values()])
+        n = sum(r["frames_without_animal"] for r in per.values())
+        eg = sum(r["grabcut"]["left_empty"] for r in per.values())
+        ea = sum(r["animalnet"]["left_empty"] for r in per.values())
+        rows.append(f"| **{case}** | **mean** | | {n} | **{g:.3f}** | **{a:.3f}** | {eg} / {ea} |")
+    return "\n".join(rows) + "\n"
