@@ -293,3 +293,25 @@ def test_an_end_of_file_inside_a_command_is_said_not_aborted(tmp_path, monkeypat
     r = run_inprocess(capsys, "bank", "list")
     assert r.code == 1 and "Aborted" not in r.err + r.out
     assert "a file or stream ended early: No data left in file" in r.err
+
+
+def test_export_to_a_new_folder_named_with_a_slash_makes_it(tmp_path, capsys):
+    store = tmp_path / "store"
+    Bank(store).add(load_gltf(write_tiny_glb(tmp_path / "t.glb"), "a"))
+    out = tmp_path / "new" / "deeper"
+    r = run_inprocess(
+        capsys, "--store", str(store), "bank", "export", "a", "--format", "usda", "-o", f"{out}/"
+    )
+    assert r.code == 0, r.err
+    assert (out / "a.usda").is_file()
+    # without the slash it is a file name whose folder must exist: one clear line, nothing made
+    r = run_inprocess(
+        capsys, "--store", str(store), "bank", "export", "a", "-o", str(tmp_path / "none" / "a.usda")
+    )
+    one_clear_line(r, "does not exist", code=2)
+    assert not (tmp_path / "none").exists()
+    # an unknown asset makes no folder either
+    r = run_inprocess(
+        capsys, "--store", str(store), "bank", "export", "zz", "--format", "usda", "-o", f"{tmp_path}/x/"
+    )
+    assert r.code != 0 and not (tmp_path / "x").exists()

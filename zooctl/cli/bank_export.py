@@ -35,13 +35,12 @@ def export(
     import time
 
     from ..errors import UsageError
-    from ..io.asset_export import check_writable, export_asset, resolve_export
+    from ..io.asset_export import export_asset, prepare_export
 
     if clip and all_clips:
         raise UsageError("--clip and --all-clips cannot be used together", hint="drop one of them")
-    spec, fmt, path = resolve_export(output, fmt, name, default_format="usdz")
-    check_writable(path)
     asset = open_bank().get(name)
+    spec, fmt, path = prepare_export(output, fmt, name, default_format="usdz")
     t0 = time.perf_counter()
     options = {}
     if camera:

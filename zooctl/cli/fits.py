@@ -82,11 +82,10 @@ def export(
     ),
 ) -> None:
     """Export a fitted character (rig, skin and the per-frame animation) through an exporter."""
-    from ..io.asset_export import check_writable, export_asset, resolve_export
+    from ..io.asset_export import export_asset, prepare_export
 
-    _, fmt, path = resolve_export(out, fmt, name)
-    check_writable(path)
     asset = _fits().character(name)
+    _, fmt, path = prepare_export(out, fmt, name)
     path = export_asset(asset, path, fmt)
     console.print(f"wrote {path}", highlight=False, markup=False)
 

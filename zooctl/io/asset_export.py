@@ -96,6 +96,24 @@ def check_not_special(path: Path) -> None:
         )
 
 
+def prepare_export(
+    out: str | None, fmt: str | None, name: str, default_format: str | None = None
+) -> tuple[ExporterSpec, str, Path]:
+    """`resolve_export` for a CLI's ``-o``/``--out``, then the folder a path ending in a slash names
+    made (the help promises it), then `check_writable`."""
+    spec, fmt, path = resolve_export(out, fmt, name, default_format)
+    if isinstance(out, str) and out.endswith(("/", os.sep)) and not path.parent.exists():
+        check_not_special(path.parent)
+        try:
+            path.parent.mkdir(parents=True)
+        except OSError as exc:
+            raise UsageError(
+                f"cannot make the folder {path.parent}: {exc.strerror}", hint="choose another -o"
+            ) from None
+    check_writable(path)
+    return spec, fmt, path
+
+
 def check_writable(path: Path) -> None:
     """A clear `UsageError` when ``path``'s folder is missing or cannot be written, or ``path`` is
     something a file cannot be written to."""
