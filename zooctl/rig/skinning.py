@@ -127,9 +127,7 @@ def linear_blend_skinning(
         # Scatter the K candidates into dense (V, J) weights and blend with one matmul: faster
         # forward + backward than gathering (V, K, 3, 4) matrices, whose backward is a scatter-add
         # (BENCHMARKS.md, "Measurements behind code choices").
-        idx = bones.expand(weights.shape)
-        dense = weights.new_zeros(weights.shape[:-1] + (J,)).scatter_add(-1, idx, weights)
-        blended = (dense @ A.flatten(-2)).unflatten(-1, (3, 4))  # (..., V, 3, 4)
+        blended = (_dense_weights(weights, bones, J) @ A.flatten(-2)).unflatten(-1, (3, 4))  # (..., V, 3, 4)
     else:
         blended = torch.einsum("...vk,...vkij->...vij", weights, A[..., bones, :, :])
     out = (blended[..., :3] @ points[..., None]).squeeze(-1) + blended[..., 3]
@@ -150,8 +148,10 @@ def _batch_holds(mats: Tensor, stretch: Tensor | None) -> bool:
 
 
 def _dense_weights(weights: Tensor, bones: Tensor, num_joints: int) -> Tensor:
-    """(V, J) dense weights from (V, K) candidate weights (repeated candidates add up)."""
-    return weights.new_zeros(weights.shape[0], num_joints).scatter_add_(1, bones, weights)
+    """(..., V, J) dense weights from (..., V, K) candidate weights of the (V, K) ``bones``
+    (repeated candidates add up)."""
+    dense = weights.new_zeros(weights.shape[:-1] + (num_joints,))
+    return dense.scatter_add(-1, bones.expand(weights.shape), weights)
 
 
 def _shared_weights_skinning(
@@ -189,8 +189,7 @@ def stretch_offsets(
     moved = (A[..., :3] @ stretch[..., None]).squeeze(-1)  # (..., J, 3): L_k s_k
     we = weights * endpoint
     if J <= DENSE_MAX_JOINTS:
-        dense_e = we.new_zeros(we.shape[:-1] + (J,)).scatter_add(-1, bones.expand(we.shape), we)
-        return dense_e @ moved
+        return _dense_weights(we, bones, J) @ moved
     return torch.einsum("...vk,...vkc->...vc", we, moved[..., bones, :])
 
 
