@@ -209,3 +209,21 @@ def test_a_tracker_lost_on_the_ground_gives_way_to_the_animal_the_network_sees_m
             replaced.append(seed)
             found.append(iou(got[0], s.mask))
     assert len(replaced) >= 2 and min(found) > 0.5, (replaced, found)
+
+
+def test_video_show_says_whether_the_network_replaced_the_tracker():
+    from zooctl.video.stats import seeding_lines
+
+    replaced = {
+        "seeding": ["network"] * 4,
+        "seed_frame": 2,
+        "animalnet": {"motion_margin": 0.98, "network_replaced_tracker": True},
+        "self_training": {"changed": 0.24},
+    }
+    text = "\n".join(seeding_lines(replaced))
+    assert "seeding: 4 network" in text and "first seed" not in text
+    assert "+0.98% of the width" in text and "replaced the tracker's masks" in text
+    assert "24.0% of mask pixels changed" in text
+    kept = {"seeding": ["localiser", "tracked"], "seed_frame": 0, "animalnet": {"motion_margin": None}}
+    text = "\n".join(seeding_lines(kept))
+    assert "first seed on frame 0" in text and "saw no animal: the tracker's masks kept" in text

@@ -326,15 +326,21 @@ class AnimalNetSegmenter:
             )
             if relabelled is not None:
                 masks = relabelled
+            self.report["self_training"] = learner.report.get("self_training")
         changed = sum(int((np.asarray(masks[i]) != np.asarray(tracked[i], bool)).sum()) for i in range(t))
         total = sum(int(np.asarray(tracked[i], bool).sum()) for i in range(t))
         self.report["animalnet"] = {
             "weights": str(self.net.path),
             "motion_margin": round(margin, 3) if np.isfinite(margin) else None,
+            "switch_motion": self.switch_motion,
             "network_replaced_tracker": bool(switched),
             "relabelled": bool(self.relabel),
             "changed": round(changed / max(total, 1), 4),
         }
+        if switched and "seeding" in self.report:  # `video show`'s per-frame account of the masks
+            self.report["seeding"] = ["network"] * t
+        if progress:
+            progress(2 * len(looked), 2 * len(looked))
         return masks
 
     def segment(self, frames, box=None, progress=None, flow=None, box_frame: int = 0) -> np.ndarray:

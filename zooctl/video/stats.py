@@ -95,6 +95,8 @@ def _stats(seg, coverage, boxes, mean, p99, top, occluded, per_frame) -> dict[st
         "animals_seen",
         "empty_frames",
         "small_frames",
+        "animalnet",
+        "self_training",
     )
     return {
         "seeding": {k: seg[k] for k in keys if k in seg} or None,
@@ -117,11 +119,12 @@ def seeding_lines(seeding: dict[str, Any] | None) -> list[str]:
     out = []
     how = seeding.get("seeding") or []
     if how:
-        counts = {k: how.count(k) for k in ("box", "localiser", "re-seeded", "tracked", "empty")}
+        counts = {k: how.count(k) for k in ("box", "localiser", "re-seeded", "tracked", "network", "empty")}
+        seeded = counts["network"] < len(how)  # else the network's animal replaced every tracked mask
         out.append(
             "seeding: "
             + ", ".join(f"{n} {k}" for k, n in counts.items() if n)
-            + f" (first seed on frame {seeding.get('seed_frame')})"
+            + (f" (first seed on frame {seeding.get('seed_frame')})" if seeded else "")
         )
     if seeding.get("box_use") == "chose the animal":
         out.append(
@@ -136,6 +139,25 @@ def seeding_lines(seeding: dict[str, Any] | None) -> list[str]:
         n = seeding.get("animals_seen", 0)
         extra = f"; {n} animal-like regions at once, the one with most evidence kept" if n > 1 else ""
         out.append(f"localiser saw: {seen}{extra}")
+    net = seeding.get("animalnet")
+    if net:
+        margin = net.get("motion_margin")
+        moved = (
+            "the network saw no animal"
+            if margin is None
+            else f"the network's animal moved against the camera {margin:+.2f}% of the width more than the tracked mask"
+        )
+        verdict = (
+            "its animal replaced the tracker's masks"
+            if net.get("network_replaced_tracker")
+            else "the tracker's masks kept"
+        )
+        out.append(f"animalnet: {moved}: {verdict}")
+    if (seeding.get("self_training") or {}).get("changed") is not None:
+        out.append(
+            f"relabelled by a classifier learned from this video: {seeding['self_training']['changed']:.1%} "
+            "of mask pixels changed"
+        )
     if seeding.get("empty_frames"):
         out.append(
             f"no animal in frames {_ranges(seeding['empty_frames'])} (stored empty; the fit skips them)"
