@@ -8,6 +8,10 @@ Each of the seven DAVIS videos (with its ground truth) becomes:
   that loses it). Frames where the truth is empty must be stored empty.
 - ``fast``: every third frame only (the animal moves three times as far between frames: a fast
   animal, or a low frame rate).
+- ``two``: a second, smaller animal: the next video's animal (with its own motion, cut out by its
+  truth and scaled to a third of the main animal's area on the first frame) pasted into the corner
+  of the frame farthest from the main one. The truth is the main animal only: it must be kept
+  throughout and the second left out.
 
 The windows and the step were fixed before any run; nothing in either segmenter was chosen on these.
 J per frame as DAVIS counts it (a frame where both masks are empty counts 1, a mask on a frame
@@ -22,11 +26,14 @@ from pathlib import Path
 
 import numpy as np
 
-CASES = ("pan", "fast")
+CASES = ("pan", "fast", "two")
 
 
-def make_case(case: str, frames: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(T, H, W, 3) frames and (T, H, W) truth -> the ``case``'s frames and truth."""
+def make_case(case: str, frames: np.ndarray, truth: np.ndarray, other=None) -> tuple[np.ndarray, np.ndarray]:
+    """(T, H, W, 3) frames and (T, H, W) truth -> the ``case``'s frames and truth; ``other``: another
+    video's (frames, truth) for ``two``."""
+    if case == "two":
+        return _with_second_animal(frames, truth, *other)
     if case == "fast":
         return frames[::3].copy(), truth[::3].copy()
     t, _, w = truth.shape
@@ -42,6 +49,42 @@ def make_case(case: str, frames: np.ndarray, truth: np.ndarray) -> tuple[np.ndar
     )
 
 
+def _with_second_animal(frames, truth, frames_b, truth_b) -> tuple[np.ndarray, np.ndarray]:
+    import cv2
+
+    t, h, w = truth.shape
+    area_a, area_b = max(int(truth[0].sum()), 1), max(int(truth_b[0].sum()), 1)
+    s = float(np.sqrt(area_a / area_b / 3.0))
+    ys, xs = np.nonzero(truth[0])
+    cy, cx = (ys.mean(), xs.mean()) if len(xs) else (h / 2, w / 2)
+    yb, xb = np.nonzero(truth_b[0])
+    by, bx = (yb.mean() * s, xb.mean() * s) if len(xb) else (0.0, 0.0)
+    # the second animal's centre on the first frame: a quarter of the way in from the far corner
+    ty = h * (0.75 if cy < h / 2 else 0.25)
+    tx = w * (0.8 if cx < w / 2 else 0.2)
+    oy, ox = int(round(ty - by)), int(round(tx - bx))
+    out = frames.copy()
+    for i in range(t):
+        j = i % len(frames_b)
+        fb = cv2.resize(frames_b[j], None, fx=s, fy=s, interpolation=cv2.INTER_AREA)
+        mb = (
+            cv2.resize(
+                truth_b[j].astype(np.uint8), (fb.shape[1], fb.shape[0]), interpolation=cv2.INTER_NEAREST
+            )
+            > 0
+        )
+        y0, x0 = max(oy, 0), max(ox, 0)
+        y1, x1 = min(oy + fb.shape[0], h), min(ox + fb.shape[1], w)
+        if y1 <= y0 or x1 <= x0:
+            continue
+        sub = mb[y0 - oy : y1 - oy, x0 - ox : x1 - ox]
+        region = out[i, y0:y1, x0:x1]
+        region[sub] = fb[y0 - oy : y1 - oy, x0 - ox : x1 - ox][sub]
+    # the main animal stays in front where the two overlap
+    out[truth] = frames[truth]
+    return out, truth.copy()
+
+
 def run(sequences, load, cache, base: dict, preset, flow_size, out: Path, weights) -> dict:
     """``load(seq)`` -> (frames, truth). {case: {video: {segmenter: result}}}."""
     import cv2
@@ -54,10 +97,11 @@ def run(sequences, load, cache, base: dict, preset, flow_size, out: Path, weight
 
     seg = AnimalNetSegmenter(weights, **base)
     results: dict = {case: {} for case in CASES}
-    for seq in sequences:
+    for k, seq in enumerate(sequences):
         frames0, truth0 = load(seq)
         for case in CASES:
-            frames, truth = make_case(case, frames0, truth0)
+            other = load(sequences[(k + 1) % len(sequences)]) if case == "two" else None
+            frames, truth = make_case(case, frames0, truth0, other)
             t, h, w = frames.shape[:3]
             tracked, g = grabcut_video(f"{case}-{seq}", frames, truth, cache, base, {}, preset, flow_size)
             flow, _ = segmenter_flow(cache, seg, frames, preset, flow_size)
