@@ -6,6 +6,8 @@ Each of the seven DAVIS videos (with its ground truth) becomes:
 - ``pan``: a window half the frame's width pans at constant speed from around the animal on the
   first frame to the far side of the frame, so the animal leaves the view on many videos (a camera
   that loses it). Frames where the truth is empty must be stored empty.
+- ``leave``: a window a third of the frame's width pans from around the animal to the far side over
+  the first half of the clip and stays there: on most videos the animal leaves the view.
 - ``fast``: every third frame only (the animal moves three times as far between frames: a fast
   animal, or a low frame rate).
 - ``two``: a second, smaller animal: the next video's animal (with its own motion, cut out by its
@@ -26,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-CASES = ("pan", "fast", "two")
+CASES = ("pan", "leave", "fast", "two")
 
 
 def make_case(case: str, frames: np.ndarray, truth: np.ndarray, other=None) -> tuple[np.ndarray, np.ndarray]:
@@ -37,12 +39,16 @@ def make_case(case: str, frames: np.ndarray, truth: np.ndarray, other=None) -> t
     if case == "fast":
         return frames[::3].copy(), truth[::3].copy()
     t, _, w = truth.shape
-    ww = w // 2
+    ww = w // 2 if case == "pan" else w // 3
     xs = np.flatnonzero(truth[0].any(0))
     cx = float(xs.mean()) if len(xs) else w / 2
     x0 = int(np.clip(cx - ww / 2, 0, w - ww))
     x1 = 0 if cx > w / 2 else w - ww
-    pos = np.round(np.linspace(x0, x1, t)).astype(int)
+    if case == "pan":
+        pos = np.round(np.linspace(x0, x1, t)).astype(int)
+    else:
+        half = max(t // 2, 2)
+        pos = np.concatenate([np.round(np.linspace(x0, x1, half)), np.full(t - half, x1)]).astype(int)
     return (
         np.stack([frames[i, :, p : p + ww] for i, p in enumerate(pos)]),
         np.stack([truth[i, :, p : p + ww] for i, p in enumerate(pos)]),
