@@ -59,13 +59,14 @@ def default_name(path: Path) -> str:
     return sanitize_name(stem)
 
 
+# The automatic segmenter when neither --segmenter nor masks are given: the one that wins on the
+# shared real videos with its settings chosen leave-one-video-out (BENCHMARKS.md, Video store).
+DEFAULT_SEGMENTER = "animalnet"
+
 # The frame budget `video add` keeps when the user does not choose: a clip's own rate up to
 # BUDGET_FRAMES frames; a longer one one frame in k (the least k that brings the rate to at most
 # BUDGET_FPS) and its first BUDGET_SECONDS. 15 fps still samples a trot's stride (2-3 Hz) five
 # times or more; 300 frames keep a fit to minutes on a CPU (its time grows with the frames).
-# The automatic segmenter when neither --segmenter nor masks are given: the one that wins on the
-# shared real videos with its settings chosen leave-one-video-out (BENCHMARKS.md, Video store).
-DEFAULT_SEGMENTER = "animalnet"
 BUDGET_FRAMES = 300
 BUDGET_FPS = 15.0
 BUDGET_SECONDS = 20.0
