@@ -75,6 +75,17 @@ def load_truth(seq: str, frames_shape) -> np.ndarray:
     )
 
 
+def loader(max_size: int):
+    """``load(seq)`` -> (frames, truth) of a shared DAVIS video decoded at ``max_size``."""
+    from zooctl.video.decode import decode
+
+    def load(seq):
+        dv = decode(VIDEOS / seq, max_size=max_size)
+        return dv.frames, load_truth(seq, dv.frames.shape)
+
+    return load
+
+
 def quality(sequences, max_size: int, preset: str, out: Path, cache, grid: dict, box: bool) -> dict:
     """J per video with no box (the localiser seeds, as `video add` does) at the segmenter's
     defaults and at each grid setting, chosen leave-one-video-out (`video_quality`); with ``box``
@@ -82,12 +93,8 @@ def quality(sequences, max_size: int, preset: str, out: Path, cache, grid: dict,
     from video_quality import leave_one_out_table, run_real, segment_video
 
     from zooctl.video import cues
-    from zooctl.video.decode import decode
 
-    def load(seq):
-        dv = decode(VIDEOS / seq, max_size=max_size)
-        return dv.frames, load_truth(seq, dv.frames.shape)
-
+    load = loader(max_size)
     report = run_real(sequences, load, cache, SEG_OPTIONS, grid, preset, FLOW_SIZE, out)
     if len(sequences) >= 2:
         table, report["leave_one_out"] = leave_one_out_table(report)
@@ -111,16 +118,10 @@ def learned_quality(module: str, sequences, max_size: int, preset: str, out: Pat
     (`animalnet`, ``weights=`` from `zooctl segment train`); the table goes to NAME.md."""
     import importlib
 
-    from zooctl.video.decode import decode
-
     bench = importlib.import_module(module)
     name = module.removeprefix("video_")
 
-    def load(seq):
-        dv = decode(VIDEOS / seq, max_size=max_size)
-        return dv.frames, load_truth(seq, dv.frames.shape)
-
-    report = bench.run(sequences, load, cache, SEG_OPTIONS, preset, FLOW_SIZE, out, **kw)
+    report = bench.run(sequences, loader(max_size), cache, SEG_OPTIONS, preset, FLOW_SIZE, out, **kw)
     if len(sequences) >= 2:
         text, report["leave_one_out"] = bench.table(report)
         (out / f"{name}.md").write_text(text)
@@ -579,17 +580,11 @@ def main() -> None:
     if args.part == "hard" and args.sequences:
         import video_hard
 
-        from zooctl.video.decode import decode
-
-        def load(seq):
-            dv = decode(VIDEOS / seq, max_size=args.max_size)
-            return dv.frames, load_truth(seq, dv.frames.shape)
-
         args.out.mkdir(parents=True, exist_ok=True)
         print("hard cases made from the shared videos (grabcut and the default animalnet):", file=sys.stderr)
         report["hard"] = video_hard.run(
             args.sequences.split(","),
-            load,
+            loader(args.max_size),
             cache,
             SEG_OPTIONS,
             args.preset,

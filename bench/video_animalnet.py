@@ -66,7 +66,7 @@ def run(sequences, load, cache, base: dict, preset, flow_size, out: Path, weight
     from zooctl.video.animalnet import AnimalNetSegmenter, weights_file
     from zooctl.video.flow import VideoFlow
     from zooctl.video.grabcut import resize_flows
-    from zooctl.video.selftrain import main_animal
+    from zooctl.video.selftrain import at_working_size, main_animal
 
     weights = weights_file(weights)
     seg = AnimalNetSegmenter(weights, **base)
@@ -93,13 +93,7 @@ def run(sequences, load, cache, base: dict, preset, flow_size, out: Path, weight
             cpu = time.process_time() - c0
             if path is not None:
                 _save(path, evidence=ev, cpu_s=np.float64(cpu))
-        small_frames = np.stack([cv2.resize(f, (sw, sh), interpolation=cv2.INTER_AREA) for f in frames])
-        small = np.stack(
-            [
-                cv2.resize(np.asarray(m, np.float32), (sw, sh), interpolation=cv2.INTER_AREA) > 0.5
-                for m in tracked
-            ]
-        )
+        small_frames, small = at_working_size(frames, tracked, (sh, sw))
 
         def full(masks, w=w, h=h):
             return np.stack(

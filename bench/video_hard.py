@@ -100,6 +100,7 @@ def run(sequences, load, cache, base: dict, preset, flow_size, out: Path, weight
     from zooctl.video.animalnet import AnimalNetSegmenter
     from zooctl.video.flow import VideoFlow
     from zooctl.video.grabcut import resize_flows
+    from zooctl.video.selftrain import at_working_size
 
     seg = AnimalNetSegmenter(weights, **base)
     results: dict = {case: {} for case in CASES}
@@ -116,13 +117,7 @@ def run(sequences, load, cache, base: dict, preset, flow_size, out: Path, weight
                 flow = VideoFlow(
                     *(resize_flows(f, sw, sh, frames) for f in (flow.forward, flow.backward)), None, None
                 )
-            small_frames = np.stack([cv2.resize(f, (sw, sh), interpolation=cv2.INTER_AREA) for f in frames])
-            small = np.stack(
-                [
-                    cv2.resize(np.asarray(m, np.float32), (sw, sh), interpolation=cv2.INTER_AREA) > 0.5
-                    for m in tracked
-                ]
-            )
+            small_frames, small = at_working_size(frames, tracked, (sh, sw))
             got = seg.decide_video(small_frames, small, flow)
             masks = np.stack(
                 [cv2.resize(m.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR) > 0.5 for m in got]

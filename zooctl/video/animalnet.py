@@ -345,27 +345,12 @@ class AnimalNetSegmenter:
 
     def segment(self, frames, box=None, progress=None, flow=None, box_frame: int = 0) -> np.ndarray:
         """(T, H, W, 3) uint8 RGB frames, optional box on frame ``box_frame`` -> (T, H, W) bool masks."""
-        from .scratch import working
-        from .selftrain import at_frame_size, track
+        from .selftrain import at_frame_size, at_working_size, track
 
-        t, fh, fw = frames.shape[:3]
+        t = len(frames)
         flow, tracked = track(self.tracker, frames, box, progress, flow, box_frame, "animalnet")
-        sh, sw = flow.forward.shape[1:3]
         self.report = dict(self.tracker.report)
-        small = working(frames, t, (sh, sw, 3), np.uint8)
-        prior = working(frames, t, (sh, sw), bool)
-        for i in range(t):
-            small[i] = (
-                frames[i]
-                if (fh, fw) == (sh, sw)
-                else cv2.resize(frames[i], (sw, sh), interpolation=cv2.INTER_AREA)
-            )
-            m = np.asarray(tracked[i], bool)
-            prior[i] = (
-                m
-                if m.shape == (sh, sw)
-                else cv2.resize(m.astype(np.float32), (sw, sh), interpolation=cv2.INTER_AREA) > 0.5
-            )
+        small, prior = at_working_size(frames, tracked, flow.forward.shape[1:3])
         masks = self.decide_video(
             small, prior, flow, (lambda d, n: progress(t + d * t // n, 2 * t)) if progress else None
         )

@@ -259,24 +259,10 @@ class SelfTrainedSegmenter:
         box_frame: int = 0,
     ) -> np.ndarray:
         """(T, H, W, 3) uint8 RGB frames, optional box on frame ``box_frame`` -> (T, H, W) bool masks."""
-        t, h, w = frames.shape[:3]
+        t = len(frames)
         flow, tracked = track(self.tracker, frames, box, progress, flow, box_frame, "selftrain")
-        sh, sw = flow.forward.shape[1:3]
         self.report = dict(self.tracker.report)
-        small = working(frames, t, (sh, sw, 3), np.uint8)
-        prior = working(frames, t, (sh, sw), bool)
-        for i in range(t):
-            small[i] = (
-                frames[i]
-                if (sw, sh) == (w, h)
-                else cv2.resize(frames[i], (sw, sh), interpolation=cv2.INTER_AREA)
-            )
-            m = np.asarray(tracked[i], bool)
-            prior[i] = (
-                m
-                if (sw, sh) == (w, h)
-                else cv2.resize(m.astype(np.float32), (sw, sh), interpolation=cv2.INTER_AREA) > 0.5
-            )
+        small, prior = at_working_size(frames, tracked, flow.forward.shape[1:3])
         masks = self.relabel(small, prior, flow, lambda d: progress(t + d, 2 * t) if progress else None)
         if masks is None:  # nothing sure to learn from: the tracker's masks stand
             return tracked
@@ -405,6 +391,25 @@ def track(tracker, frames, box, progress, flow, box_frame: int, who: str):
         box_frame=box_frame,
     )
     return flow, tracked
+
+
+def at_working_size(frames, masks, size: tuple[int, int]):
+    """(T, H, W, 3) frames and (T, H, W) bool masks -> both at ``size`` (h, w), the working size
+    a segmenter decides again at: ((T, h, w, 3) uint8, (T, h, w) bool)."""
+    t = len(frames)
+    h, w = size
+    small = working(frames, t, (h, w, 3), np.uint8)
+    small_masks = working(frames, t, (h, w), bool)
+    for i in range(t):
+        f = frames[i]
+        small[i] = f if f.shape[:2] == (h, w) else cv2.resize(f, (w, h), interpolation=cv2.INTER_AREA)
+        m = np.asarray(masks[i], bool)
+        small_masks[i] = (
+            m
+            if m.shape == (h, w)
+            else cv2.resize(m.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA) > 0.5
+        )
+    return small, small_masks
 
 
 def at_frame_size(masks, frames):
