@@ -111,7 +111,7 @@ def run(sequences, load, cache, base: dict, preset, flow_size, out: Path, weight
             seg.feature_every, seg.switch_motion, seg.relabel, seg.net_weight = 3, switch, relabel, net_weight
             seg.relabel_options = {"prior_weight": 1.0, **dict(options)}
             c0 = time.process_time()
-            masks = full(seg.decide_video(small_frames, small, flow))
+            masks = full(seg.decide_video(small_frames, small, flow, seed_frame=g.get("seed_frame")))
             info = dict(seg.report["animalnet"], cpu_s=round(time.process_time() - c0, 2))
             res[_label(switch, relabel, net_weight, options)] = scored(masks, truth, info)
             masks_by[(switch, relabel, net_weight, options)] = masks

@@ -14,8 +14,13 @@ Each of the seven DAVIS videos (with its ground truth) becomes:
   truth and scaled to a third of the main animal's area on the first frame) pasted into the corner
   of the frame farthest from the main one. The truth is the main animal only: it must be kept
   throughout and the second left out.
+- ``chase``: as ``two``, but the second animal is dog-agility's dog, the fastest-moving of the seven
+  (for dog-agility itself, the next video's animal): a second animal that moves more than the main
+  one must not take its place.
 
-The windows and the step were fixed before any run; nothing in either segmenter was chosen on these.
+The windows and the step of the first four were fixed before any run; ``chase`` was added after the
+switch had been seen taking such a second animal, and `animalnet`'s identity check and remnant rule
+were designed after seeing these cases (so they are no test of those two rules).
 J per frame as DAVIS counts it (a frame where both masks are empty counts 1, a mask on a frame
 without the animal 0). Also counted: the frames without the animal, and how many were left empty.
 Flow and the tracker's masks are cached as ``--part quality``'s. Written into the output folder:
@@ -28,13 +33,14 @@ from pathlib import Path
 
 import numpy as np
 
-CASES = ("pan", "leave", "fast", "two")
+CASES = ("pan", "leave", "fast", "two", "chase")
+FASTEST = "dog-agility"
 
 
 def make_case(case: str, frames: np.ndarray, truth: np.ndarray, other=None) -> tuple[np.ndarray, np.ndarray]:
     """(T, H, W, 3) frames and (T, H, W) truth -> the ``case``'s frames and truth; ``other``: another
     video's (frames, truth) for ``two``."""
-    if case == "two":
+    if case in ("two", "chase"):
         return _with_second_animal(frames, truth, *other)
     if case == "fast":
         return frames[::3].copy(), truth[::3].copy()
@@ -107,7 +113,11 @@ def run(sequences, load, cache, base: dict, preset, flow_size, out: Path, weight
     for k, seq in enumerate(sequences):
         frames0, truth0 = load(seq)
         for case in CASES:
-            other = load(sequences[(k + 1) % len(sequences)]) if case == "two" else None
+            other = None
+            if case == "two" or (case == "chase" and (seq == FASTEST or FASTEST not in sequences)):
+                other = load(sequences[(k + 1) % len(sequences)])
+            elif case == "chase":
+                other = load(FASTEST)
             frames, truth = make_case(case, frames0, truth0, other)
             t, h, w = frames.shape[:3]
             tracked, g = grabcut_video(f"{case}-{seq}", frames, truth, cache, base, {}, preset, flow_size)
@@ -118,7 +128,7 @@ def run(sequences, load, cache, base: dict, preset, flow_size, out: Path, weight
                     *(resize_flows(f, sw, sh, frames) for f in (flow.forward, flow.backward)), None, None
                 )
             small_frames, small = at_working_size(frames, tracked, (sh, sw))
-            got = seg.decide_video(small_frames, small, flow)
+            got = seg.decide_video(small_frames, small, flow, seed_frame=g.get("seed_frame"))
             masks = np.stack(
                 [cv2.resize(m.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR) > 0.5 for m in got]
             )

@@ -204,11 +204,47 @@ def test_a_tracker_lost_on_the_ground_gives_way_to_the_animal_the_network_sees_m
         lost = np.zeros_like(truth)
         lost[:, 10:60, 10:80] = True
         lost &= ~truth
-        got = np.asarray(seg.decide_video(s.frames, lost, flow), bool)
+        got = np.asarray(seg.decide_video(s.frames, lost, flow, seed_frame=0), bool)
         if seg.report["animalnet"]["network_replaced_tracker"]:
+            # the lost masks lie on still ground: no overlap is asked of them
+            assert seg.report["animalnet"]["same_animal_on_seed_frame"], seed
             replaced.append(seed)
             found.append(iou(got[0], s.mask))
     assert len(replaced) >= 2 and min(found) > 0.5, (replaced, found)
+
+
+def test_the_switch_takes_only_the_tracked_animal_or_replaces_a_region_holding_still():
+    """A second animal that moves more than the tracked one only touches it on the seed frame: it
+    must not replace it; the same animal, overlapping, may; so may anything, when the tracked
+    region moves no more than its surroundings."""
+    from zooctl.video.animalnet import AnimalNetSegmenter
+
+    seg = AnimalNetSegmenter(relabel=False)
+    ev = np.full((1, 60, 80), -5.0, np.float32)
+    ev[0, 20:40, 40:60] = 5.0  # the network's animal
+    beside = np.zeros((1, 60, 80), bool)
+    beside[0, 20:40, 20:41] = True  # touches it: one column shared
+    over = np.zeros((1, 60, 80), bool)
+    over[0, 20:40, 30:50] = True  # half of it
+    seen = {0: None}
+    moving = seg.switch_motion  # the tracked region's own motion against the camera, % of the width
+    assert not seg._same_animal(None, beside, None, 0, ev, seen, still=moving)
+    assert seg._same_animal(None, over, None, 0, ev, seen, still=moving)
+    assert seg._same_animal(None, beside, None, 0, ev, seen, still=0.0)
+
+
+def test_remnants_far_smaller_than_the_animal_are_dropped_unless_cut_by_the_edge():
+    from zooctl.video.animalnet import drop_remnants
+
+    masks = np.zeros((6, 60, 80), bool)
+    masks[:3, 10:50, 10:60] = True  # the animal: 2,000 pixels
+    masks[3, 30:34, 30:34] = True  # a speck left on the ground (16)
+    masks[4, 20:40, 0:4] = True  # the animal entering at the edge (80)
+    before = masks.copy()
+    assert drop_remnants(masks, 0.0) == [] and (masks == before).all()
+    assert drop_remnants(masks, 0.1) == [3]
+    assert not masks[3].any() and (masks[4] == before[4]).all() and (masks[:3] == before[:3]).all()
+    assert drop_remnants(np.zeros((3, 8, 8), bool), 0.1) == []  # nothing seen: nothing to judge
 
 
 def test_video_show_says_whether_the_network_replaced_the_tracker():

@@ -37,6 +37,10 @@ HEAD = (
     ("c4", 3, 8, 32),
     ("out", 1, 1, 1),
 )
+# the switch's identity check: on the seed frame, the tracker's and the network's animal overlap at
+# least this much (intersection over union) when they are one animal; a second animal beside the
+# first only touches it (BENCHMARKS.md, Video store)
+SAME_ANIMAL_IOU = 0.1
 
 
 def default_weights() -> Path:
@@ -170,7 +174,10 @@ class AnimalNetSegmenter:
        the animal it lost moves against it: when, over the frames looked at, the median of the
        network's animal's `motion_contrast` minus the tracked mask's exceeds ``switch_motion``
        hundredths of the frame's width, the network's animal replaces the tracker's masks on every
-       frame (the frames between looks then looked at too). ``switch_motion`` < 0: never.
+       frame (the frames between looks then looked at too). ``switch_motion`` < 0: never. The
+       switch must not take a second animal that merely moves more: it fires only when the network's
+       animal is the tracker's on the tracker's seed frame (they overlap there), or when the tracked
+       region holds still against the camera (a tracker seeded on the background).
     4. Otherwise the tracked masks stand, or with ``net_weight`` > 0 are decided again from
        ``net_weight`` x the network's log-odds where it sees an animal (everywhere with ``erase``)
        plus ``prior_weight`` inside the tracked mask (minus it outside).
@@ -178,6 +185,9 @@ class AnimalNetSegmenter:
        decide every frame again (`SelfTrainedSegmenter.relabel`, on the features step 2 computed;
        ``relabel_options``: its ``band``, ``deep_weight``, ``prior_weight`` (here 1 by default,
        chosen on the shared videos with the leave-one-out estimate beside it: BENCHMARKS.md), ...).
+    6. A frame whose mask is under ``remnant`` times the video's median mask area and does not touch
+       the frame's edge is stored empty: what a tracker leaves behind on the ground once the animal
+       has left (an animal leaving or entering is cut by the edge). 0: never.
 
     ``weights``: the head's ``.npz`` (`weights_file`). Other options go to the tracker.
     ``report``: the tracker's, with ``animalnet`` added (weights, the motion margin measured, whether
@@ -197,6 +207,7 @@ class AnimalNetSegmenter:
         net_weight: float = 0.0,
         prior_weight: float = 2.0,
         erase: bool = False,
+        remnant: float = 0.1,
         **tracker_options,
     ) -> None:
         from ..errors import UsageError
@@ -213,6 +224,7 @@ class AnimalNetSegmenter:
         self.net_weight = net_weight
         self.prior_weight = prior_weight
         self.erase = erase
+        self.remnant = remnant
         self._features = None
         self.report: dict = {}
 
@@ -273,9 +285,10 @@ class AnimalNetSegmenter:
         net = evidence if self.erase else np.maximum(evidence, 0.0)
         return main_animal(self.net_weight * net + prior)
 
-    def decide_video(self, small, tracked, flow, progress=None) -> np.ndarray:
-        """Steps 2-5 on (T, h, w, 3) frames and (T, h, w) bool tracked masks at the working size and
-        their flow -> (T, h, w) bool masks; sets ``report["animalnet"]``."""
+    def decide_video(self, small, tracked, flow, progress=None, seed_frame: int | None = None) -> np.ndarray:
+        """Steps 2-6 on (T, h, w, 3) frames and (T, h, w) bool tracked masks at the working size and
+        their flow -> (T, h, w) bool masks; sets ``report["animalnet"]``. ``seed_frame``: the frame
+        the tracker started from (None: unknown, the switch then checks motion only)."""
         from .scratch import working
         from .selftrain import SelfTrainedSegmenter, carry_between, main_animal
 
@@ -283,20 +296,22 @@ class AnimalNetSegmenter:
         looked = sorted(set(range(0, t, self.feature_every)) | {t - 1})
         ev = working(small, t, (h, w), np.float32)
         seen: dict[int, tuple] = {}
-        margins = []
+        margins, held = [], []
         for k, i in enumerate(looked):
             ev[i], f, residual = self.look(small[i], _motion(flow, i, t))
             seen[i] = (f[0].astype(np.float16), f[1])  # float16: as `relabel` keeps them
             animal = main_animal(ev[i])
-            margins.append(
-                motion_contrast(animal, residual) - motion_contrast(np.asarray(tracked[i], bool), residual)
-                if animal.any()
-                else -np.inf
-            )
+            held.append(motion_contrast(np.asarray(tracked[i], bool), residual))
+            margins.append(motion_contrast(animal, residual) - held[-1] if animal.any() else -np.inf)
             if progress:
                 progress(k + 1, 2 * len(looked))
         margin = float(np.median(margins)) * 100.0 / w
         switched = self.switch_motion >= 0 and margin > self.switch_motion
+        same = None
+        if switched and seed_frame is not None and 0 <= seed_frame < t:
+            still = float(np.median(held)) * 100.0 / w
+            same = self._same_animal(small, tracked, flow, seed_frame, ev, seen, still)
+            switched = same
         prior = working(small, t, (h, w), bool)
         if switched:
             for i in range(t):
@@ -327,6 +342,7 @@ class AnimalNetSegmenter:
             if relabelled is not None:
                 masks = relabelled
             self.report["self_training"] = learner.report.get("self_training")
+        dropped = drop_remnants(masks, self.remnant)
         changed = sum(int((np.asarray(masks[i]) != np.asarray(tracked[i], bool)).sum()) for i in range(t))
         total = sum(int(np.asarray(tracked[i], bool).sum()) for i in range(t))
         self.report["animalnet"] = {
@@ -334,14 +350,35 @@ class AnimalNetSegmenter:
             "motion_margin": round(margin, 3) if np.isfinite(margin) else None,
             "switch_motion": self.switch_motion,
             "network_replaced_tracker": bool(switched),
+            "same_animal_on_seed_frame": same,
+            "remnants_dropped": dropped,
             "relabelled": bool(self.relabel),
             "changed": round(changed / max(total, 1), 4),
         }
         if switched and "seeding" in self.report:  # `video show`'s per-frame account of the masks
             self.report["seeding"] = ["network"] * t
+        if dropped and "seeding" in self.report:
+            self.report["seeding"] = [
+                "empty" if i in dropped else h for i, h in enumerate(self.report["seeding"])
+            ]
         if progress:
             progress(2 * len(looked), 2 * len(looked))
         return masks
+
+    def _same_animal(self, small, tracked, flow, s: int, ev, seen: dict, still: float) -> bool:
+        """Whether the network's animal may replace the tracked masks: it overlaps the tracked mask
+        on the tracker's seed frame ``s`` (where the tracker held its animal; intersection over
+        union at least ``SAME_ANIMAL_IOU``), or the tracked region holds still against the camera
+        (``still``, its median `motion_contrast` in hundredths of the frame's width, under a fifth
+        of ``switch_motion``, the flow's noise: a tracker that started on the background)."""
+        from .selftrain import main_animal
+
+        if still < 0.2 * self.switch_motion:
+            return True
+        ev_s = ev[s] if s in seen else self.look(small[s], _motion(flow, s, len(small)))[0]
+        animal, held = main_animal(ev_s), np.asarray(tracked[s], bool)
+        # two animals side by side touch; the same animal seen twice overlaps
+        return bool((animal & held).sum() >= SAME_ANIMAL_IOU * (animal | held).sum() > 0)
 
     def segment(self, frames, box=None, progress=None, flow=None, box_frame: int = 0) -> np.ndarray:
         """(T, H, W, 3) uint8 RGB frames, optional box on frame ``box_frame`` -> (T, H, W) bool masks."""
@@ -352,9 +389,31 @@ class AnimalNetSegmenter:
         self.report = dict(self.tracker.report)
         small, prior = at_working_size(frames, tracked, flow.forward.shape[1:3])
         masks = self.decide_video(
-            small, prior, flow, (lambda d, n: progress(t + d * t // n, 2 * t)) if progress else None
+            small,
+            prior,
+            flow,
+            (lambda d, n: progress(t + d * t // n, 2 * t)) if progress else None,
+            seed_frame=self.tracker.report.get("seed_frame"),
         )
         return at_frame_size(masks, frames)
+
+
+def drop_remnants(masks, remnant: float) -> list[int]:
+    """Empty, in place, each (h, w) mask of ``masks`` (T, h, w) under ``remnant`` times the median
+    area of the non-empty ones that does not touch the frame's edge; -> the frames emptied."""
+    if remnant <= 0:
+        return []
+    areas = np.array([int(np.count_nonzero(m)) for m in masks])
+    if not areas.any():
+        return []
+    small = remnant * float(np.median(areas[areas > 0]))
+    dropped = []
+    for i in np.flatnonzero((areas > 0) & (areas < small)):
+        m = np.asarray(masks[i], bool)
+        if not (m[0].any() or m[-1].any() or m[:, 0].any() or m[:, -1].any()):
+            masks[i] = np.zeros_like(m)
+            dropped.append(int(i))
+    return dropped
 
 
 def _motion(flow, i: int, t: int) -> np.ndarray:
