@@ -17,9 +17,12 @@ Each of the seven DAVIS videos (with its ground truth) becomes:
 - ``chase``: as ``two``, but the second animal is dog-agility's dog, the fastest-moving of the seven
   (for dog-agility itself, the next video's animal): a second animal that moves more than the main
   one must not take its place.
+- ``small``: the animal at a third of its size (a ninth of its area), cut out by its truth and pasted
+  over the first frame with the animal painted out, its first-frame centre in place: a distant animal
+  before a still camera.
 
 The windows and the step of the first four were fixed before any run; ``chase`` was added after the
-switch had been seen taking such a second animal, and `animalnet`'s identity check and remnant rule
+switch had been seen taking such a second animal, ``small`` later (its scale fixed before its run), and `animalnet`'s identity check and remnant rule
 were designed after seeing these cases (so they are no test of those two rules).
 J per frame as DAVIS counts it (a frame where both masks are empty counts 1, a mask on a frame
 without the animal 0). Also counted: the frames without the animal, and how many were left empty.
@@ -33,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-CASES = ("pan", "leave", "fast", "two", "chase")
+CASES = ("pan", "leave", "fast", "two", "chase", "small")
 FASTEST = "dog-agility"
 
 
@@ -44,6 +47,8 @@ def make_case(case: str, frames: np.ndarray, truth: np.ndarray, other=None) -> t
         return _with_second_animal(frames, truth, *other)
     if case == "fast":
         return frames[::3].copy(), truth[::3].copy()
+    if case == "small":
+        return _small_animal(frames, truth)
     t, _, w = truth.shape
     ww = w // 2 if case == "pan" else w // 3
     xs = np.flatnonzero(truth[0].any(0))
@@ -59,6 +64,32 @@ def make_case(case: str, frames: np.ndarray, truth: np.ndarray, other=None) -> t
         np.stack([frames[i, :, p : p + ww] for i, p in enumerate(pos)]),
         np.stack([truth[i, :, p : p + ww] for i, p in enumerate(pos)]),
     )
+
+
+def _small_animal(frames, truth, scale: float = 1.0 / 3.0) -> tuple[np.ndarray, np.ndarray]:
+    """The animal at ``scale`` of its size (a ninth of its area at a third), cut out of each frame by
+    its truth and pasted, its frame-0 centre in place, over frame 0 with the animal painted out
+    (OpenCV's Telea inpainting): a distant animal moving as the original does, scaled, before a still
+    camera (a background painted per frame would carry a blurred ghost of the animal along)."""
+    import cv2
+
+    t, h, w = truth.shape
+    ys, xs = np.nonzero(truth[0])
+    cy, cx = (ys.mean(), xs.mean()) if len(xs) else (h / 2, w / 2)
+    oy, ox = int(round(cy * (1 - scale))), int(round(cx * (1 - scale)))
+    sh, sw = max(round(h * scale), 1), max(round(w * scale), 1)
+    hole = cv2.dilate(truth[0].astype(np.uint8), np.ones((9, 9), np.uint8))
+    background = cv2.inpaint(np.ascontiguousarray(frames[0]), hole, 5, cv2.INPAINT_TELEA)
+    out = np.repeat(background[None], t, 0)
+    small_truth = np.zeros_like(truth)
+    for i in range(t):
+        fs = cv2.resize(frames[i], (sw, sh), interpolation=cv2.INTER_AREA)
+        ms = cv2.resize(truth[i].astype(np.uint8), (sw, sh), interpolation=cv2.INTER_NEAREST) > 0
+        y0, x0, y1, x1 = max(oy, 0), max(ox, 0), min(oy + sh, h), min(ox + sw, w)
+        sub = ms[y0 - oy : y1 - oy, x0 - ox : x1 - ox]
+        out[i, y0:y1, x0:x1][sub] = fs[y0 - oy : y1 - oy, x0 - ox : x1 - ox][sub]
+        small_truth[i, y0:y1, x0:x1] = sub
+    return out, small_truth
 
 
 def _with_second_animal(frames, truth, frames_b, truth_b) -> tuple[np.ndarray, np.ndarray]:
