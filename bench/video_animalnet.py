@@ -5,7 +5,7 @@ leave-one-video-out; used by ``bench/video.py --part quality --segmenter animaln
 tracker's masks with the network's animal when that moves against the camera more than the tracked
 mask does (``switch_motion``), and relabels the video with `selftrain`'s per-video classifier
 (``relabel``). The tracker's masks and the flow come from the same cache as ``--part quality``'s;
-every setting of `GRID` runs `AnimalNetSegmenter.decide_video` on them (a few CPU seconds a video).
+every setting of `GRID` runs `AnimalNetSegmenter.decide_near` on them (a few CPU seconds a video).
 Also scored: the network alone on every frame (its connected part over even odds holding the most
 probability, no tracker; its evidence cached by the frames, the flow, the weights' digest and
 ``zooctl/video/animalnet.py``'s source). Leave-one-out runs over the `animalnet` settings (ties keep
@@ -111,7 +111,7 @@ def run(sequences, load, cache, base: dict, preset, flow_size, out: Path, weight
             seg.feature_every, seg.switch_motion, seg.relabel, seg.net_weight = 3, switch, relabel, net_weight
             seg.relabel_options = {"prior_weight": 1.0, **dict(options)}
             c0 = time.process_time()
-            masks = full(seg.decide_video(small_frames, small, flow, seed_frame=g.get("seed_frame")))
+            masks = full(seg.decide_near(small_frames, small, flow, seed_frame=g.get("seed_frame")))
             info = dict(seg.report["animalnet"], cpu_s=round(time.process_time() - c0, 2))
             res[_label(switch, relabel, net_weight, options)] = scored(masks, truth, info)
             masks_by[(switch, relabel, net_weight, options)] = masks

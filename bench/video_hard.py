@@ -159,7 +159,7 @@ def run(sequences, load, cache, base: dict, preset, flow_size, out: Path, weight
                     *(resize_flows(f, sw, sh, frames) for f in (flow.forward, flow.backward)), None, None
                 )
             small_frames, small = at_working_size(frames, tracked, (sh, sw))
-            got = seg.decide_video(small_frames, small, flow, seed_frame=g.get("seed_frame"))
+            got = seg.decide_near(small_frames, small, flow, seed_frame=g.get("seed_frame"))
             masks = np.stack(
                 [cv2.resize(m.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR) > 0.5 for m in got]
             )

@@ -247,6 +247,43 @@ def test_remnants_far_smaller_than_the_animal_are_dropped_unless_cut_by_the_edge
     assert drop_remnants(np.zeros((3, 8, 8), bool), 0.1) == []  # nothing seen: nothing to judge
 
 
+def test_a_small_animal_is_decided_on_the_part_of_the_frame_it_keeps_to(animals):
+    """An animal kept to a small part of a large frame is decided on that part, enlarged; a large
+    one on the whole frame; the masks come back at the frame's size and keep the animal."""
+    from zooctl.benchdata.composites import composite
+    from zooctl.video.animalnet import AnimalNetSegmenter, _kept_to
+    from zooctl.video.flow import DISFlow, compute_video_flow
+
+    big = np.zeros((2, 60, 80), bool)
+    big[:, 5:50, 10:70] = True
+    assert _kept_to(big, 80, 60) is None
+    assert _kept_to(np.zeros((2, 60, 80), bool), 80, 60) is None
+    small = np.zeros((2, 60, 80), bool)
+    small[0, 10:20, 10:20] = True
+    small[1, 12:22, 14:24] = True
+    assert _kept_to(small, 80, 60) == (
+        6,
+        7,
+        22,
+        18,
+    )  # both frames' masks (14 x 12), a quarter wider each side
+
+    s = composite(animals, np.random.default_rng(0), (320, 240))
+    frames = np.full((2, 600, 800, 3), 128, np.uint8)
+    frames[:, 300:540, 400:720] = s.frames
+    truth = np.zeros((2, 600, 800), bool)
+    truth[:, 300:540, 400:720] = s.mask
+    flow = compute_video_flow(DISFlow("medium"), frames)
+    seg = AnimalNetSegmenter()
+    got = np.asarray(seg.decide_near(frames, truth, flow, seed_frame=0), bool)
+    assert got.shape == truth.shape and seg.report["animalnet"]["crop"] is not None
+    assert iou(got[0], truth[0]) > 0.6
+    whole = np.zeros((2, 240, 320), bool)
+    whole[:, 20:220, 20:300] = True  # a tracked animal over most of the frame: no crop
+    seg.decide_near(s.frames, whole, compute_video_flow(DISFlow("medium"), s.frames))
+    assert seg.report["animalnet"]["crop"] is None
+
+
 def test_video_show_says_whether_the_network_replaced_the_tracker():
     from zooctl.video.stats import seeding_lines
 
@@ -260,6 +297,20 @@ def test_video_show_says_whether_the_network_replaced_the_tracker():
     assert "seeding: 4 network" in text and "first seed" not in text
     assert "+0.98% of the width" in text and "replaced the tracker's masks" in text
     assert "24.0% of mask pixels changed" in text
+    other = {
+        "seeding": ["localiser", "tracked", "empty"],
+        "seed_frame": 0,
+        "animalnet": {
+            "motion_margin": 1.13,
+            "network_replaced_tracker": False,
+            "same_animal_on_seed_frame": False,
+            "remnants_dropped": [2],
+            "crop": [10, 20, 200, 120],
+        },
+    }
+    text = "\n".join(seeding_lines(other))
+    assert "another animal than the tracked one" in text and "frames 2" in text
+    assert "200x120 at (10, 20)" in text
     kept = {"seeding": ["localiser", "tracked"], "seed_frame": 0, "animalnet": {"motion_margin": None}}
     text = "\n".join(seeding_lines(kept))
     assert "first seed on frame 0" in text and "saw no animal: the tracker's masks kept" in text

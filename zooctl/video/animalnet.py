@@ -189,9 +189,14 @@ class AnimalNetSegmenter:
        the frame's edge is stored empty: what a tracker leaves behind on the ground once the animal
        has left (an animal leaving or entering is cut by the edge). 0: never.
 
+    Steps 2-6 run on the part of the frame the tracked animal keeps to, enlarged to the working size,
+    when that part is at most half the frame's width and height (`decide_near`): a small or distant
+    animal would otherwise cover a few cells of the network's and the relabelling's grid.
+
     ``weights``: the head's ``.npz`` (`weights_file`). Other options go to the tracker.
     ``report``: the tracker's, with ``animalnet`` added (weights, the motion margin measured, whether
-    the network's masks replaced the tracker's, share of mask pixels changed).
+    the network's masks replaced the tracker's, whether the animal on the seed frame was the same,
+    the frames emptied as remnants, the part of the frame decided on, share of mask pixels changed).
     """
 
     name = "animalnet"
@@ -365,6 +370,49 @@ class AnimalNetSegmenter:
             progress(2 * len(looked), 2 * len(looked))
         return masks
 
+    def decide_near(self, small, tracked, flow, progress=None, seed_frame: int | None = None) -> np.ndarray:
+        """`decide_video` on the part of the frame the tracked animal keeps to, enlarged to the working
+        size, when that part is at most half the frame's width and height (a small or distant animal,
+        else the network and the relabelling see it on a few cells of their grid); the whole frame
+        otherwise. Same arguments and result; ``report["animalnet"]["crop"]``: the part (x, y, w, h)
+        at the working size, or None."""
+        from .flow import VideoFlow, resize_flow
+        from .scratch import working
+
+        t, h, w = small.shape[:3]
+        box = _kept_to(tracked, w, h)
+        if box is None:
+            masks = self.decide_video(small, tracked, flow, progress, seed_frame)
+            self.report["animalnet"]["crop"] = None
+            return masks
+        x, y, bw, bh = box
+        scale = min(w / bw, h / bh)
+        cw, ch = max(round(bw * scale), 1), max(round(bh * scale), 1)
+
+        def up(a, interpolation):
+            return cv2.resize(
+                np.ascontiguousarray(a[y : y + bh, x : x + bw]), (cw, ch), interpolation=interpolation
+            )
+
+        frames_c = np.stack([up(small[i], cv2.INTER_LINEAR) for i in range(t)])
+        tracked_c = np.stack([up(np.asarray(tracked[i], np.uint8), cv2.INTER_NEAREST) > 0 for i in range(t)])
+        flow_c = VideoFlow(
+            *(
+                np.stack([resize_flow(np.ascontiguousarray(f[y : y + bh, x : x + bw]), cw, ch) for f in part])
+                for part in (flow.forward, flow.backward)
+            ),
+            None,
+            None,
+        )
+        got = self.decide_video(frames_c, tracked_c, flow_c, progress, seed_frame)
+        masks = working(small, t, (h, w), bool)
+        for i in range(t):
+            masks[i, y : y + bh, x : x + bw] = (
+                cv2.resize(np.asarray(got[i], np.float32), (bw, bh), interpolation=cv2.INTER_LINEAR) > 0.5
+            )
+        self.report["animalnet"]["crop"] = [int(x), int(y), int(bw), int(bh)]
+        return masks
+
     def _same_animal(self, small, tracked, flow, s: int, ev, seen: dict, still: float) -> bool:
         """Whether the network's animal may replace the tracked masks: it overlaps the tracked mask
         on the tracker's seed frame ``s`` (where the tracker held its animal; intersection over
@@ -388,7 +436,7 @@ class AnimalNetSegmenter:
         flow, tracked = track(self.tracker, frames, box, progress, flow, box_frame, "animalnet")
         self.report = dict(self.tracker.report)
         small, prior = at_working_size(frames, tracked, flow.forward.shape[1:3])
-        masks = self.decide_video(
+        masks = self.decide_near(
             small,
             prior,
             flow,
@@ -396,6 +444,25 @@ class AnimalNetSegmenter:
             seed_frame=self.tracker.report.get("seed_frame"),
         )
         return at_frame_size(masks, frames)
+
+
+def _kept_to(tracked, w: int, h: int, margin: float = 0.25) -> tuple[int, int, int, int] | None:
+    """(x, y, w, h) around every frame's tracked mask, widened by ``margin`` of its size on each side,
+    when it is at most half the frame's width and height; else None."""
+    rows, cols = np.zeros(h, bool), np.zeros(w, bool)
+    for m in tracked:
+        m = np.asarray(m, bool)
+        rows |= m.any(1)
+        cols |= m.any(0)
+    if not rows.any():
+        return None
+    y0, y1 = np.flatnonzero(rows)[[0, -1]]
+    x0, x1 = np.flatnonzero(cols)[[0, -1]]
+    mx, my = round(margin * (x1 - x0 + 1)), round(margin * (y1 - y0 + 1))
+    x0, y0, x1, y1 = max(x0 - mx, 0), max(y0 - my, 0), min(x1 + mx + 1, w), min(y1 + my + 1, h)
+    if x1 - x0 > w / 2 or y1 - y0 > h / 2:
+        return None
+    return int(x0), int(y0), int(x1 - x0), int(y1 - y0)
 
 
 def drop_remnants(masks, remnant: float) -> list[int]:

@@ -152,7 +152,19 @@ def seeding_lines(seeding: dict[str, Any] | None) -> list[str]:
             if net.get("network_replaced_tracker")
             else "the tracker's masks kept"
         )
+        if net.get("same_animal_on_seed_frame") is False:
+            verdict += " (it was another animal than the tracked one on the seed frame)"
         out.append(f"animalnet: {moved}: {verdict}")
+        if net.get("crop"):
+            x, y, w, h = net["crop"]
+            out.append(
+                f"decided on the part of the frame the animal keeps to: {w}x{h} at ({x}, {y}), working size"
+            )
+        if net.get("remnants_dropped"):
+            out.append(
+                f"left empty as remnants of the tracker (far smaller than the animal, not at the edge): "
+                f"frames {_ranges(net['remnants_dropped'])}"
+            )
     if (seeding.get("self_training") or {}).get("changed") is not None:
         out.append(
             f"relabelled by a classifier learned from this video: {seeding['self_training']['changed']:.1%} "
