@@ -23,8 +23,12 @@ import contextlib
 import io
 import json
 import math
+import os
 import shutil
-from collections.abc import Iterator
+import sys
+import threading
+from collections import deque
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -241,9 +245,15 @@ class VideoWriter:
 
     `VideoStore.add_written` publishes the finished file; ``discard()`` (safe to call again, and
     after a failure) closes and removes it. ``frames`` is the frames dataset for reading back.
+
+    ``behind``: bytes of frames and flow that may wait in memory for a background thread to
+    compress and write them (0: written at once, on the caller's thread). The thread runs at a
+    lower priority and writes frames before flow, so that compressing the flow fills a core the
+    flow or the segmenter leaves idle instead of holding them up; the arrays given are kept until
+    written (the caller must not change them), a write error is raised by the next call.
     """
 
-    def __init__(self, tmp: Path, size: tuple[int, int]) -> None:
+    def __init__(self, tmp: Path, size: tuple[int, int], behind: int = 0) -> None:
         import h5py
 
         self.path = Path(tmp)
@@ -255,6 +265,13 @@ class VideoWriter:
         self._masks: Any = None
         self._boxes: list[np.ndarray] = []
         self.coverage: list[float] = []
+        self._behind = max(int(behind), 0)
+        self._queue: dict[str, deque] = {"frames": deque(), "flow": deque()}
+        self._waiting = 0  # bytes queued
+        self._cv = threading.Condition()
+        self._thread: threading.Thread | None = None
+        self._failed: BaseException | None = None
+        self._closing = False
         with self._writing():
             self._f = f = h5py.File(self._io, "w")
             g = f.create_group("flow")
@@ -270,7 +287,7 @@ class VideoWriter:
                 )
 
             # frames and flow take lzf: much faster to write than gzip for a few more bytes (BENCHMARKS.md, Video store)
-            self.frames = grow(f, "frames", (h, w, 3), np.uint8, compression="lzf")
+            self._frames = grow(f, "frames", (h, w, 3), np.uint8, compression="lzf")
             flow = {"compression": "lzf", "shuffle": True}
             occ = {"compression": "gzip", "compression_opts": _GZIP}
             self._flow = [
@@ -283,23 +300,114 @@ class VideoWriter:
     def __len__(self) -> int:
         return self._t
 
+    @property
+    def frames(self):
+        """The frames dataset, once every frame given is written."""
+        self._wait("frames")
+        return self._frames
+
     def add_frames(self, frames: np.ndarray) -> None:
         """Append (N, H, W, 3) uint8 frames."""
-        n = len(frames)
-        with self._writing():
-            self.frames.resize(self._t + n, axis=0)
-            self.frames[self._t : self._t + n] = frames
+        start, n = self._t, len(frames)
+
+        def write() -> None:
+            with self._writing():
+                self._frames.resize(start + n, axis=0)
+                self._frames[start : start + n] = frames
+
         self._t += n
+        self._submit("frames", np.asarray(frames).nbytes, write)
 
     def add_flow(self, forward, backward, occlusion_forward, occlusion_backward) -> None:
         """Append the flow of the next N frame pairs ((N, H, W, 2) float, (N, H, W) bool)."""
         parts = (forward, backward, occlusion_forward, occlusion_backward)
-        n = len(forward)
-        with self._writing():
-            for ds, arr in zip(self._flow, parts):
-                ds.resize(self._pairs + n, axis=0)
-                ds[self._pairs : self._pairs + n] = np.asarray(arr).astype(ds.dtype, copy=False)
+        start, n = self._pairs, len(forward)
+        nbytes = sum(np.asarray(p).nbytes for p in parts)
+        if self._behind and self._waiting + nbytes > self._behind:
+            parts, nbytes = self._spill(parts), 0  # no room in memory: it waits on disk
+
+        def write() -> None:
+            with self._writing():
+                for ds, arr in zip(self._flow, parts):
+                    ds.resize(start + n, axis=0)
+                    for k in range(n):  # a pair at a time: HDF5 serves other callers in between
+                        ds[start + k] = np.asarray(arr[k]).astype(ds.dtype, copy=False)
+            for arr in parts:
+                if hasattr(arr, "close"):
+                    arr.close()
+
         self._pairs += n
+        self._submit("flow", nbytes, write)
+
+    # -- writing behind ----------------------------------------------------------------------------
+
+    def _submit(self, kind: str, nbytes: int, write: Callable[[], None]) -> None:
+        """Run ``write`` now, or queue it for the background thread (waiting while more than
+        ``behind`` bytes are queued)."""
+        if not self._behind:
+            write()
+            return
+        with self._cv:
+            while self._failed is None and self._waiting and self._waiting + nbytes > self._behind:
+                self._cv.wait()
+            self._raise_failure()
+            self._queue[kind].append((nbytes, write))
+            self._waiting += nbytes
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._write_behind, name="video-writer", daemon=True)
+                self._thread.start()
+            self._cv.notify_all()
+
+    def _spill(self, parts) -> list[_Spilled]:
+        """``parts`` copied to temporary files beside the video, to wait there for the writer
+        thread instead of in memory."""
+        with self._writing():
+            return [_Spilled(np.asarray(p), self.path.parent) for p in parts]
+
+    def _write_behind(self) -> None:
+        lower_thread_priority(10)
+        while True:
+            with self._cv:
+                while not self._closing and not (self._queue["frames"] or self._queue["flow"]):
+                    self._cv.wait()
+                if self._closing:
+                    return
+                queue = self._queue["frames"] or self._queue["flow"]
+                nbytes, write = queue[0]  # left queued until written: `_wait` sees it
+            try:
+                write()
+            except BaseException as exc:  # raised to the caller by its next call
+                with self._cv:
+                    self._failed = exc
+                    for q in self._queue.values():
+                        q.clear()
+                    self._waiting = 0
+                    self._cv.notify_all()
+                return
+            with self._cv:
+                queue.popleft()
+                self._waiting -= nbytes
+                self._cv.notify_all()
+
+    def _wait(self, *kinds: str) -> None:
+        """Until what was given of ``kinds`` (default: everything) is written."""
+        with self._cv:
+            while self._failed is None and any(self._queue[k] for k in kinds or self._queue):
+                self._cv.wait()
+            self._raise_failure()
+
+    def _stop_writing(self) -> None:
+        """End the background thread (after the write it is doing; what is still queued is dropped)."""
+        with self._cv:
+            self._closing = True
+            self._cv.notify_all()
+        if self._thread is not None:
+            self._thread.join()
+            self._thread = None
+
+    def _raise_failure(self) -> None:
+        if self._failed is not None:
+            raise self._failed
 
     def set_mask(self, i: int, mask: np.ndarray) -> None:
         """Store frame i's (H, W) bool mask; every frame's, in order 0, 1, ..."""
@@ -307,7 +415,7 @@ class VideoWriter:
             raise ValueError(f"masks are stored in order: expected frame {len(self._boxes)}, got {i}")
         with self._writing():
             if self._masks is None:
-                _, h, w, _ = self.frames.shape
+                _, h, w, _ = self._frames.shape
                 self._masks = self._f.create_dataset(
                     "masks",
                     shape=(self._t, h, w),
@@ -324,7 +432,9 @@ class VideoWriter:
         self, name: str, fps: float, source: dict, source_indices, segmenter: dict, flow_estimator: dict
     ):
         """Write the attributes and close the file; returns the video's index summary."""
-        t, h, w, _ = self.frames.shape
+        self._wait()
+        self._stop_writing()
+        t, h, w, _ = self._frames.shape
         if t < 2 or self._pairs != t - 1 or len(self._boxes) != t or len(source_indices) != t:
             raise ValueError(
                 f"incomplete video file: {t} frames, {self._pairs} flow pairs, {len(self._boxes)} masks"
@@ -361,12 +471,55 @@ class VideoWriter:
 
     def discard(self) -> None:
         """Close and remove the temporary (whatever state it is in)."""
+        self._stop_writing()
         with contextlib.suppress(Exception):
             if getattr(self, "_f", None):
                 self._f.close()
         with contextlib.suppress(Exception):
             self._io.close()
         self.path.unlink(missing_ok=True)
+
+
+class _Spilled:
+    """An (N, ...) array waiting in an unlinked temporary file (gone once closed, or when the process
+    ends), read back one record at a time."""
+
+    def __init__(self, arr: np.ndarray, folder: Path) -> None:
+        import tempfile
+
+        self.dtype, self.shape = arr.dtype, arr.shape
+        self._item = arr[0].nbytes if len(arr) else 0
+        self._file = tempfile.TemporaryFile(prefix=".zooctl-spill-", dir=folder, buffering=0)
+        try:
+            data = memoryview(np.ascontiguousarray(arr)).cast("B")
+            done = 0
+            while done < len(data):
+                done += self._file.write(data[done:])
+        except BaseException:
+            self._file.close()
+            raise
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def __getitem__(self, k: int) -> np.ndarray:
+        buf = os.pread(self._file.fileno(), self._item, int(k) * self._item)
+        if len(buf) != self._item:
+            raise OSError(f"short read from a temporary file ({len(buf)} of {self._item} bytes)")
+        return np.frombuffer(buf, self.dtype).reshape(self.shape[1:])
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def lower_thread_priority(step: int) -> None:
+    """Raise the calling thread's nice value by ``step`` (Linux, where a thread has its own; elsewhere
+    nothing): work that is not waited for yet (writing the file behind, the network's looks while the
+    tracker runs) then fills an idle core instead of slowing the work that is."""
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            tid = threading.get_native_id()
+            os.setpriority(os.PRIO_PROCESS, tid, os.getpriority(os.PRIO_PROCESS, tid) + step)
 
 
 def read_video_h5(path: Path, what: tuple[str, ...] = ("frames", "masks", "flow")) -> VideoRecord:
@@ -480,10 +633,10 @@ class VideoStore(IndexedStore):
             raise self.exists_error(name)
         return name
 
-    def begin_file(self, name: str, size: tuple[int, int]) -> VideoWriter:
+    def begin_file(self, name: str, size: tuple[int, int], behind: int = 0) -> VideoWriter:
         """A `VideoWriter` for a new video ``name`` of frames ``size`` (w, h), on a temporary beside
-        its final path; publish it with `add_written`, or ``discard()`` it."""
-        return VideoWriter(temp_path(self.path(name)), size)
+        its final path (``behind``: `VideoWriter`'s); publish it with `add_written`, or ``discard()`` it."""
+        return VideoWriter(temp_path(self.path(name)), size, behind)
 
     def add_written(
         self, name: str, writer: VideoWriter, summary: dict[str, Any], replace: bool = False

@@ -71,6 +71,9 @@ BUDGET_FRAMES = 300
 BUDGET_FPS = 15.0
 BUDGET_SECONDS = 20.0
 CHUNK = 8  # frames decoded, flowed and written at a time: what preprocessing holds at once
+# Compressing and writing frames and flow runs on a thread of its own, beside the flow and the
+# segmenter; at most this many chunks wait for it (their frames, float32 flow and occlusion).
+WRITE_BEHIND_CHUNKS = 2
 
 
 @dataclass
@@ -120,13 +123,18 @@ def preprocess(path: str | Path, opts: AddOptions, progress: StageProgress | Non
     name = opts.name or default_name(path)
     with tempfile.TemporaryDirectory(prefix="zooctl-video-") as tmp:
         file = Path(tmp) / f"{name}.h5"
-        ingest(
-            path,
-            AddOptions(**{**opts.__dict__, "name": name}),
-            lambda size: VideoWriter(file, size),
-            progress,
-        )
-        return read_video_h5(file)
+        writers: list[VideoWriter] = []
+
+        def begin(size: tuple[int, int], behind: int = 0) -> VideoWriter:
+            writers.append(VideoWriter(file, size, behind))
+            return writers[-1]
+
+        try:
+            ingest(path, AddOptions(**{**opts.__dict__, "name": name}), begin, progress)
+            return read_video_h5(file)
+        finally:
+            for w in writers:  # its writer thread ends before the folder goes
+                w.discard()
 
 
 def add_video(
@@ -147,8 +155,8 @@ def add_video(
     opts = AddOptions(**{**opts.__dict__, "name": name})
     writers = []
 
-    def begin(size: tuple[int, int]):
-        writers.append(store.begin_file(name, size))
+    def begin(size: tuple[int, int], behind: int = 0):
+        writers.append(store.begin_file(name, size, behind))
         return writers[-1]
 
     try:
@@ -163,12 +171,13 @@ def add_video(
 def ingest(
     path: Path,
     opts: AddOptions,
-    begin: Callable[[tuple[int, int]], Any],
+    begin: Callable[[tuple[int, int], int], Any],
     progress: StageProgress | None = None,
     notify: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """Decode, flow and segment ``path`` into the `zooctl.store.videos.VideoWriter` that
-    ``begin((w, h))`` makes, a few frames at a time; finishes it and returns its summary."""
+    ``begin((w, h), behind)`` makes (``behind``: the bytes that may wait for its writer thread), a
+    few frames at a time; finishes it and returns its summary."""
     from ..plugins import get_registry
     from .decode import DEFAULT_MAX_MEMORY_GB, DEFAULT_MAX_SIZE, check_frame_memory, open_video
 
@@ -198,7 +207,10 @@ def ingest(
     )
     w, h = stream.size
     check_frame_memory(
-        w, h, CHUNK, DEFAULT_MAX_MEMORY_GB if opts.max_memory_gb is None else opts.max_memory_gb
+        w,
+        h,
+        CHUNK * (1 + WRITE_BEHIND_CHUNKS),  # the chunk at work and those waiting to be written
+        DEFAULT_MAX_MEMORY_GB if opts.max_memory_gb is None else opts.max_memory_gb,
     )
     if seg_name == "masks":
         seg_opts.setdefault("source_indices", None)
@@ -209,8 +221,15 @@ def ingest(
     segmenter = seg_spec.create(**seg_opts)
     uses_flow = getattr(segmenter, "uses_flow", False)
     flow_size = segmenter.flow_size(w, h) if uses_flow and hasattr(segmenter, "flow_size") else (w, h)
-    writer = begin((w, h))
-    seg_flow = _stream_frames(stream, writer, estimator, flow_size if uses_flow else None, stage)
+    writer = begin((w, h), WRITE_BEHIND_CHUNKS * CHUNK * w * h * (3 + 2 * 8 + 2))
+    import inspect
+
+    # a segmenter working at a smaller size gets the frames at that size too, made as they are
+    # decoded (else it reads every frame back from the file to downscale it)
+    takes_small = "working_frames" in inspect.signature(segmenter.segment).parameters
+    seg_flow, small = _stream_frames(
+        stream, writer, estimator, flow_size if uses_flow else None, stage, uses_flow and takes_small
+    )
     try:
         t = len(writer)
         if t < 2:
@@ -225,9 +244,9 @@ def ingest(
         kwargs: dict[str, Any] = {"box": box, "progress": stage("segment")}
         if uses_flow:
             kwargs["flow"] = seg_flow
+        if small is not None:
+            kwargs["working_frames"] = small
         if opts.box_frame:
-            import inspect
-
             if box is None:
                 raise UsageError("--box-frame places --box: give both", hint="--box x,y,w,h --box-frame N")
             if "box_frame" not in inspect.signature(segmenter.segment).parameters:
@@ -247,7 +266,9 @@ def ingest(
             )
         report = store_masks(masks, writer, seg_name, user=seg_name == "masks")
     finally:
-        for part in () if seg_flow is None else (seg_flow.forward, seg_flow.backward):
+        for part in (() if seg_flow is None else (seg_flow.forward, seg_flow.backward)) + (
+            () if small is None else (small,)
+        ):
             part.close()
     recorded = {
         k: str(Path(v).resolve()) if isinstance(v, Path) else str(v)
@@ -281,24 +302,33 @@ def ingest(
     )
 
 
-def _stream_frames(stream, writer, estimator, flow_size, stage):
+def _stream_frames(stream, writer, estimator, flow_size, stage, keep_frames: bool = False):
     """Decode ``stream`` ``CHUNK`` frames at a time into ``writer``, with the flow of each frame
     pair. ``flow_size`` (w, h): also keep the float32 flow at that size for the segmenter (a
-    `zooctl.video.flow.VideoFlow` of scratch arrays, returned); None: it needs none."""
+    `zooctl.video.flow.VideoFlow` of scratch arrays); None: it needs none. ``keep_frames``: and the
+    frames at that size (INTER_AREA, a scratch array) when it is not theirs. -> (flow, frames)."""
+    import cv2
+
     from .flow import VideoFlow, compute_video_flow, resize_flow
     from .scratch import ScratchArray
 
     decoded, flowed = stage("decode"), stage("flow")
     total = stream.total
     keep: VideoFlow | None = None
+    small: ScratchArray | None = None
     prev: np.ndarray | None = None
     chunk: list[np.ndarray] = []
 
     def flush() -> None:
-        nonlocal prev, keep
+        nonlocal prev, keep, small
         frames = np.stack(chunk)
         chunk.clear()
         writer.add_frames(frames)
+        if keep_frames and flow_size is not None and tuple(flow_size) != (frames.shape[2], frames.shape[1]):
+            if small is None:
+                small = ScratchArray(0, (flow_size[1], flow_size[0], 3), np.uint8)
+            for f in frames:
+                small.append(cv2.resize(f, tuple(flow_size), interpolation=cv2.INTER_AREA))
         pairs = frames if prev is None else np.concatenate([prev[None], frames])
         prev = frames[-1]
         if decoded:
@@ -327,7 +357,7 @@ def _stream_frames(stream, writer, estimator, flow_size, stage):
             flush()
     if chunk:
         flush()
-    return keep
+    return keep, small
 
 
 def store_masks(masks, writer, seg_name: str, user: bool) -> dict[str, Any]:
