@@ -258,6 +258,16 @@ class AnimalNetSegmenter:
         grid = self.net.logits(inputs)
         return grid_to_pixels(grid, w, h, fnet.input_size(w, h)), (feats, cam), residual
 
+    def looks(self, small, flow) -> dict:
+        """`look` at each frame `decide_video` looks at, of (T, h, w, 3) frames at the working size
+        and their flow -> {frame: (log-odds, (float16 features, class map), residual motion)}."""
+        t = len(small)
+        out = {}
+        for i in sorted(set(range(0, t, self.feature_every)) | {t - 1}):
+            grid, (feats, cam), residual = self.look(small[i], _motion(flow, i, t))
+            out[i] = (grid, (feats.astype(np.float16), cam), residual)
+        return out
+
     def evidence(self, frames, flow, progress=None) -> np.ndarray:
         """(T, h, w) float32 network log-odds at the flow's size for (T, H, W, 3) frames (every
         ``feature_every``-th looked at; the frames between carried along the
@@ -290,10 +300,13 @@ class AnimalNetSegmenter:
         net = evidence if self.erase else np.maximum(evidence, 0.0)
         return main_animal(self.net_weight * net + prior)
 
-    def decide_video(self, small, tracked, flow, progress=None, seed_frame: int | None = None) -> np.ndarray:
+    def decide_video(
+        self, small, tracked, flow, progress=None, seed_frame: int | None = None, looks: dict | None = None
+    ) -> np.ndarray:
         """Steps 2-6 on (T, h, w, 3) frames and (T, h, w) bool tracked masks at the working size and
         their flow -> (T, h, w) bool masks; sets ``report["animalnet"]``. ``seed_frame``: the frame
-        the tracker started from (None: unknown, the switch then checks motion only)."""
+        the tracker started from (None: unknown, the switch then checks motion only). ``looks``:
+        `looks` already taken of these frames (by frame; the others are taken here)."""
         from .scratch import working
         from .selftrain import SelfTrainedSegmenter, carry_between, main_animal
 
@@ -302,8 +315,9 @@ class AnimalNetSegmenter:
         ev = working(small, t, (h, w), np.float32)
         seen: dict[int, tuple] = {}
         margins, held = [], []
+        looks = looks or {}
         for k, i in enumerate(looked):
-            ev[i], f, residual = self.look(small[i], _motion(flow, i, t))
+            ev[i], f, residual = looks[i] if i in looks else self.look(small[i], _motion(flow, i, t))
             seen[i] = (f[0].astype(np.float16), f[1])  # float16: as `relabel` keeps them
             animal = main_animal(ev[i])
             held.append(motion_contrast(np.asarray(tracked[i], bool), residual))
@@ -370,19 +384,21 @@ class AnimalNetSegmenter:
             progress(2 * len(looked), 2 * len(looked))
         return masks
 
-    def decide_near(self, small, tracked, flow, progress=None, seed_frame: int | None = None) -> np.ndarray:
+    def decide_near(
+        self, small, tracked, flow, progress=None, seed_frame: int | None = None, looks: dict | None = None
+    ) -> np.ndarray:
         """`decide_video` on the part of the frame the tracked animal keeps to, enlarged to the working
         size, when that part is at most half the frame's width and height (a small or distant animal,
         else the network and the relabelling see it on a few cells of their grid); the whole frame
-        otherwise. Same arguments and result; ``report["animalnet"]["crop"]``: the part (x, y, w, h)
-        at the working size, or None."""
+        otherwise. Same arguments and result (``looks``: of the whole frames, used when it decides on
+        them); ``report["animalnet"]["crop"]``: the part (x, y, w, h) at the working size, or None."""
         from .flow import VideoFlow, resize_flow
         from .scratch import working
 
         t, h, w = small.shape[:3]
         box = _kept_to(tracked, w, h)
         if box is None:
-            masks = self.decide_video(small, tracked, flow, progress, seed_frame)
+            masks = self.decide_video(small, tracked, flow, progress, seed_frame, looks)
             self.report["animalnet"]["crop"] = None
             return masks
         x, y, bw, bh = box
@@ -428,20 +444,43 @@ class AnimalNetSegmenter:
         # two animals side by side touch; the same animal seen twice overlaps
         return bool((animal & held).sum() >= SAME_ANIMAL_IOU * (animal | held).sum() > 0)
 
-    def segment(self, frames, box=None, progress=None, flow=None, box_frame: int = 0) -> np.ndarray:
-        """(T, H, W, 3) uint8 RGB frames, optional box on frame ``box_frame`` -> (T, H, W) bool masks."""
+    def segment(
+        self, frames, box=None, progress=None, flow=None, box_frame: int = 0, working_frames=None
+    ) -> np.ndarray:
+        """(T, H, W, 3) uint8 RGB frames, optional box on frame ``box_frame`` -> (T, H, W) bool masks.
+        ``working_frames``: the frames at `flow_size` (INTER_AREA), when the caller has them."""
         from .selftrain import at_frame_size, at_working_size, track
 
         t = len(frames)
-        flow, tracked = track(self.tracker, frames, box, progress, flow, box_frame, "animalnet")
+        early: dict = {}
+
+        def look_early(small, flow) -> None:  # the network's looks need no masks: taken while it tracks
+            from ..store.videos import lower_thread_priority
+
+            lower_thread_priority(5)  # the tracker first: these are needed only once it is done
+            self._feature_net()
+            early["small"], early["looks"] = small, self.looks(small, flow)
+
+        flow, tracked = track(
+            self.tracker,
+            frames,
+            box,
+            progress,
+            flow,
+            box_frame,
+            "animalnet",
+            alongside=look_early,
+            working_frames=working_frames,
+        )
         self.report = dict(self.tracker.report)
-        small, prior = at_working_size(frames, tracked, flow.forward.shape[1:3])
+        small, prior = at_working_size(early["small"], tracked, flow.forward.shape[1:3])
         masks = self.decide_near(
             small,
             prior,
             flow,
             (lambda d, n: progress(t + d * t // n, 2 * t)) if progress else None,
             seed_frame=self.tracker.report.get("seed_frame"),
+            looks=early["looks"],
         )
         return at_frame_size(masks, frames)
 

@@ -21,7 +21,9 @@ seed (re-seeding). Works on CPU, offline.
 from __future__ import annotations
 
 import dataclasses
+import threading
 from collections.abc import Callable
+from functools import partial
 
 import cv2
 import numpy as np
@@ -140,8 +142,10 @@ class GrabCutTracker:
         progress: Callable[[int, int], None] | None = None,
         flow: VideoFlow | None = None,
         box_frame: int = 0,
+        working_frames=None,
     ) -> np.ndarray:
-        """(T, H, W, 3) uint8 RGB frames, optional box on frame ``box_frame`` -> (T, H, W) bool masks."""
+        """(T, H, W, 3) uint8 RGB frames, optional box on frame ``box_frame`` -> (T, H, W) bool masks.
+        ``working_frames``: the frames at `flow_size` (INTER_AREA), when the caller has them."""
         t, h, w = frames.shape[:3]
         if t < 2:
             raise InputError("the grabcut segmenter needs at least 2 frames (it uses motion)")
@@ -165,9 +169,11 @@ class GrabCutTracker:
         # linear upsample of their 0/1 values.
         # A lazy video (frames read from the store's file) keeps its working set in scratch files.
         scale = self._scale(w, h)
-        small = working(frames, t, (sh, sw, 3), np.uint8)
-        for i in range(t):
-            small[i] = cv2.resize(frames[i], (sw, sh), interpolation=cv2.INTER_AREA)
+        small = working_frames
+        if small is None:
+            small = working(frames, t, (sh, sw, 3), np.uint8)
+            for i in range(t):
+                small[i] = cv2.resize(frames[i], (sw, sh), interpolation=cv2.INTER_AREA)
         if tuple(flow.forward.shape[1:3]) == (sh, sw):  # given at the size GrabCut works at
             small_flow = VideoFlow(flow.forward, flow.backward, None, None)
         else:
@@ -196,16 +202,42 @@ class GrabCutTracker:
     def _honour(self, frames, box, box_frame, progress, flow) -> np.ndarray:
         """`_segment`, and with a box whose animal the localiser chose: again from the box's own seed
         when the mask on the box's frame is not what the box was drawn around. The frames' colour
-        bins and the localiser's looks (they depend on the frames alone) serve both passes."""
-        bins = working(frames, len(frames), frames.shape[1:3], np.int32)
-        for i in range(len(frames)):
-            bins[i] = cues.lab_bins(frames[i])
+        bins and the localiser's looks (they depend on the frames alone) serve both passes.
+        The keyframes' looks are taken on a second thread from the last one back, while the first
+        pass takes them from the first one on."""
+        t = len(frames)
         self._evidence = _Seen(frames)
-        masks = self._segment(frames, bins, box, box_frame, progress, flow)
-        if box is None or self.report["box_use"] == "seeded" or hint.agrees(masks[box_frame], box):
-            return masks
-        cv2.setRNGSeed(0)
-        return self._segment(frames, bins, box, box_frame, progress, flow, box_seed=True)
+        ahead = None
+        if self.localise:
+            self._localiser()
+            keys = sorted(set(range(0, t, self.key_every)) | {t - 1}, reverse=True)
+            self._stop_ahead = False
+            ahead = threading.Thread(target=self._look_ahead, args=(frames, keys), name="localiser-ahead")
+            ahead.start()
+        try:
+            bins = working(frames, t, frames.shape[1:3], np.int32)
+            for i in range(t):
+                bins[i] = cues.lab_bins(frames[i])
+            masks = self._segment(frames, bins, box, box_frame, progress, flow)
+            if box is None or self.report["box_use"] == "seeded" or hint.agrees(masks[box_frame], box):
+                return masks
+            cv2.setRNGSeed(0)
+            return self._segment(frames, bins, box, box_frame, progress, flow, box_seed=True)
+        finally:
+            self._stop_ahead = True
+            if ahead is not None:
+                ahead.join()
+
+    def _look_ahead(self, frames, keys) -> None:
+        """The localiser's looks at ``keys`` into its cache (a frame the tracker is looking at
+        already is left to it; an error is left to the tracker to meet)."""
+        for k in keys:
+            if self._stop_ahead:
+                return
+            try:
+                self._seen(frames, k)
+            except Exception:
+                return
 
     def _segment(self, frames, bins, box, box_frame, progress, flow, box_seed: bool = False) -> np.ndarray:
         t, h, w = frames.shape[:3]
@@ -230,48 +262,105 @@ class GrabCutTracker:
             p0 = cues.colour_probability(bins[s], hist_fg, hist_bg0)[masks[s]]
             gate = min(self.gate_scale * float(np.percentile(p0, 10)), self.max_gate)
         gate = 0.0 if gate is None else gate
-        done = 1
-        if progress:
-            progress(done, t)
-        # from the seed frame forwards to the end, then backwards to the start
-        for order in (range(s + 1, t), range(s - 1, -1, -1)):
-            hist_bg = hist_bg0
-            for i in order:
-                src = i - 1 if i > s else i + 1
-                pull = flow.backward[i - 1] if i > s else flow.forward[i]  # takes frame src onto i's grid
-                prior = warp(masks[src].astype(np.float32), pull) > 0.5
-                m = np.zeros((h, w), bool)
-                if prior.any():
-                    m = self._track(
-                        frames[i],
-                        bins[i],
-                        prior,
-                        self._motion_flow(flow, i),
-                        hist_fg,
-                        hist_bg,
-                        gate,
-                        self._unreliable(flow, i) if self.reliable_motion else None,
-                    )
-                if self.localise and self._due(i, t, m, prior):
-                    new = self._reseed(frames, bins, flow, i, m, hist_fg, hist_bg)
-                    if new is not None:
-                        m, how[i] = new, "re-seeded"
-                masks[i] = m
-                if not m.any():
-                    how[i] = "empty"
-                elif (~m).any():
-                    # the animal's colours stay those of the seed frame (a slow leak must not teach it
-                    # the water); the background's follow the camera
-                    a = self.colour_memory
-                    hist_bg = a * hist_bg + (1 - a) * cues.colour_histogram(bins[i], ~m)
-                done += 1
-                if progress:
-                    progress(done, t)
+        # from the seed frame forwards to the end, and backwards to the start: each direction starts
+        # from the seed frame's mask and colours, so the two run side by side (GrabCut and the cues
+        # release the GIL), the backward one on a thread of its own with its own RNG stream (OpenCV's
+        # is per thread) seeded as here, so masks come out the same run after run
+        forward, backward = range(s + 1, t), range(s - 1, -1, -1)
+        track = partial(self._track_along, frames, bins, flow, masks, how, s, hist_fg, hist_bg0, gate)
+        done, cv = [1], threading.Condition()
+        self._localising = threading.Lock()  # the localiser's cache and counts, one direction at a time
+
+        def step() -> None:
+            with cv:
+                done[0] += 1
+                cv.notify_all()
+
+        def report() -> None:
+            if progress:
+                with cv:
+                    n = done[0]
+                progress(n, t)
+
+        report()
+        if not forward or not backward:  # one direction (the seed is the first or the last frame)
+            track(forward or backward, lambda: (step(), report()))
+        else:
+            failed: list[BaseException] = []
+            stop = threading.Event()  # the forward direction failed: the backward one ends too
+
+            def step_back() -> None:
+                step()
+                if stop.is_set():
+                    raise _Stopped
+
+            def behind() -> None:
+                cv2.setRNGSeed(0)
+                try:
+                    track(backward, step_back)
+                except _Stopped:
+                    pass
+                except BaseException as exc:
+                    failed.append(exc)
+                finally:
+                    with cv:
+                        cv.notify_all()
+
+            worker = threading.Thread(target=behind, name="grabcut-backward", daemon=True)
+            worker.start()
+            try:
+                track(forward, lambda: (step(), report()))
+                while worker.is_alive():
+                    with cv:
+                        cv.wait(0.5)
+                    report()
+            finally:
+                stop.set()
+                worker.join()
+            if failed:
+                raise failed[0]
+            report()
         self.report = self._report(how, s)
         if box is not None:
             self.report["box_frame"] = box_frame
             self.report["box_use"] = "seeded" if how[s] == "box" else "chose the animal"
         return masks
+
+    def _track_along(self, frames, bins, flow, masks, how, s, hist_fg, hist_bg0, gate, order, step) -> None:
+        """Track from the seed frame ``s`` over ``order`` (consecutive frames, away from ``s``),
+        writing ``masks[i]`` and ``how[i]``; ``step()`` after each frame."""
+        t, h, w = frames.shape[:3]
+        hist_bg = hist_bg0
+        for i in order:
+            src = i - 1 if i > s else i + 1
+            pull = flow.backward[i - 1] if i > s else flow.forward[i]  # takes frame src onto i's grid
+            prior = warp(masks[src].astype(np.float32), pull) > 0.5
+            m = np.zeros((h, w), bool)
+            if prior.any():
+                m = self._track(
+                    frames[i],
+                    bins[i],
+                    prior,
+                    self._motion_flow(flow, i),
+                    hist_fg,
+                    hist_bg,
+                    gate,
+                    self._unreliable(flow, i) if self.reliable_motion else None,
+                )
+            if self.localise and self._due(i, t, m, prior):
+                with self._localising:
+                    new = self._reseed(frames, bins, flow, i, m, hist_fg, hist_bg)
+                if new is not None:
+                    m, how[i] = new, "re-seeded"
+            masks[i] = m
+            if not m.any():
+                how[i] = "empty"
+            elif (~m).any():
+                # the animal's colours stay those of the seed frame (a slow leak must not teach it
+                # the water); the background's follow the camera
+                a = self.colour_memory
+                hist_bg = a * hist_bg + (1 - a) * cues.colour_histogram(bins[i], ~m)
+            step()
 
     # -- the localiser: where to start and when to start again -------------------------------------
 
@@ -302,9 +391,7 @@ class GrabCutTracker:
         return self._loc
 
     def _seen(self, frames, i: int) -> Evidence:
-        if i not in self._evidence:
-            self._evidence[i] = self._localiser().evidence(frames[i])
-        return self._evidence[i]
+        return self._evidence.get(i, lambda: self._localiser().evidence(frames[i]))
 
     def _fused(self, frames, flow, i: int) -> tuple[np.ndarray, Evidence]:
         ev = self._seen(frames, i)
@@ -594,6 +681,10 @@ def resize_flows(flow, w: int, h: int, like=None):
     return out
 
 
+class _Stopped(Exception):
+    """Ends a tracking direction whose other direction failed."""
+
+
 class _Seen:
     """The localiser's looks by frame (`Evidence`), as a dict: for a lazy video the class maps
     wait in a scratch file, so a long video holds only their summaries."""
@@ -603,6 +694,30 @@ class _Seen:
         self._items: dict[int, Evidence] = {}
         self._maps: ScratchArray | None = None
         self._where: dict[int, int] = {}
+        self._lock = threading.Lock()
+        self._making: dict[int, threading.Event] = {}
+
+    def get(self, i: int, look: Callable[[], Evidence]) -> Evidence:
+        """Frame i's look, taken with ``look()`` unless it is here (or being taken: then awaited;
+        the cache serves two threads)."""
+        with self._lock:
+            taking = self._making.get(i)
+            if i not in self._items and taking is None:
+                self._making[i] = threading.Event()
+        if taking is not None:
+            taking.wait()
+        if i in self._items:
+            return self[i]
+        if taking is not None:  # the other thread failed to take it
+            return self.get(i, look)
+        try:
+            ev = look()
+            with self._lock:
+                self[i] = ev
+        finally:
+            with self._lock:
+                self._making.pop(i).set()
+        return self[i]
 
     def __contains__(self, i: int) -> bool:
         return i in self._items
@@ -630,5 +745,6 @@ class _Seen:
         return dataclasses.replace(ev, animal=self._maps[self._where[i]])  # type: ignore[index]
 
     def values(self):
-        """Summaries of the looks (their class maps left out)."""
-        return self._items.values()
+        """Summaries of the looks (their class maps left out), by frame (whichever direction of the
+        tracking looked first: the report's sums come out the same)."""
+        return [self._items[i] for i in sorted(self._items)]

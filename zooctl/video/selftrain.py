@@ -367,9 +367,19 @@ class SelfTrainedSegmenter:
         return out
 
 
-def track(tracker, frames, box, progress, flow, box_frame: int, who: str):
+def track(
+    tracker, frames, box, progress, flow, box_frame: int, who: str, alongside=None, working_frames=None
+):
     """The tracker's masks of (T, H, W, 3) ``frames`` and the flow at its working size, for a
-    segmenter that decides again after it (half of its ``progress``) -> (flow, tracked masks)."""
+    segmenter that decides again after it (half of its ``progress``) -> (flow, tracked masks).
+
+    ``working_frames``: the frames at the working size (INTER_AREA), when the caller has them.
+    ``alongside(small, flow)``: work that needs the frames (``small``, (T, h, w, 3) uint8) and the
+    flow at the working size but not the masks, run on a second thread while the tracker runs (which
+    then takes ``small`` instead of downscaling the frames again); its error is raised here."""
+    from concurrent.futures import ThreadPoolExecutor
+    from functools import partial
+
     from .flow import DISFlow, VideoFlow, compute_video_flow
     from .grabcut import resize_flows
 
@@ -383,13 +393,26 @@ def track(tracker, frames, box, progress, flow, box_frame: int, who: str):
         flow = VideoFlow(
             *(resize_flows(f, sw, sh, frames) for f in (flow.forward, flow.backward)), None, None
         )
-    tracked = tracker.segment(
+    run = partial(
+        tracker.segment,
         frames,
         box=box,
         progress=(lambda d, n: progress(d, 2 * n)) if progress else None,
         flow=flow,
         box_frame=box_frame,
     )
+    small = working_frames
+    if alongside is None:
+        return flow, run() if small is None else run(working_frames=small)
+    if small is None:
+        small = working(frames, t, (sh, sw, 3), np.uint8)
+        for i in range(t):
+            f = frames[i]
+            small[i] = f if f.shape[:2] == (sh, sw) else cv2.resize(f, (sw, sh), interpolation=cv2.INTER_AREA)
+    with ThreadPoolExecutor(1, thread_name_prefix=f"{who}-alongside") as pool:
+        beside = pool.submit(alongside, small, flow)
+        tracked = run(working_frames=small)
+        beside.result()
     return flow, tracked
 
 

@@ -1,0 +1,155 @@
+"""`video add` on two cores: the tracker's two directions side by side, the network's looks taken
+while it tracks and the file written behind give the same masks and file, run after run."""
+
+from __future__ import annotations
+
+import threading
+
+import cv2
+import numpy as np
+import pytest
+from video_helpers import assert_same_video, iou, moving_object_video
+
+from zooctl.errors import StoreError
+from zooctl.store.h5 import describe_h5
+from zooctl.store.videos import VideoStore, VideoWriter
+from zooctl.video import cues
+from zooctl.video.animalnet import AnimalNetSegmenter
+from zooctl.video.grabcut import GrabCutTracker
+from zooctl.video.selftrain import at_frame_size, at_working_size, track
+
+
+@pytest.fixture(scope="module")
+def clip():
+    return moving_object_video(t=12, h=96, w=128)
+
+
+def _in_thread(fn):
+    out: list = []
+    worker = threading.Thread(target=lambda: out.append(fn()))
+    worker.start()
+    worker.join()
+    return out[0]
+
+
+def test_both_directions_from_a_middle_seed_give_the_same_masks_every_run(clip):
+    """Seeded on frame 6 of 12, the tracker runs forwards and backwards at once; the masks and the
+    report do not depend on which thread runs it or on the OpenCV random state it finds."""
+    frames, truth = clip
+    seg = GrabCutTracker(localise=False)
+    box = cues.box_of(truth[6])
+
+    def run():
+        masks = seg.segment(frames, box=box, box_frame=6)
+        return np.asarray(masks, bool), dict(seg.report)
+
+    first, report = run()
+    assert report["seed_frame"] == 6 and report["seeding"][6] == "box"
+    assert min(iou(m, t) for m, t in zip(first, truth)) > 0.85  # both directions tracked it
+    cv2.setRNGSeed(1234)
+    cv2.randu(np.zeros((64, 64), np.float32), 0, 1)  # another random state in this thread
+    for again, again_report in (run(), _in_thread(run)):
+        assert np.array_equal(again, first)
+        assert again_report == report
+    steps: list[tuple[int, int]] = []
+    seg.segment(frames, box=box, box_frame=6, progress=lambda d, n: steps.append((d, n)))
+    assert steps[-1] == (12, 12) and [d for d, _ in steps] == sorted(d for d, _ in steps)
+
+
+@pytest.mark.parametrize("failing_direction", ["backward", "forward"])
+def test_a_tracking_error_in_either_direction_is_raised_once_both_have_stopped(
+    clip, monkeypatch, failing_direction
+):
+    frames, truth = clip
+    seg = GrabCutTracker(localise=False)
+    real, running = GrabCutTracker._track, set()
+
+    def failing(self, frame, *args, **kwargs):
+        on_main = threading.current_thread() is threading.main_thread()
+        running.add(threading.current_thread())
+        if on_main == (failing_direction == "forward"):
+            raise RuntimeError("injected failure")
+        return real(self, frame, *args, **kwargs)
+
+    monkeypatch.setattr(GrabCutTracker, "_track", failing)
+    with pytest.raises(RuntimeError, match="injected"):
+        seg.segment(frames, box=cues.box_of(truth[6]), box_frame=6)
+    assert len(running) == 2 and not any(t.is_alive() for t in running - {threading.main_thread()})
+
+
+def test_looks_taken_while_tracking_give_the_masks_taken_after_it(clip):
+    """`AnimalNetSegmenter.segment` takes the network's looks beside the tracker: the masks are
+    those of looking after tracking, as `decide_near` alone does."""
+    frames, truth = clip
+    box = cues.box_of(truth[0])
+    seg = AnimalNetSegmenter(feature_every=3)
+    got = np.asarray(seg.segment(frames, box=box), bool)
+    report = seg.report["animalnet"]
+    flow, tracked = track(seg.tracker, frames, box, None, None, 0, "animalnet")
+    small, prior = at_working_size(frames, tracked, flow.forward.shape[1:3])
+    alone = seg.decide_near(small, prior, flow, seed_frame=seg.tracker.report["seed_frame"])
+    assert report["crop"] is None  # decided on the whole frames: the looks taken early served
+    assert np.array_equal(got, np.asarray(at_frame_size(alone, frames), bool))
+    assert seg.report["animalnet"] == report
+    assert np.array_equal(np.asarray(seg.segment(frames, box=box), bool), got)
+
+
+def _write(w: VideoWriter, rec) -> VideoWriter:
+    for i in range(0, len(rec.frames), 5):
+        w.add_frames(rec.frames[i : i + 5])
+    parts = (rec.flow_forward, rec.flow_backward, rec.occlusion_forward, rec.occlusion_backward)
+    for i in range(0, len(rec.flow_forward), 4):
+        w.add_flow(*(p[i : i + 4] for p in parts))
+    return w
+
+
+def test_writing_behind_makes_the_file_written_at_once(tmp_path):
+    from test_video_store import _record
+
+    rec = _record()
+    size = rec.frames.shape[1:3][::-1]
+    stores = {}
+    for behind in (0, 1, 10**9):  # at once; one part at a time queued; everything queued
+        store = stores[behind] = VideoStore.open(tmp_path / f"s{behind}")
+        w = _write(store.begin_file("bg", size, behind), rec)
+        try:
+            assert len(w) == 12 and w.frames.shape[0] == 12  # the frames are readable once given
+            for i, m in enumerate(rec.masks):
+                w.set_mask(i, m)
+            summary = w.finish(
+                "bg", rec.fps, rec.source, rec.source_indices, rec.segmenter, rec.flow_estimator
+            )
+            store.add_written("bg", w, summary)
+        finally:
+            w.discard()
+    for behind in (1, 10**9):
+        assert_same_video(stores[behind].get("bg"), stores[0].get("bg"))
+        assert describe_h5(stores[behind].path("bg")) == describe_h5(stores[0].path("bg"))
+
+
+def test_a_write_error_behind_is_raised_by_a_later_call_and_nothing_is_left(tmp_path, monkeypatch):
+    """A write that fails on the writer thread (HDF5's OSError, a full disk): the caller gets one
+    clear error from the next call that gives it data, or from ``finish``; ``discard`` leaves no
+    temporary."""
+    import h5py
+    from test_video_store import _record
+
+    rec = _record()
+    real = h5py.Dataset.__setitem__
+
+    def full_disk(self, key, value):
+        if threading.current_thread() is not threading.main_thread():
+            raise OSError(28, "No space left on device")
+        return real(self, key, value)
+
+    monkeypatch.setattr(h5py.Dataset, "__setitem__", full_disk)
+    store = VideoStore.open(tmp_path / "s")
+    w = store.begin_file("bg", rec.frames.shape[1:3][::-1], 10**9)
+    with pytest.raises(StoreError, match="space"):
+        _write(w, rec)
+        for i, m in enumerate(rec.masks):
+            w.set_mask(i, m)
+        w.finish("bg", rec.fps, rec.source, rec.source_indices, rec.segmenter, rec.flow_estimator)
+    w.discard()
+    w.discard()
+    assert store.names() == [] and not list(store.dir.iterdir())
