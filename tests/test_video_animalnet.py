@@ -206,31 +206,33 @@ def test_a_tracker_lost_on_the_ground_gives_way_to_the_animal_the_network_sees_m
         lost &= ~truth
         got = np.asarray(seg.decide_video(s.frames, lost, flow, seed_frame=0), bool)
         if seg.report["animalnet"]["network_replaced_tracker"]:
-            # the lost masks lie on still ground: no overlap is asked of them
-            assert seg.report["animalnet"]["same_animal_on_seed_frame"], seed
+            assert not seg.report["animalnet"]["identity_kept_tracker"], seed
             replaced.append(seed)
             found.append(iou(got[0], s.mask))
     assert len(replaced) >= 2 and min(found) > 0.5, (replaced, found)
 
 
-def test_the_switch_takes_only_the_tracked_animal_or_replaces_a_region_holding_still():
-    """A second animal that moves more than the tracked one only touches it on the seed frame: it
-    must not replace it; the same animal, overlapping, may; so may anything, when the tracked
-    region moves no more than its surroundings."""
-    from zooctl.video.animalnet import AnimalNetSegmenter
+def test_the_network_part_that_is_the_tracked_animal_is_followed_and_a_second_one_is_not():
+    """A second animal only touches the tracked one: it is not the same part; the part overlapping
+    the tracked mask is, and it is followed from frame to frame while another part moves apart."""
+    from zooctl.video.animalnet import animal_parts, follow_part, same_part
 
-    seg = AnimalNetSegmenter(relabel=False)
-    ev = np.full((1, 60, 80), -5.0, np.float32)
-    ev[0, 20:40, 40:60] = 5.0  # the network's animal
-    beside = np.zeros((1, 60, 80), bool)
-    beside[0, 20:40, 20:41] = True  # touches it: one column shared
-    over = np.zeros((1, 60, 80), bool)
-    over[0, 20:40, 30:50] = True  # half of it
-    seen = {0: None}
-    moving = seg.switch_motion  # the tracked region's own motion against the camera, % of the width
-    assert not seg._same_animal(None, beside, None, 0, ev, seen, still=moving)
-    assert seg._same_animal(None, over, None, 0, ev, seen, still=moving)
-    assert seg._same_animal(None, beside, None, 0, ev, seen, still=0.0)
+    ev = np.full((4, 60, 80), -5.0, np.float32)
+    for i in range(4):
+        ev[i, 20:40, 10 + 3 * i : 25 + 3 * i] = 5.0  # the animal, moving right
+        ev[i, 5:15, 70 - 5 * i : 78 - 5 * i] = 5.0  # a second one, moving left
+    held = np.zeros((60, 80), bool)
+    held[20:40, 25:35] = True  # touches the animal's right side on frame 0: one column shared
+    assert same_part(animal_parts(ev[0])[0], held) is None
+    held[20:40, 15:35] = True  # now overlaps half of it
+    label = same_part(animal_parts(ev[0])[0], held)
+    assert label is not None
+    got = dict(follow_part(lambda i: ev[i], [0, 1, 2, 3], 0, label))
+    for i in range(4):
+        assert (got[i] == (ev[i] > 0) & (np.arange(60)[:, None] >= 20)).all(), i
+    ev[2] = -5.0  # the network loses it on frame 2: nothing there, found again on frame 3
+    got = dict(follow_part(lambda i: ev[i], [0, 1, 2, 3], 0, label))
+    assert got[2] is None and got[3][30, 25 + 3 * 3 - 10]
 
 
 def test_remnants_far_smaller_than_the_animal_are_dropped_unless_cut_by_the_edge():
@@ -303,13 +305,13 @@ def test_video_show_says_whether_the_network_replaced_the_tracker():
         "animalnet": {
             "motion_margin": 1.13,
             "network_replaced_tracker": False,
-            "same_animal_on_seed_frame": False,
+            "identity_kept_tracker": True,
             "remnants_dropped": [2],
             "crop": [10, 20, 200, 120],
         },
     }
     text = "\n".join(seeding_lines(other))
-    assert "another animal than the tracked one" in text and "frames 2" in text
+    assert "the animal moving most was not the tracked one" in text and "frames 2" in text
     assert "200x120 at (10, 20)" in text
     kept = {"seeding": ["localiser", "tracked"], "seed_frame": 0, "animalnet": {"motion_margin": None}}
     text = "\n".join(seeding_lines(kept))

@@ -37,8 +37,8 @@ HEAD = (
     ("c4", 3, 8, 32),
     ("out", 1, 1, 1),
 )
-# the switch's identity check: on the seed frame, the tracker's and the network's animal overlap at
-# least this much (intersection over union) when they are one animal; a second animal beside the
+# the switch's identity check: near the seed frame, the tracker's and the network's animal overlap
+# at least this much (intersection over union) when they are one animal; a second animal beside the
 # first only touches it (BENCHMARKS.md, Video store)
 SAME_ANIMAL_IOU = 0.1
 
@@ -175,9 +175,12 @@ class AnimalNetSegmenter:
        network's animal's `motion_contrast` minus the tracked mask's exceeds ``switch_motion``
        hundredths of the frame's width, the network's animal replaces the tracker's masks on every
        frame (the frames between looks then looked at too). ``switch_motion`` < 0: never. The
-       switch must not take a second animal that merely moves more: it fires only when the network's
-       animal is the tracker's on the tracker's seed frame (they overlap there), or when the tracked
-       region holds still against the camera (a tracker seeded on the background).
+       switch must not take a second animal that merely moves more: when, on the looked frame
+       nearest the tracker's seed frame, one of the network's parts is the tracked animal (they
+       overlap, `same_part`), that part is followed from frame to frame (`follow_part`) and is the
+       network's animal above; when none is, the network's main animal replaces the tracked masks
+       only if the tracked region holds still against the camera (a tracker seeded on the
+       background).
     4. Otherwise the tracked masks stand, or with ``net_weight`` > 0 are decided again from
        ``net_weight`` x the network's log-odds where it sees an animal (everywhere with ``erase``)
        plus ``prior_weight`` inside the tracked mask (minus it outside).
@@ -195,8 +198,8 @@ class AnimalNetSegmenter:
 
     ``weights``: the head's ``.npz`` (`weights_file`). Other options go to the tracker.
     ``report``: the tracker's, with ``animalnet`` added (weights, the motion margin measured, whether
-    the network's masks replaced the tracker's, whether the animal on the seed frame was the same,
-    the frames emptied as remnants, the part of the frame decided on, share of mask pixels changed).
+    the network's masks replaced the tracker's, whether the identity check kept them out, the frames
+    emptied as remnants, the part of the frame decided on, share of mask pixels changed).
     """
 
     name = "animalnet"
@@ -305,8 +308,11 @@ class AnimalNetSegmenter:
     ) -> np.ndarray:
         """Steps 2-6 on (T, h, w, 3) frames and (T, h, w) bool tracked masks at the working size and
         their flow -> (T, h, w) bool masks; sets ``report["animalnet"]``. ``seed_frame``: the frame
-        the tracker started from (None: unknown, the switch then checks motion only). ``looks``:
-        `looks` already taken of these frames (by frame; the others are taken here)."""
+        the tracker started from (None: unknown, the switch then checks the main animal's motion
+        only). ``looks``: `looks` already taken of these frames (by frame; the others are taken
+        here)."""
+        from . import cues
+        from .cues import background_motion_residual
         from .scratch import working
         from .selftrain import SelfTrainedSegmenter, carry_between, main_animal
 
@@ -314,29 +320,46 @@ class AnimalNetSegmenter:
         looked = sorted(set(range(0, t, self.feature_every)) | {t - 1})
         ev = working(small, t, (h, w), np.float32)
         seen: dict[int, tuple] = {}
-        margins, held = [], []
+        margins, held = [], {}
         looks = looks or {}
         for k, i in enumerate(looked):
             ev[i], f, residual = looks[i] if i in looks else self.look(small[i], _motion(flow, i, t))
             seen[i] = (f[0].astype(np.float16), f[1])  # float16: as `relabel` keeps them
             animal = main_animal(ev[i])
-            held.append(motion_contrast(np.asarray(tracked[i], bool), residual))
-            margins.append(motion_contrast(animal, residual) - held[-1] if animal.any() else -np.inf)
+            held[i] = motion_contrast(np.asarray(tracked[i], bool), residual)
+            margins.append(motion_contrast(animal, residual) - held[i] if animal.any() else -np.inf)
             if progress:
                 progress(k + 1, 2 * len(looked))
+        still = float(np.median(list(held.values()))) * 100.0 / w
+        moved = float(np.median(margins)) * 100.0 / w  # the network's main animal, whichever it is
+        anchor = None
+        if seed_frame is not None and 0 <= seed_frame < t:
+            k0 = min(looked, key=lambda i: abs(i - seed_frame))
+            anchor = same_part(animal_parts(ev[k0])[0], np.asarray(tracked[k0], bool))
+        if anchor is not None:
+            # the network's view of the tracked animal itself, followed from the seed frame: a second
+            # animal, however fast, is never part of it
+            margins = [
+                motion_contrast(part, background_motion_residual(_motion(flow, i, t))) - held[i]
+                if part is not None
+                else -np.inf
+                for i, part in follow_part(lambda i: ev[i], looked, k0, anchor, carry_by_flow(flow))
+            ]
         margin = float(np.median(margins)) * 100.0 / w
         switched = self.switch_motion >= 0 and margin > self.switch_motion
-        same = None
-        if switched and seed_frame is not None and 0 <= seed_frame < t:
-            still = float(np.median(held)) * 100.0 / w
-            same = self._same_animal(small, tracked, flow, seed_frame, ev, seen, still)
-            switched = same
+        if switched and anchor is None and seed_frame is not None:
+            switched = still < 0.2 * self.switch_motion  # a tracker that started on the background
         prior = working(small, t, (h, w), bool)
         if switched:
             for i in range(t):
                 if i not in seen:
                     ev[i] = self.look(small[i], _motion(flow, i, t))[0]
-                prior[i] = main_animal(ev[i])
+            if anchor is None:
+                for i in range(t):
+                    prior[i] = main_animal(ev[i])
+            else:
+                for i, part in follow_part(lambda i: ev[i], list(range(t)), k0, anchor, carry_by_flow(flow)):
+                    prior[i] = False if part is None else cues.fill_holes(part)
         else:
             if self.net_weight > 0 and len(looked) < t:
                 carry_between(ev, looked, flow)
@@ -369,7 +392,9 @@ class AnimalNetSegmenter:
             "motion_margin": round(margin, 3) if np.isfinite(margin) else None,
             "switch_motion": self.switch_motion,
             "network_replaced_tracker": bool(switched),
-            "same_animal_on_seed_frame": same,
+            "identity_kept_tracker": bool(
+                self.switch_motion >= 0 and moved > self.switch_motion and not switched
+            ),
             "remnants_dropped": dropped,
             "relabelled": bool(self.relabel),
             "changed": round(changed / max(total, 1), 4),
@@ -429,21 +454,6 @@ class AnimalNetSegmenter:
         self.report["animalnet"]["crop"] = [int(x), int(y), int(bw), int(bh)]
         return masks
 
-    def _same_animal(self, small, tracked, flow, s: int, ev, seen: dict, still: float) -> bool:
-        """Whether the network's animal may replace the tracked masks: it overlaps the tracked mask
-        on the tracker's seed frame ``s`` (where the tracker held its animal; intersection over
-        union at least ``SAME_ANIMAL_IOU``), or the tracked region holds still against the camera
-        (``still``, its median `motion_contrast` in hundredths of the frame's width, under a fifth
-        of ``switch_motion``, the flow's noise: a tracker that started on the background)."""
-        from .selftrain import main_animal
-
-        if still < 0.2 * self.switch_motion:
-            return True
-        ev_s = ev[s] if s in seen else self.look(small[s], _motion(flow, s, len(small)))[0]
-        animal, held = main_animal(ev_s), np.asarray(tracked[s], bool)
-        # two animals side by side touch; the same animal seen twice overlaps
-        return bool((animal & held).sum() >= SAME_ANIMAL_IOU * (animal | held).sum() > 0)
-
     def segment(
         self, frames, box=None, progress=None, flow=None, box_frame: int = 0, working_frames=None
     ) -> np.ndarray:
@@ -483,6 +493,80 @@ class AnimalNetSegmenter:
             looks=early["looks"],
         )
         return at_frame_size(masks, frames)
+
+
+def animal_parts(logit: np.ndarray) -> tuple[np.ndarray, int]:
+    """(H, W) log-odds -> ((H, W) int32 labels 1..n of the connected parts over even odds, 0
+    elsewhere; n)."""
+    n, lab = cv2.connectedComponents((logit > 0).astype(np.uint8), connectivity=8)
+    return lab.astype(np.int32), n - 1
+
+
+def same_part(labels: np.ndarray, held: np.ndarray) -> int | None:
+    """The label of the part of ``labels`` that is the animal of the (H, W) bool ``held`` mask: the
+    one overlapping it most, if their intersection over union is at least ``SAME_ANIMAL_IOU``."""
+    if not held.any() or not labels.any():
+        return None
+    hits = np.bincount(labels[held], minlength=int(labels.max()) + 1)
+    hits[0] = 0
+    j = int(np.argmax(hits))
+    if hits[j] == 0:
+        return None
+    part = labels == j
+    return j if hits[j] >= SAME_ANIMAL_IOU * float((part | held).sum()) else None
+
+
+def follow_part(logit_of, frames: list[int], start: int, label: int, carry=None):
+    """Yield (frame, (H, W) bool mask or None) of one of the network's parts followed through
+    ``frames`` from part ``label`` (`animal_parts`) of ``logit_of(start)``'s log-odds, outwards in
+    both directions: on each frame, of the parts touching the last part found (carried there by
+    ``carry(mask, from, to)``, None: left in place, and widened by half its size), the one holding the
+    most probability (None: no part touches it; the last part found stays the reference)."""
+    first = animal_parts(logit_of(start))[0] == label
+    yield start, first
+    for order in ([f for f in frames if f > start], [f for f in reversed(frames) if f < start]):
+        ref, at = first, start
+        for f in order:
+            logit = logit_of(f)
+            labels, n = animal_parts(logit)
+            moved = ref if carry is None else carry(ref, at, f)
+            r = max(int(0.5 * np.sqrt(ref.sum())), 1)
+            disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1,) * 2)
+            touching = np.unique(labels[cv2.dilate(moved.astype(np.uint8), disk) > 0])
+            touching = touching[touching > 0]
+            if not len(touching):
+                yield f, None
+                continue
+            p = 1.0 / (1.0 + np.exp(-np.clip(logit, -30, 30)))
+            mass = np.bincount(labels.ravel(), weights=p.ravel(), minlength=n + 1)
+            ref, at = labels == int(touching[np.argmax(mass[touching])]), f
+            yield f, ref
+
+
+def carry_by_flow(flow):
+    """``carry(mask, a, b)`` for `follow_part`: the (H, W) bool mask on frame a moved onto frame b
+    by the median flow inside it, frame by frame (``flow`` a `zooctl.video.flow.VideoFlow`)."""
+
+    def carry(mask: np.ndarray, a: int, b: int) -> np.ndarray:
+        ys, xs = np.nonzero(mask)
+        if not len(xs):
+            return mask
+        h, w = mask.shape
+        dx = dy = 0.0
+        step = 1 if b > a else -1
+        for j in range(a, b, step):
+            f = flow.forward[j] if step > 0 else flow.backward[j - 1]
+            yy = np.clip(np.round(ys + dy).astype(int), 0, h - 1)
+            xx = np.clip(np.round(xs + dx).astype(int), 0, w - 1)
+            v = np.median(np.asarray(f)[yy, xx], axis=0)
+            dx, dy = dx + float(v[0]), dy + float(v[1])
+        yy, xx = np.round(ys + dy).astype(int), np.round(xs + dx).astype(int)
+        keep = (yy >= 0) & (yy < h) & (xx >= 0) & (xx < w)
+        out = np.zeros_like(mask)
+        out[yy[keep], xx[keep]] = True
+        return out
+
+    return carry
 
 
 def _kept_to(tracked, w: int, h: int, margin: float = 0.25) -> tuple[int, int, int, int] | None:

@@ -152,8 +152,8 @@ def seeding_lines(seeding: dict[str, Any] | None) -> list[str]:
             if net.get("network_replaced_tracker")
             else "the tracker's masks kept"
         )
-        if net.get("same_animal_on_seed_frame") is False:
-            verdict += " (it was another animal than the tracked one on the seed frame)"
+        if net.get("identity_kept_tracker"):
+            verdict += " (the animal moving most was not the tracked one)"
         out.append(f"animalnet: {moved}: {verdict}")
         if net.get("crop"):
             x, y, w, h = net["crop"]
