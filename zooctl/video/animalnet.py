@@ -435,22 +435,29 @@ class AnimalNetSegmenter:
                 np.ascontiguousarray(a[y : y + bh, x : x + bw]), (cw, ch), interpolation=interpolation
             )
 
-        frames_c = np.stack([up(small[i], cv2.INTER_LINEAR) for i in range(t)])
-        tracked_c = np.stack([up(np.asarray(tracked[i], np.uint8), cv2.INTER_NEAREST) > 0 for i in range(t)])
-        flow_c = VideoFlow(
-            *(
-                np.stack([resize_flow(np.ascontiguousarray(f[y : y + bh, x : x + bw]), cw, ch) for f in part])
-                for part in (flow.forward, flow.backward)
-            ),
-            None,
-            None,
-        )
+        # a long video's crop waits in scratch files, as its frames do
+        frames_c = working(small, t, (ch, cw, 3), np.uint8)
+        tracked_c = working(small, t, (ch, cw), bool)
+        for i in range(t):
+            frames_c[i] = up(small[i], cv2.INTER_LINEAR)
+            tracked_c[i] = up(np.asarray(tracked[i], np.uint8), cv2.INTER_NEAREST) > 0
+        parts = []
+        for part in (flow.forward, flow.backward):
+            out = working(small, len(part), (ch, cw, 2), np.float32)
+            for i in range(len(part)):
+                out[i] = resize_flow(
+                    np.ascontiguousarray(np.asarray(part[i])[y : y + bh, x : x + bw]), cw, ch
+                )
+            parts.append(out)
+        flow_c = VideoFlow(*parts, None, None)
         got = self.decide_video(frames_c, tracked_c, flow_c, progress, seed_frame)
         masks = working(small, t, (h, w), bool)
         for i in range(t):
-            masks[i, y : y + bh, x : x + bw] = (
+            m = np.zeros((h, w), bool)
+            m[y : y + bh, x : x + bw] = (
                 cv2.resize(np.asarray(got[i], np.float32), (bw, bh), interpolation=cv2.INTER_LINEAR) > 0.5
             )
+            masks[i] = m
         self.report["animalnet"]["crop"] = [int(x), int(y), int(bw), int(bh)]
         return masks
 
