@@ -22,8 +22,9 @@ Each of the seven DAVIS videos (with its ground truth) becomes:
   before a still camera.
 
 The windows and the step of the first four were fixed before any run; ``chase`` was added after the
-switch had been seen taking such a second animal, ``small`` later (its scale fixed before its run), and `animalnet`'s identity check and remnant rule
-were designed after seeing these cases (so they are no test of those two rules).
+switch had been seen taking such a second animal, ``small`` later (its scale fixed before its run).
+`animalnet`'s identity check, remnant rule and crop were designed after seeing these cases, so the
+cases show what those do, not how they generalise.
 J per frame as DAVIS counts it (a frame where both masks are empty counts 1, a mask on a frame
 without the animal 0). Also counted: the frames without the animal, and how many were left empty.
 Flow and the tracker's masks are cached as ``--part quality``'s. Written into the output folder:
