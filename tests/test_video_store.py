@@ -133,6 +133,14 @@ def _record(t=12, h=40, w=56):
     )
 
 
+def publish(store, writer, rec, name="bg") -> None:
+    """Give ``writer`` the masks of ``rec``, finish it and publish it in ``store`` as ``name``."""
+    for i, m in enumerate(rec.masks):
+        writer.set_mask(i, m)
+    summary = writer.finish(name, rec.fps, rec.source, rec.source_indices, rec.segmenter, rec.flow_estimator)
+    store.add_written(name, writer, summary)
+
+
 def test_a_file_written_a_chunk_at_a_time_equals_one_written_at_once(store, tmp_path):
     """`VideoWriter` (what `video add` streams into) makes the file `add` makes from memory:
     same arrays, same layout (schema-validated), published with its index entry."""
@@ -146,12 +154,7 @@ def test_a_file_written_a_chunk_at_a_time_equals_one_written_at_once(store, tmp_
         for i in range(0, 11, 4):
             parts = (rec.flow_forward, rec.flow_backward, rec.occlusion_forward, rec.occlusion_backward)
             writer.add_flow(*(p[i : i + 4] for p in parts))
-        for i, m in enumerate(rec.masks):
-            writer.set_mask(i, m)
-        summary = writer.finish(
-            "bg", rec.fps, rec.source, rec.source_indices, rec.segmenter, rec.flow_estimator
-        )
-        streamed.add_written("bg", writer, summary)
+        publish(streamed, writer, rec)
     finally:
         writer.discard()
     a, b = one.get("bg"), streamed.get("bg")

@@ -104,7 +104,7 @@ def _write(w: VideoWriter, rec) -> VideoWriter:
 
 
 def test_writing_behind_makes_the_file_written_at_once(tmp_path):
-    from test_video_store import _record
+    from test_video_store import _record, publish
 
     rec = _record()
     size = rec.frames.shape[1:3][::-1]
@@ -114,12 +114,7 @@ def test_writing_behind_makes_the_file_written_at_once(tmp_path):
         w = _write(store.begin_file("bg", size, behind), rec)
         try:
             assert len(w) == 12 and w.frames.shape[0] == 12  # the frames are readable once given
-            for i, m in enumerate(rec.masks):
-                w.set_mask(i, m)
-            summary = w.finish(
-                "bg", rec.fps, rec.source, rec.source_indices, rec.segmenter, rec.flow_estimator
-            )
-            store.add_written("bg", w, summary)
+            publish(store, w, rec)
         finally:
             w.discard()
     for behind in (1, 10**9):

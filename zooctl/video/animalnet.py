@@ -312,7 +312,6 @@ class AnimalNetSegmenter:
         only). ``looks``: `looks` already taken of these frames (by frame; the others are taken
         here)."""
         from . import cues
-        from .cues import background_motion_residual
         from .scratch import working
         from .selftrain import SelfTrainedSegmenter, carry_between, main_animal
 
@@ -320,13 +319,13 @@ class AnimalNetSegmenter:
         looked = sorted(set(range(0, t, self.feature_every)) | {t - 1})
         ev = working(small, t, (h, w), np.float32)
         seen: dict[int, tuple] = {}
-        margins, held = [], {}
+        margins, held, residuals = [], {}, {}
         looks = looks or {}
         for k, i in enumerate(looked):
             ev[i], f, residual = looks[i] if i in looks else self.look(small[i], _motion(flow, i, t))
             seen[i] = (f[0].astype(np.float16), f[1])  # float16: as `relabel` keeps them
             animal = main_animal(ev[i])
-            held[i] = motion_contrast(np.asarray(tracked[i], bool), residual)
+            held[i], residuals[i] = motion_contrast(np.asarray(tracked[i], bool), residual), residual
             margins.append(motion_contrast(animal, residual) - held[i] if animal.any() else -np.inf)
             if progress:
                 progress(k + 1, 2 * len(looked))
@@ -340,9 +339,7 @@ class AnimalNetSegmenter:
             # the network's view of the tracked animal itself, followed from the seed frame: a second
             # animal, however fast, is never part of it
             margins = [
-                motion_contrast(part, background_motion_residual(_motion(flow, i, t))) - held[i]
-                if part is not None
-                else -np.inf
+                motion_contrast(part, residuals[i]) - held[i] if part is not None else -np.inf
                 for i, part in follow_part(lambda i: ev[i], looked, k0, anchor, carry_by_flow(flow))
             ]
         margin = float(np.median(margins)) * 100.0 / w
