@@ -148,3 +148,56 @@ def test_a_write_error_behind_is_raised_by_a_later_call_and_nothing_is_left(tmp_
     w.discard()
     w.discard()
     assert store.names() == [] and not list(store.dir.iterdir())
+
+
+def test_flow_left_without_occlusion_then_checked_pair_by_pair_is_the_same(clip):
+    from zooctl.video.flow import DISFlow, compute_video_flow, pair_occlusion
+
+    frames, _ = clip
+    whole = compute_video_flow(DISFlow(), frames[:5])
+    bare = compute_video_flow(DISFlow(), frames[:5], occlusion=False)
+    assert bare.occlusion_forward is None and bare.occlusion_backward is None
+    assert np.array_equal(bare.forward, whole.forward) and np.array_equal(bare.backward, whole.backward)
+    for k in range(4):
+        occ_f, occ_b = pair_occlusion(bare.forward[k], bare.backward[k])
+        assert np.array_equal(occ_f, whole.occlusion_forward[k])
+        assert np.array_equal(occ_b, whole.occlusion_backward[k])
+
+
+def test_occlusion_made_by_the_writer_gives_the_file_given_the_occlusion(tmp_path):
+    """`video add` leaves the flow's forward-backward check to the writer (its thread, when writing
+    behind): the file is the one written from the checked arrays, at once, queued or spilled."""
+    import dataclasses
+
+    from test_video_store import _record, publish
+
+    from zooctl.video.flow import pair_occlusion
+
+    rec = _record()
+    occ = [pair_occlusion(f, b) for f, b in zip(rec.flow_forward, rec.flow_backward)]
+    rec = dataclasses.replace(
+        rec, occlusion_forward=np.stack([o[0] for o in occ]), occlusion_backward=np.stack([o[1] for o in occ])
+    )
+    size = rec.frames.shape[1:3][::-1]
+    stores = {}
+    for behind in (None, 0, 1, 10**9):  # the arrays given; made at once; spilled; queued
+        store = stores[behind] = VideoStore.open(tmp_path / f"s{behind}")
+        w = store.begin_file("bg", size, behind or 0)
+        try:
+            if behind is None:
+                _write(w, rec)
+            else:
+                for i in range(0, len(rec.frames), 5):
+                    w.add_frames(rec.frames[i : i + 5])
+                for i in range(0, len(rec.flow_forward), 4):
+                    w.add_flow(
+                        rec.flow_forward[i : i + 4], rec.flow_backward[i : i + 4], occlusion=pair_occlusion
+                    )
+            publish(store, w, rec)
+        finally:
+            w.discard()
+    for behind in (0, 1, 10**9):
+        assert_same_video(stores[behind].get("bg"), stores[None].get("bg"))
+        assert describe_h5(stores[behind].path("bg")) == describe_h5(stores[None].path("bg"))
+    with pytest.raises(ValueError, match="occlusion"):
+        VideoStore.open(tmp_path / "x").begin_file("bg", size).add_flow(rec.flow_forward, rec.flow_backward)

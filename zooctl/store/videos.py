@@ -272,6 +272,7 @@ class VideoWriter:
         self._thread: threading.Thread | None = None
         self._failed: BaseException | None = None
         self._closing = False
+        self._waiters = 0  # callers waiting for the writer thread
         with self._writing():
             self._f = f = h5py.File(self._io, "w")
             g = f.create_group("flow")
@@ -318,17 +319,30 @@ class VideoWriter:
         self._t += n
         self._submit("frames", np.asarray(frames).nbytes, write)
 
-    def add_flow(self, forward, backward, occlusion_forward, occlusion_backward) -> None:
-        """Append the flow of the next N frame pairs ((N, H, W, 2) float, (N, H, W) bool)."""
-        parts = (forward, backward, occlusion_forward, occlusion_backward)
+    def add_flow(
+        self, forward, backward, occlusion_forward=None, occlusion_backward=None, occlusion=None
+    ) -> None:
+        """Append the flow of the next N frame pairs ((N, H, W, 2) float, (N, H, W) bool).
+
+        ``occlusion``: instead of the two occlusion arrays, ``occlusion(forward[k], backward[k]) ->
+        (occlusion_forward[k], occlusion_backward[k])`` of one pair's float32 flow, made where the
+        flow is written (on the writer thread, when writing behind)."""
+        if occlusion is None and (occlusion_forward is None or occlusion_backward is None):
+            raise ValueError("add_flow needs the occlusion arrays or a function that makes them")
+        parts = (
+            (forward, backward)
+            if occlusion is not None
+            else (forward, backward, occlusion_forward, occlusion_backward)
+        )
         start, n = self._pairs, len(forward)
         nbytes = sum(np.asarray(p).nbytes for p in parts)
         if self._behind and self._waiting + nbytes > self._behind:
             parts, nbytes = self._spill(parts), 0  # no room in memory: it waits on disk
 
         def write() -> None:
+            arrays = parts if occlusion is None else (*parts, *_occlusions(occlusion, *parts))
             with self._writing():
-                for ds, arr in zip(self._flow, parts):
+                for ds, arr in zip(self._flow, arrays):
                     ds.resize(start + n, axis=0)
                     for k in range(n):  # a pair at a time: HDF5 serves other callers in between
                         ds[start + k] = np.asarray(arr[k]).astype(ds.dtype, copy=False)
@@ -348,8 +362,12 @@ class VideoWriter:
             write()
             return
         with self._cv:
-            while self._failed is None and self._waiting and self._waiting + nbytes > self._behind:
-                self._cv.wait()
+            self._waiters += 1
+            try:
+                while self._failed is None and self._waiting and self._waiting + nbytes > self._behind:
+                    self._cv.wait()
+            finally:
+                self._waiters -= 1
             self._raise_failure()
             self._queue[kind].append((nbytes, write))
             self._waiting += nbytes
@@ -365,7 +383,8 @@ class VideoWriter:
             return [_Spilled(np.asarray(p), self.path.parent) for p in parts]
 
     def _write_behind(self) -> None:
-        lower_thread_priority(10)
+        base = thread_priority()
+        low = base is not None and set_thread_priority(base + 10)
         while True:
             with self._cv:
                 while not self._closing and not (self._queue["frames"] or self._queue["flow"]):
@@ -374,6 +393,11 @@ class VideoWriter:
                     return
                 queue = self._queue["frames"] or self._queue["flow"]
                 nbytes, write = queue[0]  # left queued until written: `_wait` sees it
+                waited_on = self._waiters > 0
+            # the caller waits for this thread: it then works at the caller's priority (a busy
+            # machine would otherwise leave it the crumbs), and lower again once it is not waited on
+            if base is not None and waited_on == low:
+                low = set_thread_priority(base if waited_on else base + 10) and not waited_on
             try:
                 write()
             except BaseException as exc:  # raised to the caller by its next call
@@ -392,8 +416,12 @@ class VideoWriter:
     def _wait(self, *kinds: str) -> None:
         """Until what was given of ``kinds`` (default: everything) is written."""
         with self._cv:
-            while self._failed is None and any(self._queue[k] for k in kinds or self._queue):
-                self._cv.wait()
+            self._waiters += 1
+            try:
+                while self._failed is None and any(self._queue[k] for k in kinds or self._queue):
+                    self._cv.wait()
+            finally:
+                self._waiters -= 1
             self._raise_failure()
 
     def _stop_writing(self) -> None:
@@ -480,6 +508,15 @@ class VideoWriter:
         self.path.unlink(missing_ok=True)
 
 
+def _occlusions(occlusion, forward, backward) -> tuple[np.ndarray, np.ndarray]:
+    """(N, H, W) bool x2: ``occlusion`` of each pair of ``forward`` and ``backward``."""
+    pairs = [
+        occlusion(np.asarray(forward[k], np.float32), np.asarray(backward[k], np.float32))
+        for k in range(len(forward))
+    ]
+    return np.stack([p[0] for p in pairs]), np.stack([p[1] for p in pairs])
+
+
 class _Spilled:
     """An (N, ...) array waiting in an unlinked temporary file (gone once closed, or when the process
     ends), read back one record at a time."""
@@ -510,6 +547,24 @@ class _Spilled:
 
     def close(self) -> None:
         self._file.close()
+
+
+def thread_priority() -> int | None:
+    """The calling thread's nice value (Linux, where a thread has its own; elsewhere None)."""
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            return os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    return None
+
+
+def set_thread_priority(nice: int) -> bool:
+    """Set the calling thread's nice value (Linux); False where it may not (raising a thread's
+    priority back needs the privilege to)."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice)
+    except (OSError, AttributeError):
+        return False
+    return True
 
 
 def lower_thread_priority(step: int) -> None:

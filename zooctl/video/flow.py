@@ -106,16 +106,18 @@ def compute_video_flow(
     frames: np.ndarray,
     progress: Callable[[int, int], None] | None = None,
     workers: int | None = None,
+    occlusion: bool = True,
 ) -> VideoFlow:
     """Forward and backward flow for every consecutive pair of ``frames`` (T, H, W, 3), T >= 2.
 
     The pairs are independent: with a ``thread_safe`` estimator they run on ``workers`` threads
-    (None: `flow_workers`; OpenCV and NumPy release the GIL), with the same result as one thread."""
+    (None: `flow_workers`; OpenCV and NumPy release the GIL), with the same result as one thread.
+    ``occlusion`` False: the occlusion masks are left to the caller (None; `pair_occlusion`)."""
     t, h, w = frames.shape[:3]
     fwd = np.empty((t - 1, h, w, 2), np.float32)
     bwd = np.empty((t - 1, h, w, 2), np.float32)
-    occ_f = np.empty((t - 1, h, w), bool)
-    occ_b = np.empty((t - 1, h, w), bool)
+    occ_f = np.empty((t - 1, h, w), bool) if occlusion else None
+    occ_b = np.empty((t - 1, h, w), bool) if occlusion else None
     use_grey = hasattr(estimator, "flow_gray")
     fn = estimator.flow_gray if use_grey else estimator.flow  # type: ignore[attr-defined]
     grey = _grey if use_grey else (lambda f: f)
@@ -124,8 +126,8 @@ def compute_video_flow(
         a, b = grey(frames[i]), grey(frames[i + 1])
         fwd[i] = fn(a, b)
         bwd[i] = fn(b, a)
-        occ_f[i] = fb_inconsistent(fwd[i], bwd[i])
-        occ_b[i] = fb_inconsistent(bwd[i], fwd[i])
+        if occlusion:
+            occ_f[i], occ_b[i] = pair_occlusion(fwd[i], bwd[i])
 
     n = flow_workers() if workers is None else max(int(workers), 1)
     if not getattr(estimator, "thread_safe", False):
@@ -171,6 +173,12 @@ def _pixel_grid(h: int, w: int) -> np.ndarray:
     grid = np.stack([gx, gy], -1)
     grid.flags.writeable = False
     return grid
+
+
+def pair_occlusion(forward: np.ndarray, backward: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One frame pair's (H, W, 2) float32 forward and backward flow -> its occlusion masks
+    (`VideoFlow`'s ``occlusion_forward[t]`` and ``occlusion_backward[t]``)."""
+    return fb_inconsistent(forward, backward), fb_inconsistent(backward, forward)
 
 
 def fb_inconsistent(

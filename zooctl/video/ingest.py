@@ -309,7 +309,7 @@ def _stream_frames(stream, writer, estimator, flow_size, stage, keep_frames: boo
     frames at that size (INTER_AREA, a scratch array) when it is not theirs. -> (flow, frames)."""
     import cv2
 
-    from .flow import VideoFlow, compute_video_flow, resize_flow
+    from .flow import VideoFlow, compute_video_flow, pair_occlusion, resize_flow
     from .scratch import ScratchArray
 
     decoded, flowed = stage("decode"), stage("flow")
@@ -335,8 +335,9 @@ def _stream_frames(stream, writer, estimator, flow_size, stage, keep_frames: boo
             decoded(len(writer), total)
         if len(pairs) < 2:
             return
-        vf = compute_video_flow(estimator, pairs)
-        writer.add_flow(vf.forward, vf.backward, vf.occlusion_forward, vf.occlusion_backward)
+        # the occlusion check runs where the flow is written (behind: on the writer's thread)
+        vf = compute_video_flow(estimator, pairs, occlusion=False)
+        writer.add_flow(vf.forward, vf.backward, None, None, pair_occlusion)
         if flow_size is not None:
             if keep is None:  # grown as pairs arrive: the decoder's count is a header's estimate
                 shape = (flow_size[1], flow_size[0], 2)
