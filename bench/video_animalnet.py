@@ -27,9 +27,9 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 # (switch_motion, relabel, net_weight, relabel options) tried; the first is the segmenter's default.
-# -1: never switch. The relabelling's three weights (`selftrain`'s, chosen on these videos) are
-# varied too; the last run is the previous default (the network's log-odds adding to the tracked mask).
-GRID = (
+# -1: never switch. The relabelling's weights (`selftrain`'s, chosen on these videos) are varied too.
+# Every setting tried on these videos is here, so that leave-one-out chooses among all of them.
+EARLIER = (  # before the motion model (motion_weight 0)
     (0.5, True, 0.0, ()),
     (0.25, True, 0.0, ()),
     (1.0, True, 0.0, ()),
@@ -40,9 +40,28 @@ GRID = (
     (0.5, True, 0.0, (("prior_weight", 3.0),)),
     (0.5, True, 0.0, (("band", 0.03),)),
     (0.5, True, 0.0, (("band", 0.2),)),
-    (0.5, False, 0.0, ()),
-    (-1.0, False, 1.0, ()),
+    # the first grid, around the relabelling's `selftrain` defaults (prior_weight 2)
+    (0.25, True, 0.0, (("prior_weight", 2.0),)),
+    (1.0, True, 0.0, (("prior_weight", 2.0),)),
+    (-1.0, True, 0.0, (("prior_weight", 2.0),)),
+    (0.5, True, 0.0, (("prior_weight", 2.0), ("deep_weight", 0.0))),
+    (0.5, True, 0.0, (("prior_weight", 2.0), ("deep_weight", 1.0))),
+    (0.5, True, 0.0, (("prior_weight", 2.0), ("band", 0.03))),
+    (0.5, True, 0.0, (("prior_weight", 2.0), ("band", 0.2))),
 )
+GRID = (
+    (0.5, True, 0.0, ()),
+    (0.5, True, 0.0, (("motion_weight", 0.25),)),
+    (0.5, True, 0.0, (("motion_weight", 0.5),)),
+    (0.5, True, 0.0, (("motion_weight", 1.0),)),
+    (0.5, True, 0.0, (("motion_clip", 1.5),)),
+    *((s, r, n, (("motion_weight", 0.0), *o)) for s, r, n, o in EARLIER),
+    (0.5, False, 0.0, ()),  # the switch alone, no relabelling
+    (-1.0, False, 1.0, ()),  # the default before the switch: the network's log-odds add to the mask
+)
+# The default's masks brought to the frame's size with other windows of the edge-following
+# upsample (0: linear); the default's own is the segmenter's ``edge_radius``.
+EDGES = (0.0, 0.005, 0.01)
 
 
 def _digest(path: Path) -> str:
@@ -59,17 +78,17 @@ def _label(switch: float, relabel: bool, net_weight: float, options=()) -> str:
 def run(sequences, load, cache, base: dict, preset, flow_size, out: Path, weights: Path) -> dict:
     """`grabcut`, the network alone and `animalnet` at each of `GRID` on every video. ``load(seq)``
     -> (frames, truth); ``base``: the tracker's options. {video: {label: result}}."""
-    import cv2
     from video_quality import _save, curve_plot, overlay_sheet, say, scored, segmenter_flow
     from video_quality import segment_video as grabcut_video
 
     from zooctl.video.animalnet import AnimalNetSegmenter, weights_file
     from zooctl.video.flow import VideoFlow
     from zooctl.video.grabcut import resize_flows
-    from zooctl.video.selftrain import at_working_size, main_animal
+    from zooctl.video.selftrain import at_frame_size, at_working_size, main_animal
 
     weights = weights_file(weights)
     seg = AnimalNetSegmenter(weights, **base)
+    defaults = dict(seg.relabel_options)
     source = _digest(REPO / "zooctl" / "video" / "animalnet.py") + _digest(Path(weights))
     results: dict = {}
     for seq in sequences:
@@ -95,26 +114,26 @@ def run(sequences, load, cache, base: dict, preset, flow_size, out: Path, weight
                 _save(path, evidence=ev, cpu_s=np.float64(cpu))
         small_frames, small = at_working_size(frames, tracked, (sh, sw))
 
-        def full(masks, w=w, h=h):
-            return np.stack(
-                [
-                    cv2.resize(m.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR) > 0.5
-                    for m in masks
-                ]
-            )
+        def full(masks, radius=seg.edge_radius, frames=frames, small_frames=small_frames):
+            return np.asarray(at_frame_size(masks, frames, small_frames, radius, seg.edge_eps), bool)
 
         res = {"grabcut": g}
-        alone = full([main_animal(e) for e in ev])
+        alone = full(np.stack([main_animal(e) for e in ev]), 0.0)
         res["network alone"] = scored(alone, truth, {"evidence_cpu_s": cpu})
         masks_by = {}
         for switch, relabel, net_weight, options in GRID:
             seg.feature_every, seg.switch_motion, seg.relabel, seg.net_weight = 3, switch, relabel, net_weight
-            seg.relabel_options = {"prior_weight": 1.0, **dict(options)}
+            seg.relabel_options = {**defaults, **dict(options)}
             c0 = time.process_time()
-            masks = full(seg.decide_near(small_frames, small, flow, seed_frame=g.get("seed_frame")))
+            decided = seg.decide_near(small_frames, small, flow, seed_frame=g.get("seed_frame"))
+            masks = full(decided)
             info = dict(seg.report["animalnet"], cpu_s=round(time.process_time() - c0, 2))
             res[_label(switch, relabel, net_weight, options)] = scored(masks, truth, info)
             masks_by[(switch, relabel, net_weight, options)] = masks
+            if (switch, relabel, net_weight, options) == GRID[0]:
+                for radius in EDGES:
+                    label = _label(switch, relabel, net_weight, options) + f" edge_radius={radius:g}"
+                    res[label] = scored(full(decided, radius), truth, info)
         results[seq] = res
         d = _label(*GRID[0])
         say(

@@ -131,14 +131,13 @@ def _with_second_animal(frames, truth, frames_b, truth_b) -> tuple[np.ndarray, n
 
 def run(sequences, load, cache, base: dict, preset, flow_size, out: Path, weights) -> dict:
     """``load(seq)`` -> (frames, truth). {case: {video: {segmenter: result}}}."""
-    import cv2
     from video_quality import overlay_sheet, say, scored, segmenter_flow
     from video_quality import segment_video as grabcut_video
 
     from zooctl.video.animalnet import AnimalNetSegmenter
     from zooctl.video.flow import VideoFlow
     from zooctl.video.grabcut import resize_flows
-    from zooctl.video.selftrain import at_working_size
+    from zooctl.video.selftrain import at_frame_size, at_working_size
 
     seg = AnimalNetSegmenter(weights, **base)
     results: dict = {case: {} for case in CASES}
@@ -161,9 +160,7 @@ def run(sequences, load, cache, base: dict, preset, flow_size, out: Path, weight
                 )
             small_frames, small = at_working_size(frames, tracked, (sh, sw))
             got = seg.decide_near(small_frames, small, flow, seed_frame=g.get("seed_frame"))
-            masks = np.stack(
-                [cv2.resize(m.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR) > 0.5 for m in got]
-            )
+            masks = np.asarray(at_frame_size(got, frames, small_frames, seg.edge_radius, seg.edge_eps), bool)
             a = scored(masks, truth, dict(seg.report["animalnet"]))
             absent = ~truth.reshape(t, -1).any(1)
             res = {"grabcut": g, "animalnet": a, "frames_without_animal": int(absent.sum())}

@@ -89,7 +89,7 @@ def test_looks_taken_while_tracking_give_the_masks_taken_after_it(clip):
     small, prior = at_working_size(frames, tracked, flow.forward.shape[1:3])
     alone = seg.decide_near(small, prior, flow, seed_frame=seg.tracker.report["seed_frame"])
     assert report["crop"] is None  # decided on the whole frames: the looks taken early served
-    assert np.array_equal(got, np.asarray(at_frame_size(alone, frames), bool))
+    assert np.array_equal(got, np.asarray(at_frame_size(alone, frames, small, seg.edge_radius), bool))
     assert seg.report["animalnet"] == report
     assert np.array_equal(np.asarray(seg.segment(frames, box=box), bool), got)
 

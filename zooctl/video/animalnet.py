@@ -41,6 +41,8 @@ HEAD = (
 # at least this much (intersection over union) when they are one animal; a second animal beside the
 # first only touches it (BENCHMARKS.md, Video store)
 SAME_ANIMAL_IOU = 0.1
+# the relabelling's options where they differ from `selftrain`'s own defaults
+RELABEL_DEFAULTS = {"prior_weight": 1.0, "motion_weight": 0.75}
 
 
 def default_weights() -> Path:
@@ -186,11 +188,15 @@ class AnimalNetSegmenter:
        plus ``prior_weight`` inside the tracked mask (minus it outside).
     5. With ``relabel``, `selftrain`'s per-video classifier and colour model, taught by those masks,
        decide every frame again (`SelfTrainedSegmenter.relabel`, on the features step 2 computed;
-       ``relabel_options``: its ``band``, ``deep_weight``, ``prior_weight`` (here 1 by default,
-       chosen on the shared videos with the leave-one-out estimate beside it: BENCHMARKS.md), ...).
+       ``relabel_options``: its ``band``, ``deep_weight``, ``prior_weight`` and ``motion_weight``
+       (here 1 and 0.75 by default, chosen on the shared videos with the leave-one-out estimate
+       beside them: BENCHMARKS.md), ...).
     6. A frame whose mask is under ``remnant`` times the video's median mask area and does not touch
        the frame's edge is stored empty: what a tracker leaves behind on the ground once the animal
        has left (an animal leaving or entering is cut by the edge). 0: never.
+    7. The masks, decided at the working size, are brought to the frame's size along its colour
+       edges (`zooctl.video.guided.guided_upsample`, a window of ``edge_radius`` times the working
+       frame's larger side, regulariser ``edge_eps``); ``edge_radius`` 0: a linear upsample.
 
     Steps 2-6 run on the part of the frame the tracked animal keeps to, enlarged to the working size,
     when that part is at most half the frame's width and height (`decide_near`): a small or distant
@@ -216,6 +222,8 @@ class AnimalNetSegmenter:
         prior_weight: float = 2.0,
         erase: bool = False,
         remnant: float = 0.1,
+        edge_radius: float = 0.02,
+        edge_eps: float = 1e-3,
         **tracker_options,
     ) -> None:
         from ..errors import UsageError
@@ -223,16 +231,22 @@ class AnimalNetSegmenter:
 
         if feature_every < 1:
             raise UsageError(f"feature_every must be at least 1, got {feature_every}")
+        if not 0 <= edge_radius < 0.5 or edge_eps <= 0:
+            raise UsageError(
+                f"edge_radius must be in [0, 0.5) and edge_eps over 0, got {edge_radius} and {edge_eps}"
+            )
         self.net = AnimalNet(weights)  # before the slow part: missing weights are refused at once
         self.tracker = GrabCutTracker(**tracker_options)
         self.feature_every = feature_every
         self.switch_motion = switch_motion
         self.relabel = relabel
-        self.relabel_options = {"prior_weight": 1.0, **(relabel_options or {})}
+        self.relabel_options = {**RELABEL_DEFAULTS, **(relabel_options or {})}
         self.net_weight = net_weight
         self.prior_weight = prior_weight
         self.erase = erase
         self.remnant = remnant
+        self.edge_radius = edge_radius
+        self.edge_eps = edge_eps
         self._features = None
         self.report: dict = {}
 
@@ -496,7 +510,7 @@ class AnimalNetSegmenter:
             seed_frame=self.tracker.report.get("seed_frame"),
             looks=early["looks"],
         )
-        return at_frame_size(masks, frames)
+        return at_frame_size(masks, frames, small, self.edge_radius, self.edge_eps)
 
 
 def animal_parts(logit: np.ndarray) -> tuple[np.ndarray, int]:

@@ -120,13 +120,15 @@ def working(like, n: int, shape: tuple[int, ...], dtype) -> np.ndarray | Scratch
 
 class Resized:
     """A lazy view of (T, h, w) masks at another size (w, h): frame i is upsampled when read,
-    with a linear upsample of the 0/1 values thresholded at one half."""
+    with a linear upsample of the 0/1 values thresholded at one half, or by ``upsample(i, mask)``
+    -> (h, w) bool when given."""
 
     dtype = np.dtype(bool)
     ndim = 3
 
-    def __init__(self, masks, w: int, h: int) -> None:
+    def __init__(self, masks, w: int, h: int, upsample=None) -> None:
         self._masks = masks
+        self._upsample = upsample
         self.shape = (len(masks), h, w)
 
     def __len__(self) -> int:
@@ -135,6 +137,8 @@ class Resized:
     def _one(self, i) -> np.ndarray:
         import cv2
 
+        if self._upsample is not None:
+            return self._upsample(int(i), np.asarray(self._masks[int(i)], bool))
         m = np.asarray(self._masks[int(i)], np.float32)
         return cv2.resize(m, (self.shape[2], self.shape[1]), interpolation=cv2.INTER_LINEAR) > 0.5
 

@@ -17,7 +17,9 @@ frame again with that knowledge:
    fitted per video by Newton's method, and a colour model (Lab histograms of the sure pixels of
    every frame): nothing but the video itself is learned from, so no weights ship;
 4. every frame gets the classifier's log-odds (frames between two looks: their neighbours' carried
-   along the flow), plus the colour model's, plus a prior for the tracker's own mask; the
+   along the flow), plus the colour model's, plus (with ``motion_weight``) a motion model's (the same
+   histograms of how far each pixel moves against the camera: an animal walking over still ground,
+   or the ground between its legs), plus a prior for the tracker's own mask; the
    connected part over even odds that holds the most probability is the animal. A frame the tracker
    left empty (the animal hidden or out of frame) stays empty.
 
@@ -39,6 +41,11 @@ from .flow import warp
 from .scratch import working
 
 Progress = Callable[[int, int], None]
+
+# bins of the motion model: log-spaced in hundredths of the frame's width, up to about 13
+MOTION_BINS = 16
+# the motion model's smoothing, a share of each class's mean count a bin (`log_odds`)
+MOTION_SHARE = 0.05
 
 # last block of the EfficientNet-Lite0 stages whose outputs are sampled (stride 8, 16, 32)
 FEATURE_BLOCKS = {4: 8, 10: 16, 15: 32}
@@ -201,13 +208,15 @@ class SelfTrainedSegmenter:
     ``feature_width``: the network's input width. ``feature_every``: frames between two the network
     looks at (the frames between get their neighbours' classifier output carried along the flow).
     ``band``: how far inside (and twice as far outside) the tracked mask a pixel must be to count as
-    sure, as a fraction of the animal's size. ``deep_weight``, ``colour_clip``, ``prior_weight``:
-    the per-pixel log-odds that the animal is there is ``deep_weight`` x the classifier's, plus the
-    colour model's (clipped to +-``colour_clip``), plus ``prior_weight`` inside the tracked mask
-    and minus it outside. ``l2``: the classifier's regularisation; ``max_samples``: sure cells it is
-    fitted on at most (drawn evenly over the frames, repeatably). Other options go to the tracker
-    (`zooctl.video.grabcut.GrabCutTracker`). ``report``: the tracker's, with ``self_training``
-    added (cells learned from, frames looked at, share of mask pixels changed).
+    sure, as a fraction of the animal's size. ``deep_weight``, ``colour_clip``, ``motion_weight``,
+    ``motion_clip``, ``prior_weight``: the per-pixel log-odds that the animal is there is
+    ``deep_weight`` x the classifier's, plus the colour model's (clipped to +-``colour_clip``), plus
+    ``motion_weight`` x the motion model's (`motion_bins`; clipped to +-``motion_clip``), plus
+    ``prior_weight`` inside the tracked mask and minus it outside. ``l2``: the classifier's
+    regularisation; ``max_samples``: sure cells it is fitted on at most (drawn evenly over the
+    frames, repeatably). Other options go to the tracker (`zooctl.video.grabcut.GrabCutTracker`).
+    ``report``: the tracker's, with ``self_training`` added (cells learned from, frames looked
+    at, share of mask pixels changed).
     """
 
     name = "selftrain"
@@ -221,6 +230,8 @@ class SelfTrainedSegmenter:
         deep_weight: float = 0.5,
         colour_clip: float = 5.0,
         prior_weight: float = 2.0,
+        motion_weight: float = 0.0,
+        motion_clip: float = 3.0,
         l2: float = 1.0,
         max_samples: int = 6000,
         **tracker_options,
@@ -234,6 +245,10 @@ class SelfTrainedSegmenter:
             raise UsageError(f"feature_width must be at least 32 pixels, got {feature_width}")
         if max_samples < 10:
             raise UsageError(f"max_samples must be at least 10, got {max_samples}")
+        if motion_weight < 0 or motion_clip <= 0:
+            raise UsageError(
+                f"motion_weight must be at least 0 and motion_clip over 0, got {motion_weight} and {motion_clip}"
+            )
         self.tracker = GrabCutTracker(**tracker_options)
         self.feature_width = feature_width
         self.feature_every = feature_every
@@ -241,6 +256,8 @@ class SelfTrainedSegmenter:
         self.deep_weight = deep_weight
         self.colour_clip = colour_clip
         self.prior_weight = prior_weight
+        self.motion_weight = motion_weight
+        self.motion_clip = motion_clip
         self.l2 = l2
         self.max_samples = max_samples
         self._net: FeatureNet | None = None
@@ -291,6 +308,8 @@ class SelfTrainedSegmenter:
         bins = working(frames, t, (h, w), np.int32)
         hist_fg = np.zeros(cues.HIST_BINS**3)
         hist_bg = np.zeros(cues.HIST_BINS**3)
+        moving = working(frames, t, (h, w), np.uint8) if self.motion_weight else None
+        motion_fg, motion_bg = np.zeros(MOTION_BINS), np.zeros(MOTION_BINS)
         steps, done = len(looked) + t, 0
         no_map = np.zeros(grid, np.float32)
         for i in range(t):
@@ -316,6 +335,10 @@ class SelfTrainedSegmenter:
             bins[i] = cues.lab_bins(frames[i])
             hist_fg += np.bincount(bins[i][fg_px], minlength=cues.HIST_BINS**3)
             hist_bg += np.bincount(bins[i][bg_px], minlength=cues.HIST_BINS**3)
+            if moving is not None:
+                moving[i] = motion_bins(flow.forward[i] if i < t - 1 else -np.asarray(flow.backward[i - 1]))
+                motion_fg += np.bincount(moving[i][fg_px], minlength=MOTION_BINS)
+                motion_bg += np.bincount(moving[i][bg_px], minlength=MOTION_BINS)
             done += 1
             progress(t * done // (2 * steps))
         n_fg = sum(len(x) for x, label, _ in samples if label)
@@ -335,12 +358,8 @@ class SelfTrainedSegmenter:
         wt, bias = fit_logistic((x - mu) / sd, y, weight, l2=self.l2)
         wt = (wt / sd).astype(np.float32)  # on the raw features
         bias = float(bias - mu @ wt)
-        colour = np.clip(
-            np.log((hist_fg + 1) / (hist_fg.sum() + len(hist_fg)))
-            - np.log((hist_bg + 1) / (hist_bg.sum() + len(hist_bg))),
-            -self.colour_clip,
-            self.colour_clip,
-        ).astype(np.float32)
+        colour = log_odds(hist_fg, hist_bg, self.colour_clip)
+        motion = self.motion_weight * log_odds(motion_fg, motion_bg, self.motion_clip, MOTION_SHARE)
         deep = working(frames, t, (h, w), np.float32)
         for k, i in enumerate(looked):
             deep[i] = grid_to_pixels(np.asarray(feats[k], np.float32) @ wt + bias, w, h, (iw, ih))
@@ -358,6 +377,8 @@ class SelfTrainedSegmenter:
                 + colour[bins[i]]
                 + np.where(p, self.prior_weight, -self.prior_weight)
             )
+            if moving is not None:
+                logit += motion[moving[i]]
             out[i] = main_animal(logit)
             changed += int((out[i] != p).sum())
             progress(t // 2 + t * (i + 1) // (2 * t))
@@ -365,6 +386,28 @@ class SelfTrainedSegmenter:
             changed / max(int(sum(np.asarray(prior[i]).sum() for i in range(t))), 1), 4
         )
         return out
+
+
+def log_odds(hist_fg: np.ndarray, hist_bg: np.ndarray, clip: float, share: float | None = None) -> np.ndarray:
+    """Two (B,) histograms of the sure animal's and background's pixels -> (B,) float32 log-odds
+    that a pixel in each bin is the animal, clipped to +-``clip``. Smoothed by one count a bin, or
+    with ``share`` by ``share`` x the class's mean count a bin: a bin neither class was seen in
+    then reads even odds, not the odds of the smaller class."""
+    pad_fg = pad_bg = 1.0
+    if share is not None:
+        pad_fg, pad_bg = (max(share * h.sum() / len(h), 1e-6) for h in (hist_fg, hist_bg))
+    fg = np.log((hist_fg + pad_fg) / (hist_fg.sum() + pad_fg * len(hist_fg)))
+    bg = np.log((hist_bg + pad_bg) / (hist_bg.sum() + pad_bg * len(hist_bg)))
+    return np.clip(fg - bg, -clip, clip).astype(np.float32)
+
+
+def motion_bins(flow: np.ndarray) -> np.ndarray:
+    """(h, w, 2) flow to a neighbouring frame -> (h, w) uint8 bin (of `MOTION_BINS`) of each pixel's
+    motion against the camera (`cues.background_motion_residual`), in hundredths of the frame's
+    width on a log scale: still, then finer steps for slow motion than for fast."""
+    residual = cues.background_motion_residual(np.ascontiguousarray(flow, np.float32))
+    scaled = np.log1p(residual * np.float32(400.0 / flow.shape[1])) * 4
+    return np.clip(scaled, 0, MOTION_BINS - 1).astype(np.uint8)
 
 
 def track(
@@ -435,18 +478,30 @@ def at_working_size(frames, masks, size: tuple[int, int]):
     return small, small_masks
 
 
-def at_frame_size(masks, frames):
-    """(T, h, w) bool masks at the working size -> at the (T, H, W) frames' size."""
+def at_frame_size(masks, frames, small=None, edge_radius: float = 0.0, edge_eps: float = 1e-3):
+    """(T, h, w) bool masks at the working size -> at the (T, H, W) frames' size. With ``small``
+    ((T, h, w, 3) uint8, the frames the masks were decided on) and ``edge_radius`` > 0, each along
+    its frame's colour edges (`zooctl.video.guided.guided_upsample` with that radius and
+    ``edge_eps``); else a linear upsample."""
+    from .guided import guided_upsample
     from .scratch import Resized
 
     h, w = frames.shape[1:3]
-    if masks.shape[1:3] == (h, w):
+    upsample = None
+    if small is not None and edge_radius > 0:
+
+        def upsample(i: int, m: np.ndarray) -> np.ndarray:
+            return guided_upsample(m, np.asarray(small[i]), np.asarray(frames[i]), edge_radius, edge_eps)
+
+    elif masks.shape[1:3] == (h, w):
         return masks
     if isinstance(frames, np.ndarray):
+        if upsample is not None:
+            return np.stack([upsample(i, np.asarray(m, bool)) for i, m in enumerate(masks)])
         return np.stack(
             [cv2.resize(m.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR) > 0.5 for m in masks]
         )
-    return Resized(masks, w, h)
+    return Resized(masks, w, h, upsample)
 
 
 def carry_between(values, looked: list[int], flow) -> None:
