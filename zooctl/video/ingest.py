@@ -363,13 +363,22 @@ def _stream_frames(stream, writer, estimator, flow_size, stage, keep_frames: boo
 
 def store_masks(masks, writer, seg_name: str, user: bool) -> dict[str, Any]:
     """Check ``masks`` (T, H, W) bool, array-like) as `check_masks` does and store them with
-    ``writer``, one frame at a time; returns what to report."""
-    cov = np.array([float(np.asarray(masks[i], bool).mean()) for i in range(len(masks))])
-    clear, report = check_coverage(cov, seg_name, user)
+    ``writer``, one frame at a time; returns what to report. A segmenter's masks are read once
+    (a lazy view upsamples each frame when read): its specks are cleared frame by frame, as
+    `check_coverage` clears them, and a video with no animal is refused once all are read."""
+    if user:  # a user's specks may refuse the whole video before anything is stored
+        cov = np.array([float(np.asarray(masks[i], bool).mean()) for i in range(len(masks))])
+        clear, report = check_coverage(cov, seg_name, user)
+        for i in range(len(masks)):
+            m = np.asarray(masks[i], bool)
+            writer.set_mask(i, np.zeros_like(m) if clear[i] else m)
+        return report
+    cov = np.zeros(len(masks))
     for i in range(len(masks)):
         m = np.asarray(masks[i], bool)
-        writer.set_mask(i, np.zeros_like(m) if clear[i] else m)
-    return report
+        cov[i] = float(m.mean())
+        writer.set_mask(i, np.zeros_like(m) if 0 < cov[i] < MIN_COVERAGE else m)
+    return check_coverage(cov, seg_name, user)[1]
 
 
 MIN_COVERAGE = 0.001  # of the frame: below this a mask is a speck the fit cannot use
