@@ -318,13 +318,21 @@ class AnimalNetSegmenter:
         return main_animal(self.net_weight * net + prior)
 
     def decide_video(
-        self, small, tracked, flow, progress=None, seed_frame: int | None = None, looks: dict | None = None
+        self,
+        small,
+        tracked,
+        flow,
+        progress=None,
+        seed_frame: int | None = None,
+        looks: dict | None = None,
+        moving=None,
     ) -> np.ndarray:
         """Steps 2-6 on (T, h, w, 3) frames and (T, h, w) bool tracked masks at the working size and
         their flow -> (T, h, w) bool masks; sets ``report["animalnet"]``. ``seed_frame``: the frame
         the tracker started from (None: unknown, the switch then checks the main animal's motion
         only). ``looks``: `looks` already taken of these frames (by frame; the others are taken
-        here)."""
+        here). ``moving``: the relabelling's `selftrain.video_motion_bins` of these frames, when
+        already taken."""
         from . import cues
         from .scratch import working
         from .selftrain import SelfTrainedSegmenter, carry_between, main_animal
@@ -391,6 +399,7 @@ class AnimalNetSegmenter:
                 else (lambda d: None),
                 seen=seen,
                 net=fnet,
+                moving=moving,
             )
             if relabelled is not None:
                 masks = relabelled
@@ -421,20 +430,28 @@ class AnimalNetSegmenter:
         return masks
 
     def decide_near(
-        self, small, tracked, flow, progress=None, seed_frame: int | None = None, looks: dict | None = None
+        self,
+        small,
+        tracked,
+        flow,
+        progress=None,
+        seed_frame: int | None = None,
+        looks: dict | None = None,
+        moving=None,
     ) -> np.ndarray:
         """`decide_video` on the part of the frame the tracked animal keeps to, enlarged to the working
         size, when that part is at most half the frame's width and height (a small or distant animal,
         else the network and the relabelling see it on a few cells of their grid); the whole frame
         otherwise. Same arguments and result (``looks``: of the whole frames, used when it decides on
-        them); ``report["animalnet"]["crop"]``: the part (x, y, w, h) at the working size, or None."""
+        them, as ``moving`` is); ``report["animalnet"]["crop"]``: the part (x, y, w, h) at the working
+        size, or None."""
         from .flow import VideoFlow, resize_flow
         from .scratch import working
 
         t, h, w = small.shape[:3]
         box = _kept_to(tracked, w, h)
         if box is None:
-            masks = self.decide_video(small, tracked, flow, progress, seed_frame, looks)
+            masks = self.decide_video(small, tracked, flow, progress, seed_frame, looks, moving)
             self.report["animalnet"]["crop"] = None
             return masks
         x, y, bw, bh = box
@@ -477,7 +494,7 @@ class AnimalNetSegmenter:
     ) -> np.ndarray:
         """(T, H, W, 3) uint8 RGB frames, optional box on frame ``box_frame`` -> (T, H, W) bool masks.
         ``working_frames``: the frames at `flow_size` (INTER_AREA), when the caller has them."""
-        from .selftrain import at_frame_size, at_working_size, track
+        from .selftrain import at_frame_size, at_working_size, track, video_motion_bins
 
         t = len(frames)
         early: dict = {}
@@ -488,6 +505,8 @@ class AnimalNetSegmenter:
             lower_thread_priority(5)  # the tracker first: these are needed only once it is done
             self._feature_net()
             early["small"], early["looks"] = small, self.looks(small, flow)
+            if self.relabel and self.relabel_options.get("motion_weight"):
+                early["moving"] = video_motion_bins(small, flow)
 
         flow, tracked = track(
             self.tracker,
@@ -509,6 +528,7 @@ class AnimalNetSegmenter:
             (lambda d, n: progress(t + d * t // n, 2 * t)) if progress else None,
             seed_frame=self.tracker.report.get("seed_frame"),
             looks=early["looks"],
+            moving=early.get("moving"),
         )
         return at_frame_size(masks, frames, small, self.edge_radius, self.edge_eps)
 

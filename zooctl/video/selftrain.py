@@ -287,10 +287,11 @@ class SelfTrainedSegmenter:
 
     # -- the steps --------------------------------------------------------------------------------
 
-    def relabel(self, frames, prior, flow, progress: Callable[[int], None], seen=None, net=None):
+    def relabel(self, frames, prior, flow, progress: Callable[[int], None], seen=None, net=None, moving=None):
         """Frames and tracked masks at the working size -> new masks (T, h, w) bool, or None when the
         tracked masks hold no sure animal pixel. ``seen``: {frame index: `FeatureNet.features` of
-        that frame} already computed by ``net`` (a `FeatureNet` of this ``feature_width``), reused."""
+        that frame} already computed by ``net`` (a `FeatureNet` of this ``feature_width``), reused.
+        ``moving``: (T, h, w) uint8 `video_motion_bins` of these frames, when already taken."""
         t, h, w = frames.shape[:3]
         seen = seen or {}
         if net is None or net.width != self.feature_width:
@@ -308,7 +309,10 @@ class SelfTrainedSegmenter:
         bins = working(frames, t, (h, w), np.int32)
         hist_fg = np.zeros(cues.HIST_BINS**3)
         hist_bg = np.zeros(cues.HIST_BINS**3)
-        moving = working(frames, t, (h, w), np.uint8) if self.motion_weight else None
+        if not self.motion_weight:
+            moving = None
+        elif moving is None:
+            moving = video_motion_bins(frames, flow)
         motion_fg, motion_bg = np.zeros(MOTION_BINS), np.zeros(MOTION_BINS)
         steps, done = len(looked) + t, 0
         no_map = np.zeros(grid, np.float32)
@@ -336,9 +340,9 @@ class SelfTrainedSegmenter:
             hist_fg += np.bincount(bins[i][fg_px], minlength=cues.HIST_BINS**3)
             hist_bg += np.bincount(bins[i][bg_px], minlength=cues.HIST_BINS**3)
             if moving is not None:
-                moving[i] = motion_bins(flow.forward[i] if i < t - 1 else -np.asarray(flow.backward[i - 1]))
-                motion_fg += np.bincount(moving[i][fg_px], minlength=MOTION_BINS)
-                motion_bg += np.bincount(moving[i][bg_px], minlength=MOTION_BINS)
+                bins_i = np.asarray(moving[i])
+                motion_fg += np.bincount(bins_i[fg_px], minlength=MOTION_BINS)
+                motion_bg += np.bincount(bins_i[bg_px], minlength=MOTION_BINS)
             done += 1
             progress(t * done // (2 * steps))
         n_fg = sum(len(x) for x, label, _ in samples if label)
@@ -408,6 +412,17 @@ def motion_bins(flow: np.ndarray) -> np.ndarray:
     residual = cues.background_motion_residual(np.ascontiguousarray(flow, np.float32))
     scaled = np.log1p(residual * np.float32(400.0 / flow.shape[1])) * 4
     return np.clip(scaled, 0, MOTION_BINS - 1).astype(np.uint8)
+
+
+def video_motion_bins(frames, flow):
+    """`motion_bins` of every frame of (T, h, w, 3) ``frames`` from their `VideoFlow` at that size
+    (the last frame's from the backward flow reversed) -> (T, h, w) uint8, where ``frames`` is
+    (`zooctl.video.scratch.working`)."""
+    t, h, w = frames.shape[:3]
+    out = working(frames, t, (h, w), np.uint8)
+    for i in range(t):
+        out[i] = motion_bins(flow.forward[i] if i < t - 1 else -np.asarray(flow.backward[i - 1]))
+    return out
 
 
 def track(
