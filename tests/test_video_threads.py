@@ -201,3 +201,61 @@ def test_occlusion_made_by_the_writer_gives_the_file_given_the_occlusion(tmp_pat
         assert describe_h5(stores[behind].path("bg")) == describe_h5(stores[None].path("bg"))
     with pytest.raises(ValueError, match="occlusion"):
         VideoStore.open(tmp_path / "x").begin_file("bg", size).add_flow(rec.flow_forward, rec.flow_backward)
+
+
+def test_a_grabcut_mask_depends_on_its_inputs_alone(clip):
+    """Each cut seeds OpenCV's random numbers (its colour models start from k-means), so the seed's
+    two cuts side by side, the two tracking directions and a rerun give the masks of one thread."""
+    from zooctl.video.grabcut import _grabcut
+
+    frames, truth = clip
+    trimap = np.full(truth[3].shape, cv2.GC_BGD, np.uint8)
+    trimap[cv2.dilate(truth[3].astype(np.uint8), np.ones((9, 9), np.uint8)) > 0] = cv2.GC_PR_BGD
+    trimap[truth[3]] = cv2.GC_PR_FGD
+    first = _grabcut(frames[3], trimap, 2)
+    assert iou(first, truth[3]) > 0.8
+    cv2.setRNGSeed(77)
+    cv2.randu(np.zeros((64, 64), np.float32), 0, 1)
+    assert np.array_equal(_grabcut(frames[3], trimap, 2), first)
+    assert np.array_equal(_in_thread(lambda: _grabcut(frames[3], trimap, 2)), first)
+
+
+def test_the_motion_made_ahead_is_the_motion_of_the_frame_tracked(clip, monkeypatch):
+    """The tracker takes each frame's motion residual from a helper thread: it is the residual of
+    that frame's own flow, as when it was made in place."""
+    from zooctl.video.flow import DISFlow, compute_video_flow
+
+    frames, truth = clip
+    flow = compute_video_flow(DISFlow(), frames)
+    seg = GrabCutTracker(localise=False)
+    real, seen = GrabCutTracker._track, []
+
+    def checked(self, frame, bins, prior, residual, *args, **kwargs):
+        i = next(k for k in range(len(frames)) if np.array_equal(frames[k], frame))
+        motion = flow.forward[i] if i < len(flow.forward) else -flow.backward[i - 1]
+        assert np.array_equal(residual, cues.background_motion_residual(motion))
+        seen.append(i)
+        return real(self, frame, bins, prior, residual, *args, **kwargs)
+
+    monkeypatch.setattr(GrabCutTracker, "_track", checked)
+    seg.segment(frames, box=cues.box_of(truth[6]), box_frame=6, flow=flow)
+    assert sorted(seen) == [i for i in range(12) if i != 6]
+
+
+def test_a_tracked_cut_starts_from_the_colour_models_the_last_one_left(clip):
+    from zooctl.video.grabcut import _grabcut
+
+    frames, truth = clip
+    trimap = np.full(truth[4].shape, cv2.GC_BGD, np.uint8)
+    trimap[cv2.dilate(truth[4].astype(np.uint8), np.ones((9, 9), np.uint8)) > 0] = cv2.GC_PR_BGD
+    trimap[truth[4]] = cv2.GC_PR_FGD
+    models: list = []
+    cold = _grabcut(frames[4], trimap, 2, models)
+    assert np.array_equal(cold, _grabcut(frames[4], trimap, 2))  # none yet: k-means, as without
+    assert len(models) == 2 and all(m.shape == (1, 65) and m.any() for m in models)
+    left = [m.copy() for m in models]
+    warm = _grabcut(frames[4], trimap, 2, models)
+    sub = trimap.copy()  # the window is the whole frame here: the same cut by hand
+    cv2.grabCut(frames[4][..., ::-1].copy(), sub, None, left[0], left[1], 2, cv2.GC_EVAL)
+    assert np.array_equal(warm, np.isin(sub, (cv2.GC_FGD, cv2.GC_PR_FGD)))
+    assert iou(warm, truth[4]) > 0.8

@@ -430,28 +430,21 @@ class AnimalNetSegmenter:
         return masks
 
     def decide_near(
-        self,
-        small,
-        tracked,
-        flow,
-        progress=None,
-        seed_frame: int | None = None,
-        looks: dict | None = None,
-        moving=None,
+        self, small, tracked, flow, progress=None, seed_frame: int | None = None, **taken
     ) -> np.ndarray:
         """`decide_video` on the part of the frame the tracked animal keeps to, enlarged to the working
         size, when that part is at most half the frame's width and height (a small or distant animal,
         else the network and the relabelling see it on a few cells of their grid); the whole frame
-        otherwise. Same arguments and result (``looks``: of the whole frames, used when it decides on
-        them, as ``moving`` is); ``report["animalnet"]["crop"]``: the part (x, y, w, h) at the working
-        size, or None."""
+        otherwise. Same arguments and result (``taken``: `decide_video`'s ``looks`` and ``moving``,
+        of the whole frames, used when it decides on them); ``report["animalnet"]["crop"]``: the
+        part (x, y, w, h) at the working size, or None."""
         from .flow import VideoFlow, resize_flow
         from .scratch import working
 
         t, h, w = small.shape[:3]
         box = _kept_to(tracked, w, h)
         if box is None:
-            masks = self.decide_video(small, tracked, flow, progress, seed_frame, looks, moving)
+            masks = self.decide_video(small, tracked, flow, progress, seed_frame, **taken)
             self.report["animalnet"]["crop"] = None
             return masks
         x, y, bw, bh = box

@@ -23,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 import threading
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from functools import partial
 
 import cv2
@@ -67,7 +68,9 @@ class GrabCutTracker:
     colours stays sure foreground when it does not move (else only where it moves too).
     ``seed_from_map``: a localiser seed starts GrabCut with the class map's region (over half its
     peak, inside the seed's box) as probably the animal, not only the box's moving, box-coloured
-    pixels (the animal's parts in the ground's colours).
+    pixels (the animal's parts in the ground's colours). ``warm_models``: a tracked frame's GrabCut
+    starts from the colour models the previous frame's cut ended with (then learns this frame's)
+    instead of a fresh k-means: the same colours a frame later, in less time.
     """
 
     name = "grabcut"
@@ -99,6 +102,7 @@ class GrabCutTracker:
         core_quantile: float = 0.5,
         hold_still: bool = True,
         seed_from_map: bool = True,
+        warm_models: bool = True,
     ) -> None:
         if iterations < 1 or first_iterations < 1:
             raise UsageError("GrabCut needs at least one iteration")
@@ -132,7 +136,9 @@ class GrabCutTracker:
         self.core_quantile = core_quantile
         self.hold_still = hold_still
         self.seed_from_map = seed_from_map
+        self.warm_models = warm_models
         self._loc: Localiser | None = None
+        self._ready: dict[int, np.ndarray] = {}  # motion residuals of the frames being tracked
         self.report: dict = {}
 
     def segment(
@@ -156,9 +162,6 @@ class GrabCutTracker:
             )
         if box is not None:
             box = _check_box(box, w, h, box_frame)
-        cv2.setRNGSeed(
-            0
-        )  # GrabCut seeds its colour models with k-means on OpenCV's global RNG: be repeatable
         if flow is None:
             flow = compute_video_flow(DISFlow(self.flow_preset), np.asarray(frames))
         sw, sh = self.flow_size(w, h)
@@ -221,7 +224,6 @@ class GrabCutTracker:
             masks = self._segment(frames, bins, box, box_frame, progress, flow)
             if box is None or self.report["box_use"] == "seeded" or hint.agrees(masks[box_frame], box):
                 return masks
-            cv2.setRNGSeed(0)
             return self._segment(frames, bins, box, box_frame, progress, flow, box_seed=True)
         finally:
             self._stop_ahead = True
@@ -264,8 +266,7 @@ class GrabCutTracker:
         gate = 0.0 if gate is None else gate
         # from the seed frame forwards to the end, and backwards to the start: each direction starts
         # from the seed frame's mask and colours, so the two run side by side (GrabCut and the cues
-        # release the GIL), the backward one on a thread of its own with its own RNG stream (OpenCV's
-        # is per thread) seeded as here, so masks come out the same run after run
+        # release the GIL), the backward one on a thread of its own
         forward, backward = range(s + 1, t), range(s - 1, -1, -1)
         track = partial(self._track_along, frames, bins, flow, masks, how, s, hist_fg, hist_bg0, gate)
         done, cv = [1], threading.Condition()
@@ -295,7 +296,6 @@ class GrabCutTracker:
                     raise _Stopped
 
             def behind() -> None:
-                cv2.setRNGSeed(0)
                 try:
                     track(backward, step_back)
                 except _Stopped:
@@ -328,49 +328,68 @@ class GrabCutTracker:
 
     def _track_along(self, frames, bins, flow, masks, how, s, hist_fg, hist_bg0, gate, order, step) -> None:
         """Track from the seed frame ``s`` over ``order`` (consecutive frames, away from ``s``),
-        writing ``masks[i]`` and ``how[i]``; ``step()`` after each frame."""
+        writing ``masks[i]`` and ``how[i]``; ``step()`` after each frame. The next frame's motion
+        residual (it needs the flow alone) is made on a helper thread while this one is tracked."""
         t, h, w = frames.shape[:3]
         hist_bg = hist_bg0
-        for i in order:
-            src = i - 1 if i > s else i + 1
-            pull = flow.backward[i - 1] if i > s else flow.forward[i]  # takes frame src onto i's grid
-            prior = warp(masks[src].astype(np.float32), pull) > 0.5
-            m = np.zeros((h, w), bool)
-            if prior.any():
-                m = self._track(
-                    frames[i],
-                    bins[i],
-                    prior,
-                    self._motion_flow(flow, i),
-                    hist_fg,
-                    hist_bg,
-                    gate,
-                    self._unreliable(flow, i) if self.reliable_motion else None,
-                )
-            if self.localise and self._due(i, t, m, prior):
-                with self._localising:
-                    new = self._reseed(frames, bins, flow, i, m, hist_fg, hist_bg)
-                if new is not None:
-                    m, how[i] = new, "re-seeded"
-            masks[i] = m
-            if not m.any():
-                how[i] = "empty"
-            elif (~m).any():
-                # the animal's colours stay those of the seed frame (a slow leak must not teach it
-                # the water); the background's follow the camera
-                a = self.colour_memory
-                hist_bg = a * hist_bg + (1 - a) * cues.colour_histogram(bins[i], ~m)
-            step()
+        order = list(order)
+        models: list = []
+        with ThreadPoolExecutor(1, thread_name_prefix="grabcut-motion") as ahead:
+            coming = ahead.submit(self._motion_residual, flow, order[0]) if order else None
+            for j, i in enumerate(order):
+                residual = coming.result()  # type: ignore[union-attr]
+                if j + 1 < len(order):
+                    coming = ahead.submit(self._motion_residual, flow, order[j + 1])
+                self._ready[i] = residual
+                try:
+                    src = i - 1 if i > s else i + 1
+                    pull = flow.backward[i - 1] if i > s else flow.forward[i]  # takes frame src onto i's grid
+                    prior = warp(masks[src].astype(np.float32), pull) > 0.5
+                    m = np.zeros((h, w), bool)
+                    if prior.any():
+                        m = self._track(
+                            frames[i],
+                            bins[i],
+                            prior,
+                            residual,
+                            hist_fg,
+                            hist_bg,
+                            gate,
+                            self._unreliable(flow, i) if self.reliable_motion else None,
+                            models if self.warm_models else None,
+                        )
+                    if self.localise and self._due(i, t, m, prior):
+                        with self._localising:
+                            new = self._reseed(frames, bins, flow, i, m, hist_fg, hist_bg)
+                        if new is not None:
+                            m, how[i] = new, "re-seeded"
+                finally:
+                    self._ready.pop(i, None)
+                masks[i] = m
+                if not m.any():
+                    how[i] = "empty"
+                elif (~m).any():
+                    # the animal's colours stay those of the seed frame (a slow leak must not teach it
+                    # the water); the background's follow the camera
+                    a = self.colour_memory
+                    hist_bg = a * hist_bg + (1 - a) * cues.colour_histogram(bins[i], ~m)
+                step()
 
     # -- the localiser: where to start and when to start again -------------------------------------
 
     def _residual(self, flow, i: int) -> np.ndarray:
         """Frame i's motion unlike the camera, in pixels (with ``reliable_motion``: 0 where the flow
         fails the forward-backward check)."""
-        r = cues.background_motion_residual(self._motion_flow(flow, i))
+        r = self._motion_residual(flow, i)
         if not self.reliable_motion:
             return r
         return np.where(_closed(self._unreliable(flow, i)), 0.0, r).astype(np.float32)
+
+    def _motion_residual(self, flow, i: int) -> np.ndarray:
+        """`cues.background_motion_residual` of frame i's motion (made already, while a tracking
+        direction is at frame i)."""
+        ready = self._ready.get(i)
+        return ready if ready is not None else cues.background_motion_residual(self._motion_flow(flow, i))
 
     @staticmethod
     def _unreliable(flow, i: int) -> np.ndarray:
@@ -472,10 +491,13 @@ class GrabCutTracker:
         and what it leaves out is big (a quarter of the animal or more: a reflection or wake, not a
         leg in other colours).
         """
-        plain = self._first(frame, bins, residual, box, likely=animal >= 0.5 if self.seed_from_map else None)
+        likely = animal >= 0.5 if self.seed_from_map else None
         if not self.core_quantile:
-            return plain
-        core = self._first(frame, bins, residual, box, animal)
+            return self._first(frame, bins, residual, box, likely=likely)
+        with ThreadPoolExecutor(1, thread_name_prefix="grabcut-core") as side:  # the two cuts side by side
+            cut = side.submit(self._first, frame, bins, residual, box, animal)
+            plain = self._first(frame, bins, residual, box, likely=likely)
+            core = cut.result()
         surest = plain & (animal >= 0.7)
         if (
             not surest.any()
@@ -585,7 +607,7 @@ class GrabCutTracker:
         return out if out.sum() >= 0.3 * seed.sum() else _clean(seed, seed)
 
     def _track(
-        self, frame, bins, prior, motion_flow, hist_fg, hist_bg, gate: float, unreliable=None
+        self, frame, bins, prior, residual, hist_fg, hist_bg, gate: float, unreliable=None, models=None
     ) -> np.ndarray:
         h, w = bins.shape
         box = cues.box_of(prior)
@@ -602,7 +624,7 @@ class GrabCutTracker:
             bins, cues.colour_histogram(bins, prior), cues.colour_histogram(bins, ~window)
         )
         p_colour = 0.5 * (p_first + p_local)
-        p_motion = cues.motion_probability(cues.background_motion_residual(motion_flow), window)
+        p_motion = cues.motion_probability(residual, window)
         if unreliable is not None:  # what only seems to move (ripples) is no evidence of the animal
             p_motion = np.where(_closed(unreliable), 0.0, p_motion)
         cue = np.sqrt(p_colour * p_motion)
@@ -625,11 +647,19 @@ class GrabCutTracker:
         if self.keep_moving:
             near = cv2.dilate(prior.astype(np.uint8), cues.disk(self.band * size)).astype(bool)
             trimap[near & (p_motion > 0.9) & (p_first > max(gate, self.keep_colour))] = cv2.GC_FGD
-        return _clean(_grabcut(frame, trimap, self.iterations), prior)
+        return _clean(_grabcut(frame, trimap, self.iterations, models), prior)
 
 
-def _grabcut(frame: np.ndarray, trimap: np.ndarray, iterations: int) -> np.ndarray:
-    """GrabCut on the window around the non-definite-background part of ``trimap``; (H, W) bool."""
+def _grabcut(
+    frame: np.ndarray,
+    trimap: np.ndarray,
+    iterations: int,
+    models: list | None = None,
+) -> np.ndarray:
+    """GrabCut on the window around the non-definite-background part of ``trimap``; (H, W) bool.
+    ``models``: a list, empty or holding the (background, foreground) colour models a cut left
+    (the previous frame's, when tracking): the cut starts from them instead of k-means, and leaves
+    its own there."""
     h, w = trimap.shape
     box = cues.box_of(trimap != cv2.GC_BGD)
     if box is None:
@@ -643,8 +673,20 @@ def _grabcut(frame: np.ndarray, trimap: np.ndarray, iterations: int) -> np.ndarr
         return np.isin(trimap, fg_labels)
     img = np.ascontiguousarray(frame[y0:y1, x0:x1, ::-1])  # OpenCV's GrabCut is BGR
     bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
+    start = cv2.GC_INIT_WITH_MASK
+    if models:  # the colour models the previous frame's cut ended with, instead of k-means
+        bgd[:], fgd[:] = models
+        start = cv2.GC_EVAL
+    if models is not None:
+        models.clear()
+    # GrabCut starts its colour models with k-means on OpenCV's random numbers (a stream per
+    # thread): seeded at each cut, a mask depends on its inputs alone, not on the thread that makes
+    # it or on the cuts made before
+    cv2.setRNGSeed(0)
     try:
-        cv2.grabCut(img, sub, None, bgd, fgd, iterations, cv2.GC_INIT_WITH_MASK)
+        cv2.grabCut(img, sub, None, bgd, fgd, iterations, start)
+        if models is not None:
+            models.extend((bgd, fgd))
     except cv2.error:  # a GMM with too few samples of one class: keep the trimap's own guess
         pass
     out = np.zeros((h, w), bool)
