@@ -259,3 +259,20 @@ def test_a_tracked_cut_starts_from_the_colour_models_the_last_one_left(clip):
     cv2.grabCut(frames[4][..., ::-1].copy(), sub, None, left[0], left[1], 2, cv2.GC_EVAL)
     assert np.array_equal(warm, np.isin(sub, (cv2.GC_FGD, cv2.GC_PR_FGD)))
     assert iou(warm, truth[4]) > 0.8
+
+
+def test_colour_bins_made_when_asked_for_are_the_frames_bins(clip):
+    """The tracker's colour bins are made as frames are needed (a frame ahead, on its helper
+    thread), in memory or in a scratch file for a lazy video: each is `cues.lab_bins` of its frame."""
+    from zooctl.video.grabcut import _Bins
+    from zooctl.video.scratch import ScratchArray
+
+    frames, _ = clip
+    lazy = ScratchArray(0, frames.shape[1:], np.uint8)
+    for f in frames:
+        lazy.append(f)
+    for source in (frames, lazy):
+        bins = _Bins(source)
+        for i in (5, 0, 5, 11):
+            assert np.array_equal(bins[i], cues.lab_bins(frames[i]))
+        assert np.array_equal(_in_thread(lambda b=bins: b[7]), cues.lab_bins(frames[7]))

@@ -218,9 +218,7 @@ class GrabCutTracker:
             ahead = threading.Thread(target=self._look_ahead, args=(frames, keys), name="localiser-ahead")
             ahead.start()
         try:
-            bins = working(frames, t, frames.shape[1:3], np.int32)
-            for i in range(t):
-                bins[i] = cues.lab_bins(frames[i])
+            bins = _Bins(frames)
             masks = self._segment(frames, bins, box, box_frame, progress, flow)
             if box is None or self.report["box_use"] == "seeded" or hint.agrees(masks[box_frame], box):
                 return masks
@@ -335,11 +333,11 @@ class GrabCutTracker:
         order = list(order)
         models: list = []
         with ThreadPoolExecutor(1, thread_name_prefix="grabcut-motion") as ahead:
-            coming = ahead.submit(self._motion_residual, flow, order[0]) if order else None
+            coming = ahead.submit(self._coming, flow, bins, order[0]) if order else None
             for j, i in enumerate(order):
                 residual = coming.result()  # type: ignore[union-attr]
                 if j + 1 < len(order):
-                    coming = ahead.submit(self._motion_residual, flow, order[j + 1])
+                    coming = ahead.submit(self._coming, flow, bins, order[j + 1])
                 self._ready[i] = residual
                 try:
                     src = i - 1 if i > s else i + 1
@@ -384,6 +382,11 @@ class GrabCutTracker:
         if not self.reliable_motion:
             return r
         return np.where(_closed(self._unreliable(flow, i)), 0.0, r).astype(np.float32)
+
+    def _coming(self, flow, bins, i: int) -> np.ndarray:
+        """Frame i's motion residual, and its colour bins made (both need the frame and flow alone)."""
+        bins[i]
+        return self._motion_residual(flow, i)
 
     def _motion_residual(self, flow, i: int) -> np.ndarray:
         """`cues.background_motion_residual` of frame i's motion (made already, while a tracking
@@ -721,6 +724,22 @@ def resize_flows(flow, w: int, h: int, like=None):
     for i in range(len(flow)):
         out[i] = resize_flow(np.asarray(flow[i], np.float32), w, h)
     return out
+
+
+class _Bins:
+    """The frames' Lab colour bins (`cues.lab_bins`), each made when first asked for (by the tracker
+    or its helper thread, a frame ahead) and kept (a lazy video's in a scratch file)."""
+
+    def __init__(self, frames) -> None:
+        self._frames = frames
+        self._bins = working(frames, len(frames), frames.shape[1:3], np.int32)
+        self._made = np.zeros(len(frames), bool)
+
+    def __getitem__(self, i: int) -> np.ndarray:
+        if not self._made[i]:  # two threads may both make it: the same bins
+            self._bins[i] = cues.lab_bins(self._frames[i])
+            self._made[i] = True
+        return self._bins[i]
 
 
 class _Stopped(Exception):
