@@ -329,3 +329,24 @@ def test_video_show_says_whether_the_network_replaced_the_tracker():
     kept = {"seeding": ["localiser", "tracked"], "seed_frame": 0, "animalnet": {"motion_margin": None}}
     text = "\n".join(seeding_lines(kept))
     assert "first seed on frame 0" in text and "saw no animal: the tracker's masks kept" in text
+
+
+def test_the_tracker_the_networks_looks_and_the_relabelling_share_each_frames_motion_residual(
+    trained, monkeypatch
+):
+    from zooctl.video import cues
+    from zooctl.video import flow as flow_mod
+
+    frames, truth = moving_object_video(t=6, h=72, w=96)
+    made = []
+
+    def counted(motion):
+        made.append(1)
+        return cues.background_motion_residual(motion)
+
+    monkeypatch.setattr(flow_mod, "background_motion_residual", counted)
+    seg = get_registry().get("segmenter", "animalnet").create(weights=str(trained[0]))
+    assert seg.relabel and seg.relabel_options.get("motion_weight")  # all three ask for them
+    masks = np.asarray(seg.segment(frames), bool)
+    assert masks.shape == truth.shape
+    assert len(made) == len(frames)  # was up to three times a frame

@@ -113,3 +113,68 @@ def test_fb_check_matches_its_formula():
     expect = (lhs > rhs) | (x < 0) | (x > 39) | (y < 0) | (y > 23)
     got = fb_inconsistent(f, b)
     assert got.dtype == bool and np.mean(got == expect) > 0.999  # float rounding at the threshold
+
+
+def _two_motions(t: int = 4):
+    from video_helpers import moving_object_video
+
+    frames, _ = moving_object_video(t=t, h=72, w=96)
+    return compute_video_flow(DISFlow("medium"), frames)
+
+
+def test_each_frames_motion_residual_is_that_of_its_own_flow_made_once_for_every_thread(monkeypatch):
+    import threading
+
+    from zooctl.video import cues
+    from zooctl.video import flow as flow_mod
+
+    vf = _two_motions()
+    expected = [cues.background_motion_residual(vf.forward[i]) for i in range(3)]
+    expected.append(cues.background_motion_residual(-vf.backward[2]))  # the last frame: backward, reversed
+    assert np.array_equal(vf.motion(3), -vf.backward[2]) and np.array_equal(vf.motion(0), vf.forward[0])
+    made, gate = [], threading.Barrier(4)
+
+    def counted(motion):
+        made.append(1)
+        return cues.background_motion_residual(motion)
+
+    monkeypatch.setattr(flow_mod, "background_motion_residual", counted)
+
+    def ask():
+        gate.wait()  # four threads ask for every frame at once
+        return [vf.residual(i) for i in (3, 0, 1, 2, -1)]
+
+    got = [[] for _ in range(4)]
+    threads = [threading.Thread(target=lambda k=k: got[k].extend(ask())) for k in range(4)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    assert len(made) == 4  # one residual a frame, whoever asked first made it
+    for seen in got:
+        assert [np.array_equal(a, expected[i]) for a, i in zip(seen, (3, 0, 1, 2, 3))] == [True] * 5
+    with pytest.raises(ValueError):
+        vf.residual(0)[0, 0] = 1.0  # shared between its readers: read-only
+
+
+def test_a_residual_whose_maker_failed_is_made_by_the_next_caller(monkeypatch):
+    from zooctl.video import cues
+    from zooctl.video import flow as flow_mod
+    from zooctl.video.flow import VideoFlow
+    from zooctl.video.scratch import ScratchArray
+
+    vf = _two_motions(3)
+    lazy = VideoFlow(*(ScratchArray(2, a.shape[1:], a.dtype) for a in (vf.forward, vf.backward)), None, None)
+    for i in range(2):
+        lazy.forward[i], lazy.backward[i] = vf.forward[i], vf.backward[i]
+
+    def failing(motion):
+        raise MemoryError("out of memory")
+
+    monkeypatch.setattr(flow_mod, "background_motion_residual", failing)
+    with pytest.raises(MemoryError):
+        lazy.residual(1)
+    monkeypatch.setattr(flow_mod, "background_motion_residual", cues.background_motion_residual)
+    # a long video's residuals wait in a scratch file, as its flow does
+    assert np.array_equal(lazy.residual(1), cues.background_motion_residual(vf.forward[1]))
+    assert np.array_equal(lazy.residual(2), cues.background_motion_residual(-vf.backward[1]))

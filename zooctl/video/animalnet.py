@@ -261,16 +261,15 @@ class AnimalNetSegmenter:
             self._features = FeatureNet(int(self.net.info.get("feature_width", FEATURE_WIDTH)))
         return self._features
 
-    def look(self, frame: np.ndarray, motion: np.ndarray) -> tuple[np.ndarray, tuple, np.ndarray]:
-        """One (h, w, 3) frame at the working size and its (h, w, 2) flow to a neighbour -> ((h, w)
-        network log-odds, the frame's `FeatureNet.features`, (h, w) residual motion in pixels)."""
-        from .cues import background_motion_residual
+    def look(self, frame: np.ndarray, residual: np.ndarray) -> tuple[np.ndarray, tuple, np.ndarray]:
+        """One (h, w, 3) frame at the working size and its (h, w) motion residual in pixels
+        (`VideoFlow.residual`) -> ((h, w) network log-odds, the frame's `FeatureNet.features`,
+        ``residual``)."""
         from .selftrain import grid_to_pixels
 
         h, w = frame.shape[:2]
         fnet = self._feature_net()
         feats, cam = fnet.features(frame)
-        residual = background_motion_residual(np.ascontiguousarray(motion, np.float32))
         inputs = np.concatenate([feats, cam[..., None], residual_grid(residual, cam.shape)[..., None]], -1)
         grid = self.net.logits(inputs)
         return grid_to_pixels(grid, w, h, fnet.input_size(w, h)), (feats, cam), residual
@@ -281,7 +280,7 @@ class AnimalNetSegmenter:
         t = len(small)
         out = {}
         for i in sorted(set(range(0, t, self.feature_every)) | {t - 1}):
-            grid, (feats, cam), residual = self.look(small[i], _motion(flow, i, t))
+            grid, (feats, cam), residual = self.look(small[i], flow.residual(i))
             out[i] = (grid, (feats.astype(np.float16), cam), residual)
         return out
 
@@ -300,7 +299,7 @@ class AnimalNetSegmenter:
             frame = frames[i]
             if frame.shape[:2] != (h, w):
                 frame = cv2.resize(frame, (w, h), interpolation=cv2.INTER_AREA)
-            out[i] = self.look(frame, _motion(flow, i, t))[0]
+            out[i] = self.look(frame, flow.residual(i))[0]
             if progress:
                 progress(k + 1, len(looked))
         if len(looked) < t:
@@ -344,7 +343,7 @@ class AnimalNetSegmenter:
         margins, held, residuals = [], {}, {}
         looks = looks or {}
         for k, i in enumerate(looked):
-            ev[i], f, residual = looks[i] if i in looks else self.look(small[i], _motion(flow, i, t))
+            ev[i], f, residual = looks[i] if i in looks else self.look(small[i], flow.residual(i))
             seen[i] = (f[0].astype(np.float16), f[1])  # float16: as `relabel` keeps them
             animal = main_animal(ev[i])
             held[i], residuals[i] = motion_contrast(np.asarray(tracked[i], bool), residual), residual
@@ -372,7 +371,7 @@ class AnimalNetSegmenter:
         if switched:
             for i in range(t):
                 if i not in seen:
-                    ev[i] = self.look(small[i], _motion(flow, i, t))[0]
+                    ev[i] = self.look(small[i], flow.residual(i))[0]
             if anchor is None:
                 for i in range(t):
                     prior[i] = main_animal(ev[i])
@@ -635,8 +634,3 @@ def drop_remnants(masks, remnant: float) -> list[int]:
             masks[i] = np.zeros_like(m)
             dropped.append(int(i))
     return dropped
-
-
-def _motion(flow, i: int, t: int) -> np.ndarray:
-    """Frame ``i``'s flow to a neighbour: forward, or for the last frame the backward flow reversed."""
-    return flow.forward[i] if i < t - 1 else -np.asarray(flow.backward[i - 1])

@@ -14,13 +14,15 @@ import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import nullcontext
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import cv2
 import numpy as np
 
 from ..errors import UsageError
+from .cues import background_motion_residual
+from .scratch import working
 
 DIS_PRESETS = {
     "ultrafast": cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST,
@@ -99,6 +101,63 @@ class VideoFlow:
     backward: np.ndarray
     occlusion_forward: np.ndarray
     occlusion_backward: np.ndarray
+    _residuals: _Residuals | None = field(default=None, init=False, repr=False, compare=False)
+
+    def motion(self, i: int) -> np.ndarray:
+        """Frame i's (H, W, 2) motion: its forward flow; the last frame's: its backward flow, reversed."""
+        return self.forward[i] if i < len(self.forward) else -np.asarray(self.backward[i - 1])
+
+    def residual(self, i: int) -> np.ndarray:
+        """(H, W) float32, read-only: frame i's motion the camera does not explain
+        (`zooctl.video.cues.background_motion_residual` of `motion`), made once per frame however
+        many steps and threads ask for it (the tracker, the network's looks, the relabelling's bins)."""
+        with _RESIDUALS_LOCK:
+            if self._residuals is None:
+                self._residuals = _Residuals(self)
+        return self._residuals.get(i)
+
+
+_RESIDUALS_LOCK = threading.Lock()
+
+
+class _Residuals:
+    """`VideoFlow.residual`'s store: every frame's residual, kept where the flow is kept (in memory
+    for arrays, else in a scratch file), each made by the first thread that asks; the others wait."""
+
+    def __init__(self, flow: VideoFlow) -> None:
+        t = len(flow.forward) + 1
+        self._flow = flow
+        self._store = working(flow.forward, t, tuple(flow.forward.shape[1:3]), np.float32)
+        self._made: list[threading.Event | None] = [None] * t
+        self._lock = threading.Lock()
+
+    def get(self, i: int) -> np.ndarray:
+        i = range(len(self._made))[i]
+        with self._lock:
+            made = self._made[i]
+            mine = made is None
+            if mine:
+                made = self._made[i] = threading.Event()
+        if mine:
+            try:
+                self._store[i] = background_motion_residual(
+                    np.ascontiguousarray(self._flow.motion(i), np.float32)
+                )
+            except BaseException:
+                with self._lock:
+                    self._made[i] = None  # the next caller tries again
+                made.set()
+                raise
+            made.set()
+        else:
+            made.wait()
+            if self._made[i] is not made:  # its maker failed
+                return self.get(i)
+        out = np.asarray(self._store[i])
+        if isinstance(self._store, np.ndarray):
+            out = out.view()
+            out.flags.writeable = False
+        return out
 
 
 def compute_video_flow(

@@ -138,7 +138,6 @@ class GrabCutTracker:
         self.seed_from_map = seed_from_map
         self.warm_models = warm_models
         self._loc: Localiser | None = None
-        self._ready: dict[int, np.ndarray] = {}  # motion residuals of the frames being tracked
         self.report: dict = {}
 
     def segment(
@@ -178,7 +177,7 @@ class GrabCutTracker:
             for i in range(t):
                 small[i] = cv2.resize(frames[i], (sw, sh), interpolation=cv2.INTER_AREA)
         if tuple(flow.forward.shape[1:3]) == (sh, sw):  # given at the size GrabCut works at
-            small_flow = VideoFlow(flow.forward, flow.backward, None, None)
+            small_flow = flow  # the same object: the motion residuals it makes are shared
         else:
             small_flow = VideoFlow(
                 *(resize_flows(f, sw, sh, frames) for f in (flow.forward, flow.backward)), None, None
@@ -338,31 +337,27 @@ class GrabCutTracker:
                 residual = coming.result()  # type: ignore[union-attr]
                 if j + 1 < len(order):
                     coming = ahead.submit(self._coming, flow, bins, order[j + 1])
-                self._ready[i] = residual
-                try:
-                    src = i - 1 if i > s else i + 1
-                    pull = flow.backward[i - 1] if i > s else flow.forward[i]  # takes frame src onto i's grid
-                    prior = warp(masks[src].astype(np.float32), pull) > 0.5
-                    m = np.zeros((h, w), bool)
-                    if prior.any():
-                        m = self._track(
-                            frames[i],
-                            bins[i],
-                            prior,
-                            residual,
-                            hist_fg,
-                            hist_bg,
-                            gate,
-                            self._unreliable(flow, i) if self.reliable_motion else None,
-                            models if self.warm_models else None,
-                        )
-                    if self.localise and self._due(i, t, m, prior):
-                        with self._localising:
-                            new = self._reseed(frames, bins, flow, i, m, hist_fg, hist_bg)
-                        if new is not None:
-                            m, how[i] = new, "re-seeded"
-                finally:
-                    self._ready.pop(i, None)
+                src = i - 1 if i > s else i + 1
+                pull = flow.backward[i - 1] if i > s else flow.forward[i]  # takes frame src onto i's grid
+                prior = warp(masks[src].astype(np.float32), pull) > 0.5
+                m = np.zeros((h, w), bool)
+                if prior.any():
+                    m = self._track(
+                        frames[i],
+                        bins[i],
+                        prior,
+                        residual,
+                        hist_fg,
+                        hist_bg,
+                        gate,
+                        self._unreliable(flow, i) if self.reliable_motion else None,
+                        models if self.warm_models else None,
+                    )
+                if self.localise and self._due(i, t, m, prior):
+                    with self._localising:
+                        new = self._reseed(frames, bins, flow, i, m, hist_fg, hist_bg)
+                    if new is not None:
+                        m, how[i] = new, "re-seeded"
                 masks[i] = m
                 if not m.any():
                     how[i] = "empty"
@@ -378,7 +373,7 @@ class GrabCutTracker:
     def _residual(self, flow, i: int) -> np.ndarray:
         """Frame i's motion unlike the camera, in pixels (with ``reliable_motion``: 0 where the flow
         fails the forward-backward check)."""
-        r = self._motion_residual(flow, i)
+        r = flow.residual(i)
         if not self.reliable_motion:
             return r
         return np.where(_closed(self._unreliable(flow, i)), 0.0, r).astype(np.float32)
@@ -386,13 +381,7 @@ class GrabCutTracker:
     def _coming(self, flow, bins, i: int) -> np.ndarray:
         """Frame i's motion residual, and its colour bins made (both need the frame and flow alone)."""
         bins[i]
-        return self._motion_residual(flow, i)
-
-    def _motion_residual(self, flow, i: int) -> np.ndarray:
-        """`cues.background_motion_residual` of frame i's motion (made already, while a tracking
-        direction is at frame i)."""
-        ready = self._ready.get(i)
-        return ready if ready is not None else cues.background_motion_residual(self._motion_flow(flow, i))
+        return flow.residual(i)
 
     @staticmethod
     def _unreliable(flow, i: int) -> np.ndarray:
@@ -401,11 +390,6 @@ class GrabCutTracker:
         if i < len(flow.forward):
             return fb_inconsistent(flow.forward[i], flow.backward[i])
         return fb_inconsistent(flow.backward[i - 1], flow.forward[i - 1])
-
-    @staticmethod
-    def _motion_flow(flow, i: int) -> np.ndarray:
-        """Frame i's motion: its forward flow (the last frame: its backward flow, reversed)."""
-        return flow.forward[i] if i < len(flow.forward) else -flow.backward[i - 1]
 
     def _localiser(self) -> Localiser:
         if self._loc is None:

@@ -405,23 +405,22 @@ def log_odds(hist_fg: np.ndarray, hist_bg: np.ndarray, clip: float, share: float
     return np.clip(fg - bg, -clip, clip).astype(np.float32)
 
 
-def motion_bins(flow: np.ndarray) -> np.ndarray:
-    """(h, w, 2) flow to a neighbouring frame -> (h, w) uint8 bin (of `MOTION_BINS`) of each pixel's
-    motion against the camera (`cues.background_motion_residual`), in hundredths of the frame's
-    width on a log scale: still, then finer steps for slow motion than for fast."""
-    residual = cues.background_motion_residual(np.ascontiguousarray(flow, np.float32))
-    scaled = np.log1p(residual * np.float32(400.0 / flow.shape[1])) * 4
+def motion_bins(residual: np.ndarray) -> np.ndarray:
+    """(h, w) motion residual of a frame in pixels (`VideoFlow.residual`) -> (h, w) uint8 bin (of
+    `MOTION_BINS`) of each pixel's motion against the camera, in hundredths of the frame's width on
+    a log scale: still, then finer steps for slow motion than for fast."""
+    scaled = np.log1p(residual * np.float32(400.0 / residual.shape[1])) * 4
     return np.clip(scaled, 0, MOTION_BINS - 1).astype(np.uint8)
 
 
 def video_motion_bins(frames, flow):
     """`motion_bins` of every frame of (T, h, w, 3) ``frames`` from their `VideoFlow` at that size
-    (the last frame's from the backward flow reversed) -> (T, h, w) uint8, where ``frames`` is
+    -> (T, h, w) uint8, where ``frames`` is
     (`zooctl.video.scratch.working`)."""
     t, h, w = frames.shape[:3]
     out = working(frames, t, (h, w), np.uint8)
     for i in range(t):
-        out[i] = motion_bins(flow.forward[i] if i < t - 1 else -np.asarray(flow.backward[i - 1]))
+        out[i] = motion_bins(flow.residual(i))
     return out
 
 
