@@ -200,6 +200,14 @@ class TemplateTrials:
     prune_margin: float = spec(
         0.05, help="how far below the best trial's score a trial stops at prune_at", required=False, minimum=0
     )
+    workers: int = spec(
+        0,
+        help="processes the trials run in side by side on the CPU, sharing the torch threads "
+        "(zooctl.fit.trial_pool). 0: one per trial while they are at most twice the threads, else one per thread; 1: one after another "
+        "in the fit's own process (always so on CUDA and with one thread)",
+        required=False,
+        minimum=0,
+    )
 
 
 @dataclass

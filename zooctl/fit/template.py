@@ -155,7 +155,8 @@ def try_candidates(
     there, and only those `kept_trials` keeps (``cfg.trials.prune_margin``) go on to
     ``cfg.trials.iters`` and compete; the others' candidates get ``pruned_at`` beside the trial IoU
     they stopped at. A depth-mirror check then compares at the checkpoint."""
-    from .view_trial import continue_trial, mirror_wanted, trial_with_mirror
+    from .trial_pool import Trial, run_trials
+    from .view_trial import mirror_wanted
 
     tried = candidates[: cfg.trials.candidates]
     if len(tried) < 2:
@@ -163,31 +164,32 @@ def try_candidates(
     semantic = [float(c.get("semantic") or 0.0) for c in tried]
     prune_at = cfg.trials.prune_at
     first = cfg.trials.iters if prune_at is None else min(prune_at, cfg.trials.iters)
-    trials = []  # (asset, trial IoU, paused state) in retrieval order
     mirror = mirror_wanted(cfg, template_given=False)
-    for i, cand in enumerate(tried):
-        if reporter is not None:
-            reporter.message(f"trial fit {i + 1}/{len(tried)}: template {cand['name']}")
-        asset = bank.get(cand["name"])
-        iou, paused, view = trial_with_mirror(
-            video, asset, cfg, reporter, mirror=mirror, pause_at=first
-        )  # no checkpoints
-        cand["trial_iou"] = round(iou, 4)
-        cand["view_trial"] = view
-        trials.append((asset, iou, paused))
+    assets = [bank.get(c["name"]) for c in tried]
+    if reporter is not None:
+        reporter.message("trial fits: " + ", ".join(a.name for a in assets))
+    done = run_trials(video, [Trial(a, first, mirror) for a in assets], cfg, reporter)
+    trials = []  # (asset, trial IoU, paused state) in retrieval order
+    for cand, asset, res in zip(tried, assets, done, strict=True):
+        cand["trial_iou"] = round(res.iou, 4)
+        cand["view_trial"] = res.view
+        trials.append((asset, res.iou, res.state))
     on = list(range(len(tried)))  # the trials that go on to cfg.trials.iters
     if first < cfg.trials.iters:
         on = kept_trials([t[1] for t in trials], semantic, cfg.trials.prune_margin)
         for i, cand in enumerate(tried):
-            asset, iou, paused = trials[i]
             if i not in on:
                 cand["pruned_at"] = first  # its trial_iou is the one at the checkpoint
-                continue
-            if reporter is not None:
-                reporter.message(f"trial fit of {cand['name']} goes on to {cfg.trials.iters} iterations")
-            iou, paused = continue_trial(video, asset, cfg, paused, cfg.trials.iters, reporter)
-            cand["trial_iou"] = round(iou, 4)
-            trials[i] = (asset, iou, paused)
+        if reporter is not None:
+            reporter.message(
+                f"trial fits of {', '.join(tried[i]['name'] for i in on)} go on to {cfg.trials.iters} iterations"
+            )
+        more = run_trials(
+            video, [Trial(trials[i][0], cfg.trials.iters, state=trials[i][2]) for i in on], cfg, reporter
+        )
+        for i, res in zip(on, more, strict=True):
+            tried[i]["trial_iou"] = round(res.iou, 4)
+            trials[i] = (trials[i][0], res.iou, res.state)
     win = on[pick_trial([trials[i][1] for i in on], cfg.trials.margin, [semantic[i] for i in on])]
     best, best_iou, best_state = trials[win]
     if reporter is not None:

@@ -1,0 +1,118 @@
+"""The template trials side by side, one process each (`zooctl.fit.trial_pool`)."""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+import torch
+from test_fit_trials import TINY, _bank_with_views
+
+from zooctl.benchdata.make import make_video
+from zooctl.errors import InputError
+from zooctl.fit.config import FitConfig
+from zooctl.fit.trial_pool import Trial, run_trials, trial_threads
+
+
+def _cfg(**trials) -> FitConfig:
+    return FitConfig.from_dict(
+        {**json.loads(json.dumps(TINY)), "trials": {"candidates": 2, "iters": 2, **trials}}
+    )
+
+
+@contextlib.contextmanager
+def _threads(n: int):
+    old = torch.get_num_threads()
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(old)
+
+
+class _Recorder:
+    def __init__(self) -> None:
+        self.stages: list[str] = []
+        self.steps = 0
+        self.messages: list[str] = []
+
+    def stage(self, name: str, total: int, done: int = 0) -> None:
+        self.stages.append(name)
+
+    def step(self, terms: dict[str, float]) -> None:
+        self.steps += 1
+
+    def message(self, text: str) -> None:
+        self.messages.append(text)
+
+
+def test_the_threads_are_shared_out_between_the_trials():
+    cfg = _cfg()
+    assert trial_threads(cfg, 3, threads=2) == [1, 1, 1]  # all at once: none runs alone at the end
+    assert trial_threads(cfg, 6, threads=2) == [1, 1]  # many: they take turns, one process a thread
+    assert trial_threads(cfg, 3, threads=8) == [3, 3, 2]
+    assert trial_threads(cfg, 2, threads=16) == [8, 8]
+    assert trial_threads(_cfg(workers=2), 3, threads=8) == [4, 4]
+    assert trial_threads(cfg, 3, threads=1) == []  # one thread: one after another here
+    assert trial_threads(cfg, 1, threads=8) == []
+    assert trial_threads(_cfg(workers=1), 3, threads=8) == []
+    cuda = dataclasses.replace(cfg, device="cuda")
+    assert trial_threads(cuda, 3, threads=8) == []  # the trials share one device
+
+
+def test_trials_side_by_side_are_the_trials_one_after_another(tmp_path, store):
+    """Two processes of one thread each pick the same template, with the same trial IoUs and the
+    same paused state, as the trials run here one after another on one thread."""
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.template import try_candidates
+
+    bank, thin = _bank_with_views(store)
+    video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
+    runs = []
+    for threads, cfg in ((1, _cfg()), (2, _cfg())):
+        assert bool(trial_threads(cfg, 2, threads=threads)) == (threads == 2)
+        cands = [{"name": "fat", "score": -2.0}, {"name": "thin", "score": -1.0}]
+        rep = _Recorder()
+        with _threads(threads):
+            runs.append((*try_candidates(bank, video, cands, cfg, rep), rep))
+    (a_one, out_one, st_one, _), (a_two, out_two, st_two, rep) = runs
+    assert a_one.name == a_two.name == "thin"
+    assert out_one[1]["trial_iou"] > out_one[0]["trial_iou"]
+    for c1, c2 in zip(out_one, out_two, strict=True):
+        assert c1["trial_iou"] == pytest.approx(c2["trial_iou"], abs=1e-4)
+        assert c1["view_trial"] == c2["view_trial"]
+    assert st_two["iteration"] == st_one["iteration"] == 2
+    for k, v in st_one["scene"].items():
+        assert torch.allclose(v, st_two["scene"][k], atol=1e-5), k
+    # the workers' reports reach the parent's reporter, named by template
+    assert any(m.startswith("[fat] ") for m in rep.messages) or any("(fat)" in s for s in rep.stages)
+    assert rep.stages and rep.steps > 0
+
+
+def test_pruned_trials_side_by_side(tmp_path, store):
+    """With a checkpoint, the trials run side by side to it and the kept one goes on from its own
+    paused state, in a worker too."""
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.template import try_candidates
+
+    bank, thin = _bank_with_views(store)
+    video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
+    cands = [{"name": "fat", "score": -2.0}, {"name": "thin", "score": -1.0}]
+    with _threads(2):
+        asset, out, state = try_candidates(bank, video, cands, _cfg(prune_at=1, prune_margin=0.0))
+    assert asset.name == "thin"
+    assert out[0]["pruned_at"] == 1 and "pruned_at" not in out[1]
+    assert state["iteration"] == 2 and len(state["history"]["stage2"]) == 2
+
+
+def test_a_trials_error_reaches_the_caller_as_it_was_raised(tmp_path, store):
+    from zooctl.fit.inputs import load_fit_video
+
+    bank, thin = _bank_with_views(store)
+    video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
+    bad = dataclasses.replace(thin, name="flat", faces=np.zeros((1, 3), np.int32))
+    with _threads(2), pytest.raises(InputError, match="'flat' has too few faces"):
+        run_trials(video, [Trial(thin, 1), Trial(bad, 1)], _cfg())

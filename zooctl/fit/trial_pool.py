@@ -1,0 +1,254 @@
+"""The template trials side by side: each candidate's short fit in its own process.
+
+A trial is a fit of a few thousand vertices at a fit resolution of about a hundred pixels: too
+small a job to keep more than one core busy through torch's own threads (on two cores a fit runs
+at about 1.2 cores). The trials of different templates are independent, so on a CPU with two or
+more torch threads they run at once, in spawned processes that split the threads between them;
+each trial's paused state comes back to continue the winner's fit exactly where it stopped.
+
+``cfg.trials.workers`` sets how many processes (0: one per trial, while they are at most twice
+the torch threads, else one per thread; 1: one after another in this process, as on CUDA, where
+the trials share one device).
+The trials are the same fits either way: side by side they agree with one after another within
+float summation order (`torch` threads differ), not bit for bit.
+"""
+
+from __future__ import annotations
+
+import io
+import multiprocessing
+import queue as queue_mod
+import threading
+import traceback
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from ..errors import ZooctlError
+
+if TYPE_CHECKING:
+    from ..asset import RiggedAsset
+    from .config import FitConfig
+    from .inputs import FitVideo
+    from .run import Reporter
+
+
+@dataclass
+class Trial:
+    """One trial to run: ``asset``'s fit paused after ``pause_at`` stage-2 iterations, from the
+    start (``state`` None; ``mirror``: with `trial_with_mirror`'s depth-mirror check) or on from a
+    paused ``state``."""
+
+    asset: RiggedAsset
+    pause_at: int
+    mirror: bool = False
+    state: dict[str, Any] | None = None
+
+
+@dataclass
+class TrialResult:
+    """A trial's mask IoU at its pause, its paused state, and what `trial_with_mirror` tried
+    (None for a continued trial)."""
+
+    iou: float
+    state: dict[str, Any] | None
+    view: dict[str, Any] | None
+
+
+def trial_threads(cfg: FitConfig, n: int, threads: int | None = None) -> list[int]:
+    """The torch threads of each of ``n`` trials run side by side, one process each, or [] to run
+    them one after another in this process (module docstring). ``threads``: the torch threads
+    this process has (default ``torch.get_num_threads()``), shared out as evenly as they go, at
+    least one each."""
+    import torch
+
+    threads = torch.get_num_threads() if threads is None else threads
+    workers = cfg.trials.workers
+    if n < 2 or workers == 1 or str(cfg.device).startswith("cuda") or threads < 2:
+        return []
+    if multiprocessing.current_process().daemon:  # a pool's worker may not start processes
+        return []
+    if workers == 0:
+        # one process per trial: three trials on two cores finish together, where two processes
+        # would leave one core idle while the third ran alone; many more trials than threads
+        # take turns in one process per thread
+        procs = n if n <= 2 * threads else threads
+    else:
+        procs = min(n, workers)
+    if procs < 2:
+        return []
+    return [max(1, threads // procs + (i < threads % procs)) for i in range(procs)]
+
+
+def run_trials(
+    video: FitVideo, trials: list[Trial], cfg: FitConfig, reporter: Reporter | None = None
+) -> list[TrialResult]:
+    """Run ``trials`` (in this order, side by side where `trial_threads` says so) and return
+    their results in the same order. A pool that breaks (a worker killed: out of memory, say)
+    falls back to running what is left here, one after another; a trial's own error is raised
+    here as it was raised there."""
+    shares = trial_threads(cfg, len(trials))
+    if not shares:
+        return _one_by_one(video, trials, cfg, reporter)
+    try:
+        return _side_by_side(video, trials, cfg, reporter, shares)
+    except BrokenProcessPool as exc:
+        if reporter is not None:
+            reporter.message(f"the trials' processes stopped ({exc}): running the trials one after another")
+        return _one_by_one(video, trials, cfg, reporter)
+
+
+def _one_by_one(
+    video: FitVideo, trials: list[Trial], cfg: FitConfig, reporter: Reporter | None
+) -> list[TrialResult]:
+    out = []
+    for i, t in enumerate(trials):
+        if reporter is not None and len(trials) > 1:
+            reporter.message(f"trial fit {i + 1}/{len(trials)}: template {t.asset.name}")
+        out.append(_run(video, t, cfg, reporter))
+    return out
+
+
+def _run(video: FitVideo, trial: Trial, cfg: FitConfig, reporter: Reporter | None) -> TrialResult:
+    from .view_trial import continue_trial, trial_with_mirror
+
+    if trial.state is None:
+        iou, state, view = trial_with_mirror(
+            video, trial.asset, cfg, reporter, mirror=trial.mirror, pause_at=trial.pause_at
+        )
+        return TrialResult(iou, state, view)
+    iou, state = continue_trial(video, trial.asset, cfg, trial.state, trial.pause_at, reporter)
+    return TrialResult(iou, state, None)
+
+
+def _side_by_side(
+    video: FitVideo, trials: list[Trial], cfg: FitConfig, reporter: Reporter | None, shares: list[int]
+) -> list[TrialResult]:
+    ctx = multiprocessing.get_context("spawn")  # fork would copy torch's thread pools
+    events = ctx.Queue()
+    forward = _Forwarder(events, reporter, [t.asset.name for t in trials])
+    forward.start()
+    try:
+        with ProcessPoolExecutor(
+            max_workers=len(shares), mp_context=ctx, initializer=_start_worker, initargs=(events,)
+        ) as pool:
+            futures = [
+                pool.submit(_trial_in_worker, i, _pack((video, t, cfg)), shares[i % len(shares)])
+                for i, t in enumerate(trials)
+            ]
+            results = [f.result() for f in futures]
+    finally:
+        forward.stop()
+    out = []
+    for packed in results:
+        status, value = _unpack(packed)
+        if status == "error":
+            raise value
+        out.append(value)
+    return out
+
+
+def _pack(obj: Any) -> bytes:
+    # torch's own pickling: tensors travel as bytes, not as shared-memory handles the sender must outlive
+    import torch
+
+    buf = io.BytesIO()
+    torch.save(obj, buf)
+    return buf.getvalue()
+
+
+def _unpack(data: bytes) -> Any:
+    import torch
+
+    return torch.load(io.BytesIO(data), weights_only=False)
+
+
+# -- in the worker ------------------------------------------------------------------------
+_EVENTS: Any = None
+
+
+def _start_worker(events: Any) -> None:
+    global _EVENTS
+    _EVENTS = events
+
+
+def _trial_in_worker(index: int, packed: bytes, threads: int) -> bytes:
+    import torch
+
+    torch.set_num_threads(threads)
+    try:
+        video, trial, cfg = _unpack(packed)
+        return _pack(("ok", _run(video, trial, cfg, _QueueReporter(index, _EVENTS))))
+    except ZooctlError as exc:
+        return _pack(("error", exc))
+    except Exception as exc:  # noqa: BLE001 - any failure crosses back with its traceback
+        return _pack(("error", RuntimeError(f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}")))
+
+
+class _QueueReporter:
+    """A `Reporter` in a worker: what it is told goes to the parent's `_Forwarder`."""
+
+    def __init__(self, index: int, events: Any) -> None:
+        self.index, self.events = index, events
+
+    def stage(self, name: str, total: int, done: int = 0) -> None:
+        self.events.put((self.index, "stage", (name, total, done)))
+
+    def step(self, terms: dict[str, float]) -> None:
+        self.events.put((self.index, "step", {k: float(v) for k, v in terms.items()}))
+
+    def message(self, text: str) -> None:
+        self.events.put((self.index, "message", text))
+
+
+# -- in the parent ------------------------------------------------------------------------
+class _Forwarder:
+    """Passes the workers' reports on to ``reporter`` from a thread: every message, named by its
+    template, and the stages and steps of one trial at a time (a reporter draws one bar), the next
+    running trial's from its next stage once that trial's are over."""
+
+    def __init__(self, events: Any, reporter: Reporter | None, names: list[str]) -> None:
+        self.events, self.reporter, self.names = events, reporter, names
+        self.shown: int | None = None
+        self.left = 0  # steps left in the shown trial's stage
+        self.thread = threading.Thread(target=self._loop, name="zooctl-trial-reports", daemon=True)
+        self.done = threading.Event()
+
+    def start(self) -> None:
+        self.thread.start()
+
+    def stop(self) -> None:
+        self.done.set()
+        self.thread.join()
+
+    def _loop(self) -> None:
+        while True:
+            try:
+                index, kind, value = self.events.get(timeout=0.1)
+            except queue_mod.Empty:
+                if self.done.is_set():
+                    return
+                continue
+            except (EOFError, OSError):
+                return
+            if self.reporter is not None:
+                self._pass(index, kind, value)
+
+    def _pass(self, index: int, kind: str, value: Any) -> None:
+        rep = self.reporter
+        assert rep is not None
+        if kind == "message":
+            rep.message(f"[{self.names[index]}] {value}")
+        elif kind == "stage":
+            name, total, done = value
+            if self.shown is None:
+                self.shown = index
+            if self.shown == index:
+                rep.stage(f"{name} ({self.names[index]})", total, done)
+                self.left = total - done
+        elif kind == "step" and self.shown == index:
+            rep.step(value)
+            self.left -= 1
+            if self.left <= 0:
+                self.shown = None  # the next trial to start a stage takes the bar
