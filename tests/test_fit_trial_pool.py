@@ -63,6 +63,23 @@ def test_the_threads_are_shared_out_between_the_trials():
     assert trial_threads(cuda, 3, threads=8) == []  # the trials share one device
 
 
+def test_a_plugin_registered_in_this_process_keeps_the_trials_here(monkeypatch):
+    """A spawned worker loads the installed plugins only: a renderer a notebook registered would
+    be missing there, so the trials stay in the process that has it."""
+    from zooctl import plugins
+
+    pm = plugins.PluginManager()
+    pm.load_entry_points()
+    monkeypatch.setattr(plugins, "_MANAGER", pm)
+    assert trial_threads(_cfg(), 2, threads=2) == [1, 1]
+
+    class Nothing:
+        pass
+
+    pm.register(Nothing(), "notebook-plugin")
+    assert trial_threads(_cfg(), 2, threads=2) == []
+
+
 def test_trials_side_by_side_are_the_trials_one_after_another(tmp_path, store):
     """Two processes of one thread each pick the same template, with the same trial IoUs and the
     same paused state, as the trials run here one after another on one thread."""

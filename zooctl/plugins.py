@@ -104,6 +104,7 @@ class PluginManager:
         self.pm.add_hookspecs(hookspecs)
         self.infos: dict[str, PluginInfo] = {}
         self._registry: Registry | None = None
+        self.in_process: set[str] = set()  # registered by `register`: another process lacks them
 
     # -- loading --------------------------------------------------------------------------
     def load_entry_points(self) -> None:
@@ -144,6 +145,7 @@ class PluginManager:
             self.pm.unregister(name=name)
             raise
         self.infos[name] = PluginInfo(name, distribution, version, repr(plugin), builtin=False)
+        self.in_process.add(name)
         self._registry = None
         self.check()
 

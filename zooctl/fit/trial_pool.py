@@ -8,9 +8,13 @@ each trial's paused state comes back to continue the winner's fit exactly where 
 
 ``cfg.trials.workers`` sets how many processes (0: one per trial, while they are at most twice
 the torch threads, else one per thread; 1: one after another in this process, as on CUDA, where
-the trials share one device).
+the trials share one device, or with a plugin registered in this process alone).
 The trials are the same fits either way: side by side they agree with one after another within
 float summation order (`torch` threads differ), not bit for bit.
+
+Workers are spawned, so a script that calls the fit guards its top level with
+``if __name__ == "__main__":``, as for PyTorch's DataLoader workers (without it, the pool breaks
+and the trials run one after another here).
 """
 
 from __future__ import annotations
@@ -69,6 +73,8 @@ def trial_threads(cfg: FitConfig, n: int, threads: int | None = None) -> list[in
         return []
     if multiprocessing.current_process().daemon:  # a pool's worker may not start processes
         return []
+    if _plugins_in_process():
+        return []
     if workers == 0:
         # one process per trial: three trials on two cores finish together, where two processes
         # would leave one core idle while the third ran alone; many more trials than threads
@@ -81,13 +87,21 @@ def trial_threads(cfg: FitConfig, n: int, threads: int | None = None) -> list[in
     return [max(1, threads // procs + (i < threads % procs)) for i in range(procs)]
 
 
+def _plugins_in_process() -> bool:
+    """Whether a plugin was registered in this process alone (a notebook's, an embedding
+    application's): a spawned worker loads the installed plugins only, and would miss it."""
+    from ..plugins import get_plugin_manager
+
+    return bool(get_plugin_manager().in_process)
+
+
 def run_trials(
     video: FitVideo, trials: list[Trial], cfg: FitConfig, reporter: Reporter | None = None
 ) -> list[TrialResult]:
     """Run ``trials`` (in this order, side by side where `trial_threads` says so) and return
     their results in the same order. A pool that breaks (a worker killed: out of memory, say)
-    falls back to running what is left here, one after another; a trial's own error is raised
-    here as it was raised there."""
+    falls back to running them all here, one after another; a trial's own error is raised here
+    as it was raised there."""
     shares = trial_threads(cfg, len(trials))
     if not shares:
         return _one_by_one(video, trials, cfg, reporter)
