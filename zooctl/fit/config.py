@@ -203,8 +203,9 @@ class TemplateTrials:
     workers: int = spec(
         0,
         help="processes the trials run in side by side on the CPU, sharing the torch threads "
-        "(zooctl.fit.trial_pool). 0: one per trial while they are at most twice the threads, else one per thread; 1: one after another "
-        "in the fit's own process (always so on CUDA and with one thread)",
+        "(zooctl.fit.trial_pool). 0: one per trial while they are at most twice the threads, "
+        "else one per thread; 1: one after another in the fit's own process (always so on CUDA, "
+        "with one thread, or with a plugin registered in that process alone)",
         required=False,
         minimum=0,
     )

@@ -2,7 +2,7 @@
 
 A trial is a fit of a few thousand vertices at a fit resolution of about a hundred pixels: too
 small a job to keep more than one core busy through torch's own threads (on two cores a fit runs
-at about 1.2 cores). The trials of different templates are independent, so on a CPU with two or
+at about 1.3 cores). The trials of different templates are independent, so on a CPU with two or
 more torch threads they run at once, in spawned processes that split the threads between them;
 each trial's paused state comes back to continue the winner's fit exactly where it stopped.
 
