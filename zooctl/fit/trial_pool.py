@@ -23,13 +23,10 @@ import io
 import multiprocessing
 import queue as queue_mod
 import threading
-import traceback
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
-
-from ..errors import ZooctlError
 
 if TYPE_CHECKING:
     from ..asset import RiggedAsset
@@ -82,8 +79,6 @@ def trial_threads(cfg: FitConfig, n: int, threads: int | None = None) -> list[in
         procs = n if n <= 2 * threads else threads
     else:
         procs = min(n, workers)
-    if procs < 2:
-        return []
     return [max(1, threads // procs + (i < threads % procs)) for i in range(procs)]
 
 
@@ -147,20 +142,15 @@ def _side_by_side(
         with ProcessPoolExecutor(
             max_workers=len(shares), mp_context=ctx, initializer=_start_worker, initargs=(events,)
         ) as pool:
+            inputs = _pack((video, cfg))  # once: the same for every trial
             futures = [
-                pool.submit(_trial_in_worker, i, _pack((video, t, cfg)), shares[i % len(shares)])
+                pool.submit(_trial_in_worker, i, inputs, _pack(t), shares[i % len(shares)])
                 for i, t in enumerate(trials)
             ]
-            results = [f.result() for f in futures]
+            # a trial's error is raised here as it was there (errors pickle whole: `ZooctlError`)
+            return [_unpack(f.result()) for f in futures]
     finally:
         forward.stop()
-    out = []
-    for packed in results:
-        status, value = _unpack(packed)
-        if status == "error":
-            raise value
-        out.append(value)
-    return out
 
 
 def _pack(obj: Any) -> bytes:
@@ -187,17 +177,12 @@ def _start_worker(events: Any) -> None:
     _EVENTS = events
 
 
-def _trial_in_worker(index: int, packed: bytes, threads: int) -> bytes:
+def _trial_in_worker(index: int, inputs: bytes, trial: bytes, threads: int) -> bytes:
     import torch
 
     torch.set_num_threads(threads)
-    try:
-        video, trial, cfg = _unpack(packed)
-        return _pack(("ok", _run(video, trial, cfg, _QueueReporter(index, _EVENTS))))
-    except ZooctlError as exc:
-        return _pack(("error", exc))
-    except Exception as exc:  # noqa: BLE001 - any failure crosses back with its traceback
-        return _pack(("error", RuntimeError(f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}")))
+    video, cfg = _unpack(inputs)
+    return _pack(_run(video, _unpack(trial), cfg, _QueueReporter(index, _EVENTS)))
 
 
 class _QueueReporter:
