@@ -11,7 +11,8 @@ import pytest
 from batch_helpers import fit_inputs, fit_records, glb_files, temporaries, tiny_config
 from cli_helpers import zooctl
 
-from zooctl.errors import InputError
+from zooctl.cli.batch_opts import stop_code
+from zooctl.errors import InputError, Terminated
 from zooctl.executors import get_executor
 from zooctl.pipelines.batch import BatchInterrupted, BatchItem, Progress, run_batch
 from zooctl.pipelines.batch_fit import commit_fit, fit_task, plan_fits, skip_finished
@@ -83,6 +84,7 @@ def test_interrupted_batch_resumes_and_stores_every_fit_once(tmp_path, store):
         run_batch(get_executor("local"), fit_task, items, commit_fit, progress=CtrlC())
     assert [r.status for r in exc.value.report.results] == ["done"]
     assert sorted(fit_records(store)) == ["a0"]
+    assert stop_code(exc.value) == 130
     mtime = (store / "fits" / "a0" / "record.json").stat().st_mtime_ns
     report = run_batch(get_executor("local"), fit_task, items, commit_fit, skip=skip_finished)
     assert [r.status for r in report.results] == ["skipped", "done", "done"]
@@ -254,3 +256,17 @@ def test_bench_run_on_an_executor_keeps_the_row_order_and_resumes(tmp_path, stor
     ]
     again = run_benchmark(folder, store, executor=get_executor("local"), resume=True, **kw)
     assert [r["mask_iou"] for r in again["rows"]] == [r["mask_iou"] for r in res["rows"]]  # from the records
+
+
+def test_a_batch_stopped_by_sigterm_exits_143(tmp_path, store):
+    """SIGTERM (`zooctl.errors.Terminated`) stops a batch as Ctrl-C does, with its own code."""
+    videos = fit_inputs(tmp_path, store, 2)
+    items = plan_fits(videos, store, tiny_config(), template="a0", out_root=tmp_path / "out")
+
+    class Term(Progress):
+        def finished(self, result):
+            raise Terminated
+
+    with pytest.raises(BatchInterrupted) as exc:
+        run_batch(get_executor("local"), fit_task, items, commit_fit, progress=Term())
+    assert [r.status for r in exc.value.report.results] == ["done"] and stop_code(exc.value) == 143

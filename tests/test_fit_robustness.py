@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 from cli_helpers import run_inprocess
-from fit_helpers import tiny_fit_config
+from fit_helpers import tiny_fit_config, tiny_overrides
 
 from zooctl.errors import InputError, NotFoundError, UsageError
 from zooctl.fit.config import FitConfig, load_config, preset
@@ -182,3 +182,60 @@ def test_interrupt_then_resume(tube_video, store, tmp_path):
     assert last["smooth"] == pytest.approx(whole_last["smooth"], rel=1e-3)
     with pytest.raises(NotFoundError):
         fit_job(str(folder), store, name="never", resume=True)
+
+
+def test_sigterm_saves_like_ctrl_c(tube_video, store, tmp_path):
+    """A `zooctl fit` process sent SIGTERM (a scheduler's cancel) exits 143 with its record marked
+    interrupted and its stage-2 state saved for --resume, as Ctrl-C leaves it."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from zooctl.store.bank import Bank
+    from zooctl.store.fits import FitStore
+
+    asset, _, folder = tube_video
+    Bank(store).add(asset)
+    conf = tmp_path / "c.json"
+    over = tiny_overrides(3)
+    over["stage2"]["iters"] = 100_000  # runs until it is stopped
+    over["checkpoint_every"] = 5
+    conf.write_text(json.dumps(over))
+    env = dict(os.environ, ZOOCTL_STORE=str(store))
+    cmd = [sys.executable, "-m", "zooctl", "fit", str(folder), "--template", "tube", "--name", "t"]
+    proc = subprocess.Popen(cmd + ["--config", str(conf)], env=env, stderr=subprocess.PIPE, text=True)
+    fits = FitStore(store)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and proc.poll() is None:
+        if _state_saved(fits, "t"):
+            break
+        time.sleep(0.2)
+    assert proc.poll() is None, proc.stderr.read()
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert "terminated" in err and "Traceback" not in err
+    assert fits.get("t")["status"] == "interrupted"
+    assert fits.load_state("t")["stage"] == 2
+
+
+def _state_saved(fits, name: str) -> bool:
+    try:
+        return fits.load_state(name)["stage"] == 2
+    except Exception:
+        return False
+
+
+def test_ctrl_c_says_interrupted(tube_video, store, capsys, monkeypatch):
+    """Ctrl-C inside a command: exit 130 and one line saying so (Click alone exits without it)."""
+    import zooctl.fit.job as job
+
+    def stop(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(job, "fit_job", stop)
+    _, _, folder = tube_video
+    r = run_inprocess(capsys, "fit", str(folder), "--template", "tube")
+    assert r.code == 130 and r.err.strip().endswith("interrupted") and "Traceback" not in r.err

@@ -62,3 +62,9 @@ class ReadOnlyStoreError(StoreError):
 
 class NoSpaceError(StoreError):
     """A store write ran out of room (disk full, quota, or a file-size limit)."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (a scheduler's cancel, `kill`), raised where the process is by the CLI's handler,
+    so that what Ctrl-C saves is saved: a fit's state and its record marked ``interrupted``, a
+    batch's report."""

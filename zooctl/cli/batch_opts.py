@@ -14,6 +14,7 @@ from typing import Any
 
 import typer
 
+from ..errors import Terminated
 from ..pipelines.batch import BatchInterrupted, BatchReport, ItemResult, Progress
 from ._common import console, err_console, print_json, print_table
 
@@ -157,9 +158,14 @@ def run_cli_batch(executor, fn, items, commit, skip, json_out: bool) -> BatchRep
             return run_batch(executor, fn, items, commit, skip=skip, progress=prog)
     except BatchInterrupted as exc:
         say_interrupted(exc.report, len(items))
-        raise typer.Exit(130) from None
+        raise typer.Exit(stop_code(exc)) from None
     finally:
         executor.close()
+
+
+def stop_code(exc: BatchInterrupted) -> int:
+    """The exit code of a stopped batch: 143 for SIGTERM, 130 for Ctrl-C."""
+    return 143 if isinstance(exc.stop, Terminated) else 130
 
 
 def say_interrupted(report: BatchReport, total: int | None) -> None:

@@ -153,7 +153,7 @@ def run(
                 res = run_benchmark(*args, executor=ex, resume=resume, batch_progress=prog, **opts)
         except BatchInterrupted as exc:
             batch_opts.say_interrupted(exc.report, None)
-            raise typer.Exit(130) from None
+            raise typer.Exit(batch_opts.stop_code(exc)) from None
         finally:
             ex.close()
     else:

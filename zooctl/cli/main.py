@@ -14,7 +14,7 @@ from rich.markup import escape
 from typer.core import TyperGroup
 
 from .. import __version__
-from ..errors import ZooctlError
+from ..errors import Terminated, ZooctlError
 from ._common import APP_OPTS, err_console, state
 
 # Before torch is imported anywhere: a spinning OpenMP pool slows every render on a busy machine
@@ -28,6 +28,16 @@ class _Group(TyperGroup):
             return super().invoke(ctx)
         except EOFError as exc:  # Click would print only "Aborted!" for it
             raise RuntimeError(f"a file or stream ended early: {exc}") from exc
+        except KeyboardInterrupt as exc:  # Typer would exit 130 without a word, SIGTERM too
+            raise _Stopped(isinstance(exc, Terminated)) from exc
+
+
+class _Stopped(BaseException):
+    """Ctrl-C or SIGTERM (``terminated``) on its way out past Click, for `run` to report."""
+
+    def __init__(self, terminated: bool):
+        super().__init__()
+        self.terminated = terminated
 
 
 app = typer.Typer(
@@ -164,9 +174,10 @@ def run(argv: list[str] | None = None) -> int:
         if exc.hint:
             err_console.print(f"  [dim]hint:[/] {escape(exc.hint)}", highlight=False, soft_wrap=True)
         return exc.exit_code
-    except KeyboardInterrupt:
-        err_console.print("interrupted")
-        return 130
+    except (_Stopped, KeyboardInterrupt) as exc:
+        stop = exc.terminated if isinstance(exc, _Stopped) else isinstance(exc, Terminated)
+        err_console.print("terminated" if stop else "interrupted")
+        return 143 if stop else 130
     except Exception as exc:
         if debug:
             traceback.print_exc()
@@ -181,7 +192,17 @@ def run(argv: list[str] | None = None) -> int:
         return 1
 
 
+def _on_sigterm(_signum: int, _frame: Any) -> None:
+    import signal
+
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # a second SIGTERM ends the process at once
+    raise Terminated()
+
+
 def entry() -> None:
+    import signal
+
+    signal.signal(signal.SIGTERM, _on_sigterm)
     _exit(run())
 
 

@@ -85,11 +85,13 @@ class BatchReport:
 
 
 class BatchInterrupted(KeyboardInterrupt):
-    """Ctrl-C during a batch: what was committed stays; ``report`` says what that is."""
+    """Ctrl-C (or SIGTERM) during a batch: what was committed stays; ``report`` says what that
+    is, ``stop`` is what stopped it."""
 
-    def __init__(self, report: BatchReport):
+    def __init__(self, report: BatchReport, stop: KeyboardInterrupt | None = None):
         super().__init__("batch interrupted")
         self.report = report
+        self.stop = stop
 
 
 class Progress:
@@ -161,11 +163,11 @@ def run_batch(
                 res.status, res.error, res.hint = "failed", out.error, out.hint
             results[i] = res
             progress.finished(res)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         _close(outcomes)
         report.results = [r for r in results if r is not None]
         report.wall_s, report.interrupted = time.perf_counter() - t0, True
-        raise BatchInterrupted(report) from None
+        raise BatchInterrupted(report, exc) from None
     finally:
         _close(outcomes)
     report.results = [r for r in results if r is not None]
