@@ -53,3 +53,26 @@ def write_json(path: Path, results: object, indent: int = 2) -> None:
     """``results`` as JSON in ``path`` (its folder made)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(results, indent=indent))
+
+
+def videos_to_log(folder: str | Path, part: str, out: Path) -> list[Path]:
+    """The benchmark videos of ``folder`` in part ``I/N`` of them (every N-th from the I-th),
+    less those a JSON-lines log ``out`` already has a line for (its ``video``)."""
+    from zooctl.benchdata.run import bench_videos
+
+    i, n = (int(x) for x in part.split("/"))
+    done = set()
+    if out.is_file():
+        done = {json.loads(line)["video"] for line in out.read_text().splitlines() if line.strip()}
+    return [v for v in bench_videos(Path(folder))[i - 1 :: n] if v.name not in done]
+
+
+def add_log_parser(sub) -> object:
+    """The ``log`` subcommand of a benchmark that logs one JSON line per video (``folder``,
+    ``--store``, ``--out``, ``--part``: see `videos_to_log`); ``sub`` from ``add_subparsers``."""
+    a = sub.add_parser("log")
+    a.add_argument("folder")
+    a.add_argument("--store", required=True)
+    a.add_argument("--out", required=True)
+    a.add_argument("--part", default="1/1")
+    return a

@@ -31,7 +31,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _util import machine  # noqa: E402
+from _util import add_log_parser, machine, videos_to_log  # noqa: E402
 
 MARGINS = (0.0, 0.005, 0.01, 0.02, 0.03, 0.04, 0.05, 0.06, 0.08, 0.1, 0.15, 0.2)
 
@@ -41,26 +41,19 @@ def _clock() -> tuple[float, float]:
 
 
 def log(args) -> None:
-    from zooctl.benchdata.run import _own_asset, bench_videos
+    from zooctl.benchdata.run import _own_asset
     from zooctl.fit.config import preset
     from zooctl.fit.job import load_source
     from zooctl.fit.run import fit_video
-    from zooctl.fit.template import TRIAL_SEMANTIC_WEIGHT, choose_template, pick_trial
+    from zooctl.fit.template import TRIAL_SEMANTIC_WEIGHT, choose_template, pick_trial, trial_score
     from zooctl.fit.view_trial import trial_iou
     from zooctl.store.bank import Bank
 
     store = Path(args.store)
     bank = Bank.open(store)
-    vids = bench_videos(Path(args.folder))
-    part, parts = (int(x) for x in args.part.split("/"))
-    vids = vids[part - 1 :: parts]
-    done = set()
     out = Path(args.out)
-    if out.is_file():
-        done = {json.loads(line)["video"] for line in out.read_text().splitlines() if line.strip()}
+    vids = videos_to_log(args.folder, args.part, out)
     for v in vids:
-        if v.name in done:
-            continue
         cfg = preset("fast")
         stops = sorted({a for a in args.at if a < cfg.trials.iters} | {cfg.trials.iters})
         video = load_source(str(v), store, None, cfg.max_frames)
@@ -96,7 +89,8 @@ def log(args) -> None:
                 state, prev = res.paused, stop
             rows.append({"name": cand["name"], "semantic": sem, "checkpoints": seg})
         final = [r["checkpoints"][-1]["iou"] for r in rows]
-        pick = pick_trial(final, cfg.trials.margin, [r["semantic"] for r in rows])
+        # the displacement term of `trial_score` is not logged here: the rule before it
+        pick = pick_trial([trial_score(i, r["semantic"]) for i, r in zip(final, rows)], cfg.trials.margin)
         line = {
             "video": v.name,
             "asset": own,
@@ -204,11 +198,7 @@ def choose(args) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
-    lg = sub.add_parser("log")
-    lg.add_argument("folder")
-    lg.add_argument("--store", required=True)
-    lg.add_argument("--out", required=True)
-    lg.add_argument("--part", default="1/1")
+    lg = add_log_parser(sub)
     lg.add_argument("--at", type=int, nargs="+", default=[0, 25, 50, 100])
     ch = sub.add_parser("choose")
     ch.add_argument("logs", nargs="+")

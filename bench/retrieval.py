@@ -87,13 +87,13 @@ def real_benchmark(store: Path, embedders: list[str], frames: int) -> dict:
     return out
 
 
-def fit_choice(store: Path, preset_name: str = "fast") -> dict:
+def fit_choice(store: Path, preset_name: str = "fast", candidates: int | None = None) -> dict:
     """The template `zooctl fit` chooses for each real video: retrieval (`retrieve`: the semantic
     term and the best asset of the family among the trials) then the template trials
     (`select_template`), stopped there (no full fit); judged as `real_benchmark` judges."""
     from zooctl.fit.config import preset
     from zooctl.fit.job import load_source
-    from zooctl.fit.template import select_template
+    from zooctl.fit.template import pick_trial, select_template, trial_score
     from zooctl.store.bank import Bank
 
     videos = json.loads((SHARED / "videos" / "labels.json").read_text())
@@ -106,17 +106,29 @@ def fit_choice(store: Path, preset_name: str = "fast") -> dict:
     rows = {}
     for v in REAL_VIDEOS:
         cfg = preset(preset_name)
+        cfg.trials.candidates = candidates or cfg.trials.candidates
         t, c = time.perf_counter(), time.process_time()
         video = load_source(v, store, None, cfg.max_frames)
         asset, cands, _, t_trials = select_template(bank, None, video, cfg)
         chosen = judge(videos[v], [asset.name], truths)
         first = judge(videos[v], [x["name"] for x in cands], truths)
+        tried = cands[: cfg.trials.candidates]
+        # the pick without the displacement term (the rule before it), from the same trials
+        before = tried[pick_trial([trial_score(x["trial_iou"], x.get("semantic") or 0.0) for x in tried])][
+            "name"
+        ]
+        was = judge(videos[v], [before], truths)
         rows[v] = {
             "chosen": asset.name,
-            "candidates": [[x["name"], x.get("trial_iou")] for x in cands[: cfg.trials.candidates]],
+            "candidates": [
+                [x["name"], x.get("trial_iou"), x.get("semantic"), x.get("trial_displacement")] for x in tried
+            ],
             "rank": chosen["rank"],
             "plan": chosen["plan1"],
             "family": chosen["family1"],
+            "chosen_without_displacement": before,
+            "plan_without_displacement": was["plan1"],
+            "family_without_displacement": was["family1"],
             "retrieval_plan1": first["plan1"],
             "retrieval_family1": first["family1"],
             "trials_s": t_trials,
@@ -125,7 +137,8 @@ def fit_choice(store: Path, preset_name: str = "fast") -> dict:
         }
         r = rows[v]
         print(
-            f"  {v}: {asset.name} (trials {', '.join(f'{n} {i}' for n, i in r['candidates'])}) "
+            f"  {v}: {asset.name} (trials {', '.join(f'{n} {i} sem {s} disp {d}' for n, i, s, d in r['candidates'])}; "
+            f"without the displacement term {before}) "
             f"plan {int(r['plan'])} family {int(r['family'])} at {r['rank']}; {r['wall_s']:.0f} s wall, "
             f"{r['cpu_s']:.0f} s CPU",
             file=sys.stderr,
@@ -256,6 +269,9 @@ def main() -> None:
     ap.add_argument(
         "--fit-choice", action="store_true", help="also the template `zooctl fit` chooses for each real video"
     )
+    ap.add_argument(
+        "--trial-candidates", type=int, help="--fit-choice: candidates the trials try (default 3)"
+    )
     ap.add_argument("--out", type=Path, default=Path("bench/out/retrieval.json"))
     args = ap.parse_args()
     embedders = args.embedder or ["effnet", "silhouette"]
@@ -313,11 +329,13 @@ def main() -> None:
             )
             semantic_report(report)
             if args.fit_choice:
-                report["fit_choice"] = fit_choice(store)
+                report["fit_choice"] = fit_choice(store, candidates=args.trial_candidates)
                 ok = report["fit_choice"].values()
                 print(
                     f"zooctl fit's template (retrieval + trials): plan {sum(r['plan'] for r in ok)}/{len(ok)}, "
-                    f"family {sum(r['family'] for r in ok)}/{len(ok)}"
+                    f"family {sum(r['family'] for r in ok)}/{len(ok)}; without the displacement term: plan "
+                    f"{sum(r['plan_without_displacement'] for r in ok)}/{len(ok)}, "
+                    f"family {sum(r['family_without_displacement'] for r in ok)}/{len(ok)}"
                 )
         if args.synthetic:
             dims = {"effnet": 1280, "silhouette": 576}

@@ -224,13 +224,14 @@ def test_bench_run_counts_the_right_body_plans(tmp_path, store, monkeypatch):
 
 
 def test_kept_trials_are_those_within_the_margin_of_the_best_score():
-    from zooctl.fit.template import TRIAL_SEMANTIC_WEIGHT, kept_trials
+    from zooctl.fit.template import TRIAL_SEMANTIC_WEIGHT, kept_trials, trial_score
 
-    assert kept_trials([0.80, 0.83, 0.70], [0.0, 0.0, 0.0], 0.05) == [0, 1]
-    assert kept_trials([0.80, 0.83, 0.70], [0.0, 0.0, 0.0], 0.0) == [1]
-    assert kept_trials([0.80, 0.83, 0.70], [0.0, 0.0, 0.0], 0.2) == [0, 1, 2]
+    assert kept_trials([0.80, 0.83, 0.70], 0.05) == [0, 1]
+    assert kept_trials([0.80, 0.83, 0.70], 0.0) == [1]
+    assert kept_trials([0.80, 0.83, 0.70], 0.2) == [0, 1, 2]
     # the semantic term counts as in pick_trial: a sure classifier keeps a lower trial IoU in
-    assert kept_trials([0.80, 0.83], [1.0, 0.0], 0.0) == [0] and TRIAL_SEMANTIC_WEIGHT > 0.03
+    sure = [trial_score(0.80, 1.0), trial_score(0.83, 0.0)]
+    assert kept_trials(sure, 0.0) == [0] and TRIAL_SEMANTIC_WEIGHT > 0.03
 
 
 def _trial_cfg(**trials):
@@ -294,3 +295,19 @@ def test_a_trial_stopped_at_the_checkpoint_is_no_close_call():
     assert close_trials_note(cands, "a", "v") is None  # b's IoU is of fewer iterations
     del cands[1]["pruned_at"]
     assert close_trials_note(cands, "a", "v") is not None
+
+
+def test_a_template_that_bulges_to_fit_loses_a_near_tie():
+    """The trials' score takes off what a template's surface had to move: of two templates with
+    about the same silhouette fit, the one whose displacement field moved further loses; a clearly
+    better silhouette, or a classifier sure of the animal, still wins over it."""
+    from zooctl.fit.template import pick_trial, trial_score
+
+    assert trial_score(0.8, 0.0, 0.0) == 0.8
+    # a dog template for a puffer fish against a fish's, the silhouettes fitted alike
+    assert pick_trial([0.884, 0.883]) == 0
+    assert pick_trial([trial_score(0.884, 0.0, 0.043), trial_score(0.883, 0.0, 0.014)]) == 1
+    assert pick_trial([trial_score(0.880, 0.0, 0.020), trial_score(0.801, 0.0, 0.010)]) == 0
+    # a swan: the long-legged bird the classifier is sure of bulges more than an anglerfish, and stays
+    assert pick_trial([trial_score(0.913, 0.875, 0.082), trial_score(0.888, 0.001, 0.026)]) == 0
+    assert abs(trial_score(0.8, 0.5, 0.01) - (0.8 + 0.05 - 0.015)) < 1e-12

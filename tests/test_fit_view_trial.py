@@ -62,7 +62,9 @@ def test_a_start_from_below_is_tried_against_its_mirror_and_the_fit_goes_on_from
     thin = tube_asset(bones=3, name="thin")
     video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
     cfg = _config()
-    iou, state, info = trial_with_mirror(video, thin, cfg)
+    kept = trial_with_mirror(video, thin, cfg)
+    iou, state, info = kept.iou, kept.state, kept.view
+    assert kept.displacement > 0  # the displacement field moved the surface in the trial
     assert info["elevation_deg"] < 0  # the only elevation searched looks up at the animal
     both = info["trial_iou"]
     kept = "mirror" if both["mirror"] >= both["search"] - cfg.camera.mirror_margin else "search"
@@ -73,9 +75,9 @@ def test_a_start_from_below_is_tried_against_its_mirror_and_the_fit_goes_on_from
     assert len(again.history["stage2"]) == cfg.stage2.iters
     assert again.camera_init["view_trial"]["start"] == kept
     # A margin of 0.99 keeps the mirror whatever its IoU; no mirror trial when it is switched off.
-    _, _, info = trial_with_mirror(video, thin, _config(mirror_margin=0.99))
+    info = trial_with_mirror(video, thin, _config(mirror_margin=0.99)).view
     assert info["start"] == "mirror"
-    _, _, info = trial_with_mirror(video, thin, cfg, mirror=False)
+    info = trial_with_mirror(video, thin, cfg, mirror=False).view
     assert info["start"] == "search" and "trial_iou" not in info
     with pytest.raises(UsageError, match="mirror_trial"):
         _config(mirror_trial="sometimes")
@@ -88,7 +90,8 @@ def test_a_start_from_above_is_not_mirrored_and_pausing_changes_nothing(tmp_path
     thin = tube_asset(bones=3, name="thin")
     video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
     cfg = _config(elevations=[30.0])
-    _, state, info = trial_with_mirror(video, thin, cfg)
+    kept = trial_with_mirror(video, thin, cfg)
+    state, info = kept.state, kept.view
     assert info["start"] == "search" and info["elevation_deg"] > 0 and "trial_iou" not in info
     resumed = fit_video(video, thin, cfg, resume=state)
     whole = fit_video(video, thin, cfg)
@@ -135,3 +138,31 @@ def test_retrieved_candidates_are_mirrored_only_when_asked(tmp_path, store):
         _, out, state = try_candidates(bank, video, cands, cfg)
         assert all(("trial_iou" in c["view_trial"]) == tried for c in out), mode
         assert state["camera_init"]["view_trial"]["elevation_deg"] < 0
+
+
+def test_a_turned_start_faces_at_least_90_degrees_from_the_searchs(tmp_path):
+    """``start="turned"``: the camera search's best view at least 90 degrees of azimuth from its
+    pick, refined and tracked as the pick is; a fit goes on from it as from any start."""
+    from zooctl.fit.camera_init import initialise_camera
+    from zooctl.fit.config import CameraConfig
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.run import fit_video
+
+    thin = tube_asset(bones=3, name="thin")
+    video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
+    cfg = CameraConfig(azimuths=8, elevations=[10.0], search_size=32)
+    search = initialise_camera(thin.vertices, thin.faces, video.masks, cfg, 1.0)
+    turned = initialise_camera(thin.vertices, thin.faces, video.masks, cfg, 1.0, turned=True)
+    gap = turned.candidates[0]["azimuth"] - search.candidates[0]["azimuth"]
+    assert abs((gap + 180.0) % 360.0 - 180.0) >= 90.0
+    assert all(
+        abs((c["azimuth"] - search.candidates[0]["azimuth"] + 180) % 360 - 180) >= 90
+        for c in turned.candidates
+    )
+    a = quat_to_matrix(np.asarray(search.root_rotation[0]))
+    b = quat_to_matrix(np.asarray(turned.root_rotation[0]))
+    assert np.degrees(np.arccos(np.clip((np.trace(a.T @ b) - 1) / 2, -1, 1))) > 45.0
+    res = fit_video(video, thin, _config(elevations=[10.0]), start="turned")
+    assert np.isfinite(res.iou).all()
+    with pytest.raises(ValueError, match="search, mirror or turned"):
+        fit_video(video, thin, _config(), start="sideways")

@@ -229,13 +229,16 @@ def test_trials_weigh_what_the_classifier_sees():
     """A trial that fits the input view a little better does not win over a candidate the
     classifier is sure of (a dog against a duck-billed dinosaur seen side on); without semantic
     scores, or with scores the classifier is unsure of, the trial IoU decides as before."""
-    from zooctl.fit.template import pick_trial
+    from zooctl.fit.template import pick_trial, trial_score
+
+    def pick(ious, semantic):
+        return pick_trial([trial_score(i, s) for i, s in zip(ious, semantic, strict=True)])
 
     ious = [0.834, 0.798, 0.860]
     assert pick_trial(ious) == 2
-    assert pick_trial(ious, semantic=[0.89, 0.01, 0.0]) == 0
-    assert pick_trial(ious, semantic=[0.1, 0.0, 0.0]) == 2  # a stylised render: little confidence
-    assert pick_trial([0.90, 0.80], semantic=[0.0, 0.9]) == 0  # a far worse fit still loses
+    assert pick(ious, [0.89, 0.01, 0.0]) == 0
+    assert pick(ious, [0.1, 0.0, 0.0]) == 2  # a stylised render: little confidence
+    assert pick([0.90, 0.80], [0.0, 0.9]) == 0  # a far worse fit still loses
 
 
 def test_stored_query_caches_its_classes(tmp_path):

@@ -180,6 +180,7 @@ def initialise_camera(
     image_height: int | None = None,
     camera_rotations: np.ndarray | None = None,
     start: np.ndarray | None = None,
+    turned: bool = False,
 ) -> CameraInit:
     """Search focal and viewpoint, track the root rotation, align every frame (module docstring).
 
@@ -190,7 +191,8 @@ def initialise_camera(
     of the video's camera (OpenCV axes: x right, y down, z forward) when they are known;
     ``start``: (3, 3) the first frame's root rotation, known (a window of a long clip continuing
     the one before it): no search, only the tracking and the alignment, at ``cfg.focal``.
-    Returns a `CameraInit` in fit pixels.
+    ``turned``: start from the best view at least 90 degrees of azimuth from the search's best
+    instead (the animal facing the other way). Returns a `CameraInit` in fit pixels.
     """
     T, H, W = masks.shape
     principal = principal if principal is not None else (W / 2, H / 2)
@@ -228,6 +230,9 @@ def initialise_camera(
         score = lambda rots, fs: scorer.score(rots, frames, fs)  # noqa: E731
     scores = score([view_rotation(*c[:3]) for c in cands], [c[3] for c in cands])
     order = np.argsort(-scores)
+    if turned:
+        az0 = cands[order[0]][0]
+        order = np.asarray([i for i in order if abs((cands[i][0] - az0 + 180.0) % 360.0 - 180.0) >= 90.0])
     best = cands[order[0]]
     top = [
         {

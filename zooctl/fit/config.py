@@ -166,10 +166,11 @@ class LossWeights:
 
 @dataclass
 class TemplateTrials:
-    """Retrieval's best candidates each get a short fit, and the fit of the template whose
-    silhouettes match the video best goes on from its trial to the full length: a check of the
-    embedding ranking by the fit itself (it corrects retrievals like Dolphin -> Stegosaurus).
-    Only when the template was retrieved."""
+    """Retrieval's best candidates each get a short fit, and the fit of the template whose trial
+    scores best goes on from its trial to the full length: a check of the embedding ranking by the
+    fit itself (it corrects retrievals like Dolphin -> Stegosaurus). The score
+    (`zooctl.fit.template.trial_score`) is the trial's mask IoU, plus the semantic term, less what
+    the template's surface had to move to fit. Only when the template was retrieved."""
 
     candidates: int = spec(3, help="1: fit the top retrieval result directly", required=False, minimum=1)
     iters: int = spec(
@@ -181,8 +182,8 @@ class TemplateTrials:
     )
     margin: float = spec(
         0.0,
-        help="a trial wins only if no candidate earlier in retrieval's order fits within this much of "
-        "its trial mask IoU",
+        help="a trial wins only if no candidate earlier in retrieval's order scores within this much of "
+        "it (the trial mask IoU, plus the semantic term, less the displacement's cost)",
         required=False,
         minimum=0,
         exclusiveMaximum=1,
@@ -191,9 +192,9 @@ class TemplateTrials:
     # (their pick score, as the winner's, more than the margin below the best) go no further.
     prune_at: int | None = spec(
         None,
-        help="stage-2 iterations after which a trial whose score (trial mask IoU plus the semantic "
-        "term) is more than prune_margin below the best stops; the rest go on to iters. null: "
-        "every trial runs to iters",
+        help="stage-2 iterations after which a trial whose score (trial mask IoU, plus the semantic "
+        "term, less the displacement's cost) is more than prune_margin below the best stops; the "
+        "rest go on to iters. null: every trial runs to iters",
         required=False,
         minimum=0,
     )

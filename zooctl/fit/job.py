@@ -476,8 +476,8 @@ def _run_and_write(
         if state is None and mirror_wanted(cfg, template is not None) and cfg.ablation.optimise:
             # No template trial ran: the template's own start gets its depth-mirror check here;
             # the fit goes on from the trial kept (as if never paused when nothing was tried).
-            _, state, view = trial_with_mirror(video, asset, cfg, reporter, checkpoint)
-            mirror_s = view.get("extra_seconds")
+            kept = trial_with_mirror(video, asset, cfg, reporter, checkpoint)
+            state, mirror_s = kept.state, kept.view.get("extra_seconds")
         result = fit_video(video, asset, cfg, reporter, checkpoint, state)
     except KeyboardInterrupt:
         record["status"] = "interrupted"

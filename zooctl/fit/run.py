@@ -121,11 +121,12 @@ def fit_video(
     ``pause_at``: stop after that many stage-2 iterations (of the configured schedule, so the
     learning rates are those of the full fit) and return with ``result.paused`` set; fitting on
     from it with ``resume=result.paused`` gives what one uninterrupted fit gives. ``start``:
-    ``search`` (the camera search's start) or ``mirror`` (its depth mirror, `zooctl.fit.view_trial`).
-    Both concern the first window."""
+    ``search`` (the camera search's start), ``mirror`` (its depth mirror, `zooctl.fit.view_trial`)
+    or ``turned`` (the search's best view at least 90 degrees of azimuth from its start).
+    All concern the first window."""
     rep = reporter or _Silent()
-    if start not in ("search", "mirror"):
-        raise ValueError(f"start must be search or mirror, not {start!r}")
+    if start not in ("search", "mirror", "turned"):
+        raise ValueError(f"start must be search, mirror or turned, not {start!r}")
     cfg.validate()
     check_template(template)
     check_device(cfg.device)
@@ -219,6 +220,7 @@ def _fit_window(
             (W / 2 - x0, H / 2 - y0),
             H,
             video.camera_rotations,
+            turned=start == "turned",
         )
         elevation = view_elevation(init.root_rotation)
         if start == "mirror":

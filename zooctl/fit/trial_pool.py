@@ -33,6 +33,7 @@ if TYPE_CHECKING:
     from .config import FitConfig
     from .inputs import FitVideo
     from .run import Reporter
+    from .view_trial import TrialResult
 
 
 @dataclass
@@ -45,16 +46,6 @@ class Trial:
     pause_at: int
     mirror: bool = False
     state: dict[str, Any] | None = None
-
-
-@dataclass
-class TrialResult:
-    """A trial's mask IoU at its pause, its paused state, and what `trial_with_mirror` tried
-    (None for a continued trial)."""
-
-    iou: float
-    state: dict[str, Any] | None
-    view: dict[str, Any] | None
 
 
 def trial_threads(cfg: FitConfig, n: int, threads: int | None = None) -> list[int]:
@@ -123,12 +114,10 @@ def _run(video: FitVideo, trial: Trial, cfg: FitConfig, reporter: Reporter | Non
     from .view_trial import continue_trial, trial_with_mirror
 
     if trial.state is None:
-        iou, state, view = trial_with_mirror(
+        return trial_with_mirror(
             video, trial.asset, cfg, reporter, mirror=trial.mirror, pause_at=trial.pause_at
         )
-        return TrialResult(iou, state, view)
-    iou, state = continue_trial(video, trial.asset, cfg, trial.state, trial.pause_at, reporter)
-    return TrialResult(iou, state, None)
+    return continue_trial(video, trial.asset, cfg, trial.state, trial.pause_at, reporter)
 
 
 def _side_by_side(
@@ -138,18 +127,25 @@ def _side_by_side(
     events = ctx.Queue()
     forward = _Forwarder(events, reporter, [t.asset.name for t in trials])
     forward.start()
+    pool = ProcessPoolExecutor(
+        max_workers=len(shares), mp_context=ctx, initializer=_start_worker, initargs=(events,)
+    )
     try:
-        with ProcessPoolExecutor(
-            max_workers=len(shares), mp_context=ctx, initializer=_start_worker, initargs=(events,)
-        ) as pool:
-            inputs = _pack((video, cfg))  # once: the same for every trial
-            futures = [
-                pool.submit(_trial_in_worker, i, inputs, _pack(t), shares[i % len(shares)])
-                for i, t in enumerate(trials)
-            ]
-            # a trial's error is raised here as it was there (errors pickle whole: `ZooctlError`)
-            return [_unpack(f.result()) for f in futures]
+        inputs = _pack((video, cfg))  # once: the same for every trial
+        futures = [
+            pool.submit(_trial_in_worker, i, inputs, _pack(t), shares[i % len(shares)])
+            for i, t in enumerate(trials)
+        ]
+        # a trial's error is raised here as it was there (errors pickle whole: `ZooctlError`)
+        return [_unpack(f.result()) for f in futures]
+    except KeyboardInterrupt:
+        # Ctrl-C reaches the workers too, a SIGTERM to this process alone does not: end them
+        for p in list((getattr(pool, "_processes", None) or {}).values()):
+            if p.is_alive():
+                p.terminate()
+        raise
     finally:
+        pool.shutdown(wait=True, cancel_futures=True)
         forward.stop()
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -39,9 +40,31 @@ def mirror_wanted(cfg: FitConfig, template_given: bool) -> bool:
     return mode == "always" or (mode == "given" and template_given)
 
 
+@dataclass
+class TrialResult:
+    """A trial's mask IoU at its pause (`trial_iou`), how far its template's surface moved to get
+    there (`trial_displacement`), its paused state, and what `trial_with_mirror` tried (None for
+    a continued trial)."""
+
+    iou: float
+    displacement: float
+    state: dict[str, Any] | None
+    view: dict[str, Any] | None = None
+
+
 def trial_iou(result: FitResult) -> float:
     """Mean input-view mask IoU of a (trial) fit; frames with an empty mask have none (NaN)."""
     return float(np.nanmean(result.iou)) if np.isfinite(result.iou).any() else 0.0
+
+
+def trial_displacement(result: FitResult) -> float:
+    """Mean length of the displacement field's offsets over the template's size (0 without a
+    field): how much a template had to change its shape to fit the video's silhouettes."""
+    import torch
+
+    with torch.no_grad():
+        disp = result.scene.model.displacement_offsets()
+    return 0.0 if disp is None else float(disp.norm(dim=-1).mean()) / result.scene.size
 
 
 def trial_with_mirror(
@@ -52,14 +75,14 @@ def trial_with_mirror(
     checkpoint: Callable[[dict[str, Any]], None] | None = None,
     mirror: bool = True,
     pause_at: int | None = None,
-) -> tuple[float, dict[str, Any] | None, dict[str, Any]]:
+) -> TrialResult:
     """The template's trial (`fit_video` paused after ``pause_at`` stage-2 iterations, by default
     ``cfg.trials.iters``) and, when ``mirror`` and its start sees the animal from below, its depth
     mirror's, compared at that pause (module docstring).
 
-    Returns (the kept trial's IoU, its paused state to continue from, what was tried: also
-    stored in the state's ``camera_init["view_trial"]`` for fit.json). ``checkpoint``: as
-    `fit_video`'s, for both trials (each is a fit that a resume can finish)."""
+    Returns the kept trial: its IoU, displacement, paused state to continue from, and what was
+    tried (``view``: also stored in the state's ``camera_init["view_trial"]`` for fit.json).
+    ``checkpoint``: as `fit_video`'s, for both trials (each is a fit that a resume can finish)."""
     pause_at = cfg.trials.iters if pause_at is None else pause_at
     t = time.perf_counter()
     search = fit_video(video, template, cfg, reporter, checkpoint, pause_at=pause_at)
@@ -87,7 +110,7 @@ def trial_with_mirror(
     state = kept.paused
     if state is not None:
         state["camera_init"] = dict(state["camera_init"], view_trial=info)
-    return iou, state, info
+    return TrialResult(iou, trial_displacement(kept), state, info)
 
 
 def continue_trial(
@@ -97,8 +120,8 @@ def continue_trial(
     state: dict[str, Any],
     pause_at: int,
     reporter: Reporter | None = None,
-) -> tuple[float, dict[str, Any] | None]:
-    """A paused trial (``state``) fitted on to ``pause_at`` stage-2 iterations and paused again:
-    (its trial IoU there, its state). The same fit as a trial paused there in one go."""
+) -> TrialResult:
+    """A paused trial (``state``) fitted on to ``pause_at`` stage-2 iterations and paused again.
+    The same fit as a trial paused there in one go."""
     res = fit_video(video, template, cfg, reporter, resume=state, pause_at=pause_at)
-    return trial_iou(res), res.paused
+    return TrialResult(trial_iou(res), trial_displacement(res), res.paused)
