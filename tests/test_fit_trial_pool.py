@@ -133,3 +133,75 @@ def test_a_trials_error_reaches_the_caller_as_it_was_raised(tmp_path, store):
     bad = dataclasses.replace(thin, name="flat", faces=np.zeros((1, 3), np.int32))
     with _threads(2), pytest.raises(InputError, match="'flat' has too few faces"):
         run_trials(video, [Trial(thin, 1), Trial(bad, 1)], _cfg())
+
+
+_STOPPED_SCRIPT = r"""
+import signal, sys, torch
+from zooctl.cli.main import _on_sigterm
+from zooctl.errors import Terminated
+from zooctl.benchdata.make import make_video
+from zooctl.fit.config import FitConfig
+from zooctl.fit.inputs import load_fit_video
+from zooctl.fit.trial_pool import Trial, run_trials
+from zooctl.rig.synthetic import tube_asset
+
+class Say:
+    def stage(self, name, total, done=0):
+        print("stage", name, flush=True)
+    def step(self, terms):
+        pass
+    def message(self, text):
+        pass
+
+if __name__ == "__main__":
+    signal.signal(signal.SIGTERM, _on_sigterm)
+    torch.set_num_threads(2)
+    thin = tube_asset(bones=3, name="thin")
+    fat = tube_asset(bones=2, bone_length=0.5, radius=0.6, name="fat")
+    video = load_fit_video(make_video(thin, sys.argv[1], frames=3, size=32, seed=0))
+    cfg = FitConfig.from_dict({"fit_size": 32, "stage1": {"iters": 2, "batch": 3},
+        "stage2": {"iters": 100000, "batch": 3}, "camera": {"azimuths": 4, "elevations": [10.0], "search_size": 32}})
+    try:
+        run_trials(video, [Trial(thin, 100000), Trial(fat, 100000)], cfg, Say())
+    except Terminated:
+        print("terminated", flush=True)
+        sys.exit(143)
+"""
+
+
+def test_sigterm_during_the_trials_ends_their_processes(tmp_path):
+    """A SIGTERM to the fit's process alone (a scheduler's cancel) does not reach the trials'
+    workers: the pool ends them, and the fit stops at once instead of waiting for the trials."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    script = tmp_path / "stopped.py"
+    script.write_text(_STOPPED_SCRIPT)
+    proc = subprocess.Popen(
+        [sys.executable, str(script), str(tmp_path / "v")], stdout=subprocess.PIPE, text=True
+    )
+    children: list[int] = []
+    ended = False
+    try:
+        assert proc.stdout is not None
+        for line in proc.stdout:  # a worker's trial reached stage 2: the pool is up
+            if line.startswith("stage stage2"):
+                break
+        children += [int(p) for p in open(f"/proc/{proc.pid}/task/{proc.pid}/children").read().split()]
+        assert children, "the trials run in worker processes"
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=60) == 143
+        time.sleep(0.5)
+        for pid in children:
+            with contextlib.suppress(ProcessLookupError, ChildProcessError):
+                os.waitpid(pid, os.WNOHANG)
+            assert not os.path.exists(f"/proc/{pid}") or "zombie" in open(f"/proc/{pid}/status").read()
+        ended = True
+    finally:  # nothing left running when it fails
+        for pid in [] if ended else [proc.pid, *children]:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        proc.wait()

@@ -62,9 +62,9 @@ def test_a_start_from_below_is_tried_against_its_mirror_and_the_fit_goes_on_from
     thin = tube_asset(bones=3, name="thin")
     video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
     cfg = _config()
-    kept = trial_with_mirror(video, thin, cfg)
-    iou, state, info = kept.iou, kept.state, kept.view
-    assert kept.displacement > 0  # the displacement field moved the surface in the trial
+    trial = trial_with_mirror(video, thin, cfg)
+    iou, state, info = trial.iou, trial.state, trial.view
+    assert trial.displacement > 0  # the displacement field moved the surface in the trial
     assert info["elevation_deg"] < 0  # the only elevation searched looks up at the animal
     both = info["trial_iou"]
     kept = "mirror" if both["mirror"] >= both["search"] - cfg.camera.mirror_margin else "search"
