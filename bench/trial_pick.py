@@ -73,6 +73,7 @@ def features(res) -> dict[str, float]:
     import torch
 
     from zooctl.fit.losses import skin_prior
+    from zooctl.fit.view_trial import trial_displacement
     from zooctl.rig.rotations import quat_angle
 
     sc = res.scene
@@ -88,8 +89,7 @@ def features(res) -> dict[str, float]:
             "stretch": float(sc.model.log_bone_scales.abs().mean()),
             "skin_kl": float(skin_prior(sc.model.skin.logits, sc.init_logits)),
         }
-        disp = sc.model.displacement_offsets()
-        out["displacement"] = 0.0 if disp is None else float(disp.norm(dim=-1).mean() / sc.size)
+    out["displacement"] = trial_displacement(res)  # what `trial_score` takes off
     last = res.history.get("stage2", [])[-25:]
     keys = sorted({k for h in last for k in h})
     loss = {k: float(np.mean([h.get(k, 0.0) for h in last])) for k in keys}
@@ -105,7 +105,7 @@ def log(args) -> None:
     from zooctl.fit.job import load_source
     from zooctl.fit.metrics import evaluate_fit
     from zooctl.fit.run import fit_video
-    from zooctl.fit.template import TRIAL_SEMANTIC_WEIGHT, choose_template
+    from zooctl.fit.template import choose_template, trial_score
     from zooctl.fit.view_trial import trial_iou, trial_with_mirror
     from zooctl.store.bank import Bank
 
@@ -134,7 +134,7 @@ def log(args) -> None:
             cands = [c for c in cands[: cfg.trials.candidates] if c["name"] not in logged.get(v.name, ())]
         starts = ("search", "turned") if args.turned else ("search",)
         rows = []
-        for cand, start in ((c, s) for c in cands[: cfg.trials.candidates] for s in starts):
+        for cand, start in ((c, s) for c in cands for s in starts):
             asset = bank.get(cand["name"])
             t, c = time.perf_counter(), time.process_time()
             kept = None
@@ -154,7 +154,7 @@ def log(args) -> None:
                     "start": start if kept is None else kept.view["start"],
                     "semantic": sem,
                     "iou": round(iou, 5),
-                    "score": round(iou + TRIAL_SEMANTIC_WEIGHT * sem, 5),
+                    "score": round(trial_score(iou, sem), 5),  # the rule before the displacement term
                     "novel_view_iou": m["novel_view_iou"],
                     "miou": m["miou"],
                     "joint": m["joint"],

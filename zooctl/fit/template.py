@@ -169,16 +169,14 @@ def try_candidates(
     assets = [bank.get(c["name"]) for c in tried]
     if reporter is not None:
         reporter.message("trial fits: " + ", ".join(a.name for a in assets))
-    done = run_trials(video, [Trial(a, first, mirror) for a in assets], cfg, reporter)
-    trials = []  # (asset, trial IoU, paused state, displacement) in retrieval order
-    for cand, asset, res in zip(tried, assets, done, strict=True):
+    results = run_trials(video, [Trial(a, first, mirror) for a in assets], cfg, reporter)  # retrieval order
+    for cand, res in zip(tried, results, strict=True):
         cand["trial_iou"] = round(res.iou, 4)
         cand["trial_displacement"] = round(res.displacement, 4)
         cand["view_trial"] = res.view
-        trials.append((asset, res.iou, res.state, res.displacement))
 
     def score(i: int) -> float:
-        return trial_score(trials[i][1], semantic[i], trials[i][3])
+        return trial_score(results[i].iou, semantic[i], results[i].displacement)
 
     on = list(range(len(tried)))  # the trials that go on to cfg.trials.iters
     if first < cfg.trials.iters:
@@ -191,16 +189,16 @@ def try_candidates(
                 f"trial fits of {', '.join(tried[i]['name'] for i in on)} go on to {cfg.trials.iters} iterations"
             )
         more = run_trials(
-            video, [Trial(trials[i][0], cfg.trials.iters, state=trials[i][2]) for i in on], cfg, reporter
+            video, [Trial(assets[i], cfg.trials.iters, state=results[i].state) for i in on], cfg, reporter
         )
         for i, res in zip(on, more, strict=True):
             tried[i]["trial_iou"] = round(res.iou, 4)
             tried[i]["trial_displacement"] = round(res.displacement, 4)
-            trials[i] = (trials[i][0], res.iou, res.state, res.displacement)
+            results[i] = res
     win = on[pick_trial([score(i) for i in on], cfg.trials.margin)]
-    best, best_iou, best_state, _ = trials[win]
+    best, best_state = assets[win], results[win].state
     if reporter is not None:
-        reporter.message(f"template {best.name}: trial mask IoU {best_iou:.3f}")
+        reporter.message(f"template {best.name}: trial mask IoU {results[win].iou:.3f}")
     if best_state is not None:
         best_state["timings"] = {}  # the trials are timed as a whole by the caller
     return best, candidates, best_state
