@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
+import time
 from pathlib import Path
 
 import pytest
@@ -30,6 +32,16 @@ def flaky(item, report):
         marker.write_text("died once")
         os._exit(3)
     return {"pid": os.getpid(), "kind": kind}
+
+
+def holds_scratch(folder, report):
+    """Makes a scratch folder, says so, and waits with it (removed in `finally`, as fit_task's)."""
+    folder.mkdir()
+    try:
+        report("working")
+        time.sleep(120)
+    finally:
+        shutil.rmtree(folder)
 
 
 def test_pool_retries_a_dead_worker_and_reports_bad_input(tmp_path):
@@ -270,3 +282,19 @@ def test_a_batch_stopped_by_sigterm_exits_143(tmp_path, store):
     with pytest.raises(BatchInterrupted) as exc:
         run_batch(get_executor("local"), fit_task, items, commit_fit, progress=Term())
     assert [r.status for r in exc.value.report.results] == ["done"] and stop_code(exc.value) == 143
+
+
+def test_workers_ended_by_the_driver_remove_their_scratch_folders(tmp_path):
+    """On Ctrl-C or SIGTERM the driver ends its workers with SIGTERM; a running task unwinds."""
+    folders = [tmp_path / "a", tmp_path / "b"]
+    working = set()
+
+    def on_stage(i, stage):
+        working.add(i)
+        if len(working) == 2:
+            raise KeyboardInterrupt
+
+    ex = get_executor("local", jobs=2)
+    with pytest.raises(KeyboardInterrupt):
+        list(ex.map(holds_scratch, folders, on_stage))
+    assert not any(f.exists() for f in folders)

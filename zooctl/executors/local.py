@@ -10,20 +10,32 @@ event counting as an attempt of every task that was in flight.
 from __future__ import annotations
 
 import multiprocessing
+import os
+import signal
 from collections.abc import Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
-from ..errors import UsageError
+from ..errors import Terminated, UsageError
 from .base import ExecutorBase, StageCallback, Task, TaskOutcome, call_task, crashed, finished, retry_or_fail
 
 _STAGES: Any = None  # the worker's end of the driver's stage queue (set by _init_worker)
+_IN_TASK = False
+
+
+def _on_sigterm(signum: int, frame: Any) -> None:
+    # The driver ends its workers with SIGTERM on Ctrl-C or its own SIGTERM: a task unwinds, so its
+    # `finally` removes its scratch folder; an idle worker just goes.
+    if _IN_TASK:
+        raise Terminated()
+    os._exit(128 + signum)
 
 
 def _init_worker(stages: Any) -> None:
     global _STAGES
     _STAGES = stages
+    signal.signal(signal.SIGTERM, _on_sigterm)
 
 
 def _report_to_queue(index: int):
@@ -37,7 +49,12 @@ def _report_to_queue(index: int):
 
 
 def _pool_task(fn: Task, item: Any, index: int, env: dict[str, str], threads: int):
-    return call_task(fn, item, _report_to_queue(index), env, threads)
+    global _IN_TASK
+    _IN_TASK = True
+    try:
+        return call_task(fn, item, _report_to_queue(index), env, threads)
+    finally:
+        _IN_TASK = False
 
 
 class LocalExecutor(ExecutorBase):
