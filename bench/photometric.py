@@ -106,7 +106,7 @@ def _loss(self, frames, it):
             self.targets.masks.coverage[frames],
         )
         total = total + p
-        terms["photo"] = float(p.detach())
+        terms["photo"] = p
     return total, terms
 
 

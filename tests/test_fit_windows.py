@@ -86,3 +86,66 @@ def test_fits_of_one_long_video_share_its_first_window_and_its_flow_targets(long
     for _ in range(2):
         fit_video(video, asset, cfg, pause_at=1)
     assert calls == [6]
+
+
+def _runner(T=12, span=None):
+    from zooctl.fit.config import preset
+    from zooctl.fit.losses import MaskTargets
+    from zooctl.fit.scene import FitScene
+    from zooctl.fit.stages import StageRunner, Targets
+    from zooctl.rig.synthetic import tube_asset
+
+    asset = tube_asset(bones=3, rings_per_bone=2, segments=8, bone_length=0.3, radius=0.05)
+    torch.manual_seed(0)
+    scene = FitScene(asset, T, 16, 16, focal=20.0, hidden=8)
+    with torch.no_grad():
+        scene.root_translation[:, 2] = -2.0
+    masks = np.zeros((T, 16, 16), np.float32)
+    masks[:, 4:12, 3:13] = 1.0
+    cfg = preset("fast")
+    cfg.stage2.batch = 4
+    return scene, cfg, StageRunner(scene, Targets(MaskTargets.build(masks, seed=0)), cfg, 2, span)
+
+
+def test_a_step_moves_only_the_frames_of_its_window_and_never_held_ones():
+    """Lazy Adam: a frame outside the step's window (or held, before the span) keeps its exact
+    values even with momentum from earlier steps."""
+    from zooctl.fit.stages import make_optimizer
+
+    scene, cfg, runner = _runner(span=(4, 12))
+    opt = make_optimizer(scene, cfg, 2, learn_focal=False, shared=True)
+    for it in range(6):
+        before = [p.detach().clone() for p in scene.per_frame_parameters()]
+        runner.gen, runner._queue = np.random.default_rng(it), []
+        window = runner.window()  # the window the step will draw: the same generator state again
+        runner.gen, runner._queue = np.random.default_rng(it), []
+        terms = runner.step(opt, it)
+        assert set(terms) >= {"mask", "total"} and all(t.dim() == 0 for t in terms.values())
+        inside = torch.zeros(scene.num_frames, dtype=torch.bool)
+        inside[window[window >= 4]] = True
+        for p, b in zip(scene.per_frame_parameters(), before, strict=True):
+            assert torch.equal(p.detach()[~inside], b[~inside])
+            assert not torch.equal(p.detach()[inside], b[inside])
+
+
+def test_the_term_log_reads_steps_back_in_batches_and_keeps_each_once():
+    from zooctl.fit.stages import TermLog
+
+    history, seen = [], []
+    log = TermLog(history, seen.append, every=3)
+    steps = [{"mask": torch.tensor(0.5 * i), "total": torch.tensor(float(i), dtype=torch.float64)} for i in range(7)]
+    for s in steps[:5]:
+        log.add(s)
+    assert len(history) == 3 and seen == history  # the first three, read back together
+    log.flush()
+    assert history == [{"mask": 0.5 * i, "total": float(i)} for i in range(5)]
+
+    def stop(row):
+        raise KeyboardInterrupt
+
+    log.on_step = stop
+    log.add(steps[5])
+    with pytest.raises(KeyboardInterrupt):
+        log.flush()
+    log.flush()  # what a checkpoint after Ctrl-C does: nothing is added twice
+    assert [r["total"] for r in history] == [0, 1, 2, 3, 4, 5]

@@ -29,7 +29,7 @@ from .inputs import FitVideo, MaskWindow, crop_box, fit_resolution, resample_flo
 from .losses import MaskTargets
 from .pose_prior import clip_joint_limits, clip_pose_stats, motion_sequence_prior
 from .scene import FitScene
-from .stages import StageRunner, Targets, make_optimizer, mask_iou, stage_config
+from .stages import StageRunner, Targets, TermLog, make_optimizer, mask_iou, stage_config
 
 STATE_VERSION = 2
 
@@ -464,8 +464,10 @@ def _run_stage(
     rep.stage(key if held is None else f"{key}, frames {held.span[0]}-{held.span[1] - 1}", last, first)
     t = time.perf_counter()
     done = first
+    log = TermLog(result.history[key], rep.step)
 
     def state(next_iter: int) -> dict[str, Any]:
+        log.flush()
         timings = dict(result.timings)
         timings[key] = timings.get(key, 0.0) + time.perf_counter() - t
         return {
@@ -488,16 +490,15 @@ def _run_stage(
             factor = lr_factor(it, st.iters, st.lr_final)
             for g, lr in zip(opt.param_groups, base_lr, strict=True):
                 g["lr"] = lr * factor
-            terms = runner.step(opt, it)
-            result.history[key].append(terms)
+            log.add(runner.step(opt, it))
             done = it + 1
-            rep.step(terms)
             if checkpoint is not None and cfg.checkpoint_every and (it + 1) % cfg.checkpoint_every == 0:
                 checkpoint(state(it + 1))
     except KeyboardInterrupt:
         if checkpoint is not None:
             checkpoint(state(done))
         raise
+    log.flush()
     if pause_at is not None:
         result.paused = copy.deepcopy(state(last))
     result.timings[key] = result.timings.get(key, 0.0) + time.perf_counter() - t

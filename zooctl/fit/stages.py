@@ -178,12 +178,18 @@ class StageRunner:
         return [starts[i] for i in self.gen.permutation(len(starts))]
 
     def loss(self, frames: Tensor, it: int = 0) -> tuple[Tensor, dict[str, float]]:
-        """The stage's loss on ``frames`` at its iteration ``it`` (the smoothness schedule's)."""
+        """The stage's loss on ``frames`` at its iteration ``it`` (the smoothness schedule's), and
+        its weighted terms as numbers."""
+        total, terms = self.loss_terms(frames, it)
+        return total, {k: float(v.detach()) for k, v in terms.items()}
+
+    def loss_terms(self, frames: Tensor, it: int = 0) -> tuple[Tensor, dict[str, Tensor]]:
+        """`loss` with the terms left as 0-d tensors on the fit's device (no host sync)."""
         share = getattr(self.scene.model, "shared_displacement", None)  # optional (`zooctl.rig.base`)
         with share() if share is not None else contextlib.nullcontext():
             return self._loss(frames, it)
 
-    def _loss(self, frames: Tensor, it: int) -> tuple[Tensor, dict[str, float]]:
+    def _loss(self, frames: Tensor, it: int) -> tuple[Tensor, dict[str, Tensor]]:
         scene, w, ab = self.scene, self.cfg.weights, self.cfg.ablation
         tg = self.targets
         verts = scene.pose_rigid(frames) if self.stage == 1 else scene.pose(frames).vertices
@@ -256,24 +262,57 @@ class StageRunner:
                     q, scene.model.rest_rotation, scene.joint_limits
                 )
         total = sum(terms.values())
-        return total, {k: float(v.detach()) for k, v in terms.items()}
+        return total, terms
 
-    def step(self, opt: torch.optim.Optimizer, it: int) -> dict[str, float]:
+    def step(self, opt: torch.optim.Optimizer, it: int) -> dict[str, Tensor]:
+        """One optimiser step; its weighted terms and ``total`` as detached 0-d tensors, read by
+        the caller when it needs the numbers (`TermLog`): nothing here waits for the device."""
         frames = self.window()
         opt.zero_grad(set_to_none=True)
-        total, terms = self.loss(frames, it)
+        total, terms = self.loss_terms(frames, it)
         total.backward()
         # Lazy Adam for per-frame parameters: frames outside the batch keep their values (their
-        # stale momentum would otherwise move them without any evidence).
-        keep = torch.ones(self.scene.num_frames, dtype=torch.bool, device=frames.device)
-        keep[frames[frames >= self.lo]] = False
-        saved = [p.detach()[keep].clone() for p in self.scene.per_frame_parameters()]
+        # stale momentum would otherwise move them without any evidence). Whole tensors and a
+        # mask, not boolean indexing, which would wait for the device.
+        moved = torch.zeros(self.scene.num_frames, dtype=torch.bool, device=frames.device)
+        moved[frames] = True
+        moved[: self.lo] = False
+        saved = [p.detach().clone() for p in self.scene.per_frame_parameters()]
         opt.step()
         with torch.no_grad():
             for p, old in zip(self.scene.per_frame_parameters(), saved, strict=True):
-                p[keep] = old
-        terms["total"] = float(total.detach())
-        return terms
+                p.copy_(torch.where(moved.view(-1, *([1] * (p.dim() - 1))), p, old))
+        out = {k: v.detach() for k, v in terms.items()}
+        out["total"] = total.detach()
+        return out
+
+
+class TermLog:
+    """Each step's loss terms, read back from the device a batch of steps at a time: one host sync
+    per ``every`` steps instead of one per term and step. ``flush`` appends the numbers to
+    ``history`` and hands each step's to ``on_step`` (the progress bar)."""
+
+    def __init__(self, history: list[dict[str, float]], on_step, every: int = 16) -> None:
+        self.history, self.on_step, self.every = history, on_step, every
+        self.pending: list[dict[str, Tensor]] = []
+
+    def add(self, terms: dict[str, Tensor]) -> None:
+        self.pending.append(terms)
+        if len(self.pending) >= self.every:
+            self.flush()
+
+    def flush(self) -> None:
+        pending, self.pending = self.pending, []
+        if not pending:
+            return
+        values = torch.stack([v.float().reshape(()) for d in pending for v in d.values()]).tolist()
+        rows, i = [], 0
+        for d in pending:
+            rows.append(dict(zip(d, values[i : i + len(d)], strict=True)))
+            i += len(d)
+        self.history.extend(rows)  # all of them before the reporter, which may raise (Ctrl-C)
+        for row in rows:
+            self.on_step(row)
 
 
 @torch.no_grad()
