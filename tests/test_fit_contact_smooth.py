@@ -1,4 +1,4 @@
-"""Ground contact and 3D smoothness, the fit's terms beyond silhouettes (`zooctl.fit.losses`): what
+"""Ground contact, 3D smoothness and edge stretch, the fit's terms beyond silhouettes (`zooctl.fit.losses`): what
 each costs, where its gradient goes, and that a fit computes them only when weighted."""
 
 from __future__ import annotations
@@ -13,9 +13,12 @@ from fit_helpers import tiny_overrides
 from zooctl.fit.config import FitConfig
 from zooctl.fit.losses import (
     body_frame,
+    edge_log_stretch,
+    edge_stretch_loss,
     foot_sliding_loss,
     ground_height,
     lowest_heights,
+    mesh_edges,
     sinking_loss,
     vertex_acceleration_loss,
 )
@@ -143,16 +146,58 @@ def test_a_fit_computes_the_terms_only_when_weighted(tmp_path):
     from zooctl.fit.inputs import load_fit_video
     from zooctl.fit.run import fit_video
 
-    tiny = tiny_overrides(3) | {"weights": {"ground_contact": 1.0, "smooth_3d": 1.0}}
+    tiny = tiny_overrides(3) | {"weights": {"ground_contact": 1.0, "smooth_3d": 1.0, "edge_stretch": 1.0}}
     cfg = FitConfig.from_dict(json.loads(json.dumps(tiny)))
     assert cfg.to_dict()["weights"]["ground_contact"] == 1.0
     asset = tube_asset(bones=3, name="tube")
     video = load_fit_video(make_video(asset, tmp_path / "v", frames=4, size=32, seed=0))
     res = fit_video(video, asset, cfg)
     hist = res.history["stage2"]
-    assert all("ground" in s and "smooth_3d" in s for s in hist)
+    assert all("ground" in s and "smooth_3d" in s and s["edge_stretch"] >= 0 for s in hist)
     assert all(math.isfinite(s["ground"]) and s["smooth_3d"] >= 0 for s in hist)
     off = fit_video(video, asset, FitConfig.from_dict(tiny_overrides(3)))
-    assert all("ground" not in s and "smooth_3d" not in s for s in off.history["stage2"])
+    assert all(not {"ground", "smooth_3d", "edge_stretch"} & set(s) for s in off.history["stage2"])
     defaults = FitConfig().weights
     assert defaults.ground_contact == 0.0 and defaults.smooth_3d == 0.0  # measured, not adopted
+    assert defaults.edge_stretch == 0.0 and not FitConfig().ablation.share_seams  # the same
+
+
+def test_mesh_edges_are_each_undirected_edge_once():
+    faces = torch.tensor([[0, 1, 2], [2, 1, 3]])
+    assert mesh_edges(faces).tolist() == [[0, 1], [0, 2], [1, 2], [1, 3], [2, 3]]
+
+
+def test_a_rigid_move_costs_no_stretch_and_a_torn_surface_costs_the_log_of_its_stretch():
+    from zooctl.rig.rotations import quat_to_matrix
+
+    asset = tube_asset(bones=3, name="tube")
+    rest = torch.as_tensor(asset.vertices, dtype=torch.float32)
+    edges = mesh_edges(torch.as_tensor(asset.faces, dtype=torch.long))
+    R = quat_to_matrix(torch.tensor([math.cos(0.4), 0.0, math.sin(0.4), 0.0]))
+    moved = (rest @ R.T + torch.tensor([0.3, -1.0, 2.0]))[None]
+    assert edge_stretch_loss(moved, rest, edges) < 1e-10
+    doubled = 2.0 * rest[None]
+    assert edge_stretch_loss(doubled, rest, edges) == pytest.approx(math.log(2.0 / 1.5) ** 2, rel=1e-5)
+    assert edge_stretch_loss(1.4 * rest[None], rest, edges) == 0.0  # within what bending does
+    torn = rest.clone()
+    torn[0] += 5.0  # one vertex dragged away: only its edges stretch
+    per_edge = edge_log_stretch(torn, rest, edges)
+    touching = (edges == 0).any(1)
+    assert (per_edge[touching] > 1.0).all() and per_edge[~touching].abs().max() < 1e-6
+
+
+def test_the_stretch_gradient_reaches_the_skinning_weights():
+    """Bent at its joints, a tube's skinning decides how its edges stretch: the term pulls on
+    the skinning logits (what it is there to hold) as well as on the rotations."""
+    from zooctl.rig.model import ArticulatedModel
+
+    model = ArticulatedModel(tube_asset(bones=3, name="tube"))
+    g = torch.Generator().manual_seed(0)
+    rot = (model.rest_rotation.detach() + 1.5 * torch.randn(model.rest_rotation.shape, generator=g))[None]
+    rot.requires_grad_(True)
+    edges = mesh_edges(model.faces)
+    with torch.no_grad():
+        rest = model().vertices
+    loss = edge_stretch_loss(model(rot).vertices, rest, edges)
+    grad_rot, grad_skin = torch.autograd.grad(loss, (rot, model.skin.logits))
+    assert loss.item() > 0 and grad_rot.abs().sum() > 0 and grad_skin.abs().sum() > 0

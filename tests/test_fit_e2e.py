@@ -66,6 +66,7 @@ def test_fit_record_and_quality(fitted):
     # (they differ only by the displacement LBS does not skin).
     assert "exported mesh" in m["mask_iou_measured"] and "given" in m["mask_iou_measured"]
     assert abs(m["mask_iou"] - m["mask_iou_model"]) < 0.05 and m["novel_view_iou"] is not None
+    assert 0.0 <= m["surface_tear"] < 0.05  # the procedural template, fitted to its own video
     for k in ("miou", "mcham", "joint", "skinning", "reanimation"):
         assert m[k] is not None and np.isfinite(m[k]), k
     assert m["miou"] > 0.3 and m["joint"] < 0.2

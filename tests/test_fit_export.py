@@ -8,6 +8,7 @@ import torch
 
 from zooctl.fit.fitted_asset import fitted_asset
 from zooctl.fit.scene import FitScene
+from zooctl.retrieval.train_data import unweld
 from zooctl.rig.rotations import quat_to_matrix
 from zooctl.rig.synthetic import tube_asset
 
@@ -62,3 +63,26 @@ def test_a_displaced_mesh_keeps_its_skeleton():
     clip = asset.clips["fit"]
     joints = asset.joint_transforms(clip.local_matrices())[..., :3, 3]
     assert np.abs(joints - pose.joints.numpy()).max() / size < 2e-3
+
+
+def test_surface_tear_sees_stretched_edges_and_opened_seams_not_bending_or_scale():
+    import dataclasses
+
+    from zooctl.fit.outputs import surface_tear
+
+    bent = tube_asset(bones=3, rings_per_bone=4, segments=8)
+    bent = dataclasses.replace(bent, clips={"fit": bent.clips["bend"]})
+    assert surface_tear(bent) == 0.0  # a smooth bend of up to 0.6 rad per joint tears nothing
+    scales = bent.clips["fit"].scales.copy()
+    scales[:, 0] *= 3.0  # the root's scale: the whole body three times its size
+    big = dataclasses.replace(bent, clips={"fit": dataclasses.replace(bent.clips["fit"], scales=scales)})
+    assert surface_tear(big) == 0.0  # the whole pose's scale is not a tear
+    split = unweld(bent)
+    assert surface_tear(split) == 0.0  # copies of a vertex that move together: a closed surface
+    cracked = split.skin_joints.copy(), split.skin_weights.copy()
+    far = split.vertices[:, 0] > 0.9 * split.vertices[:, 0].max()  # the tip ring's copies...
+    first = far & (np.arange(split.num_vertices) % 3 == 0)  # ...one face-corner in three of them
+    cracked[0][first], cracked[1][first] = 0, 0.0
+    cracked[1][first, 0] = 1.0  # skinned to the root bone: left behind when the tube bends
+    torn = dataclasses.replace(split, skin_joints=cracked[0], skin_weights=cracked[1])
+    assert 0.0 < surface_tear(torn) < 0.5

@@ -133,7 +133,10 @@ def test_the_term_log_reads_steps_back_in_batches_and_keeps_each_once():
 
     history, seen = [], []
     log = TermLog(history, seen.append, every=3)
-    steps = [{"mask": torch.tensor(0.5 * i), "total": torch.tensor(float(i), dtype=torch.float64)} for i in range(7)]
+    steps = [
+        {"mask": torch.tensor(0.5 * i), "total": torch.tensor(float(i), dtype=torch.float64)}
+        for i in range(7)
+    ]
     for s in steps[:5]:
         log.add(s)
     assert len(history) == 3 and seen == history  # the first three, read back together

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 
+from zooctl.retrieval.train_data import unweld
 from zooctl.rig.model import ArticulatedModel
 from zooctl.rig.rotations import axis_angle_to_quat
 from zooctl.rig.synthetic import tube_asset
@@ -170,3 +171,65 @@ def test_shared_displacement_runs_the_field_once_with_the_same_gradients():
     assert torch.allclose(a, b, rtol=1e-12) and len(ga) == len(gb) > 3
     assert all(torch.allclose(x, y, rtol=1e-9, atol=1e-12) for x, y in zip(ga, gb))
     assert model.displacement_offsets() is not model.displacement_offsets()  # off after the block
+
+
+def test_seam_groups_join_copies_at_one_position_with_the_same_bones():
+    from zooctl.rig.skinning import seam_groups
+
+    points = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 0], [1, 0, 1e-9], [0, 0, 0]], float)
+    bones = np.array([[0, 1], [1, 0], [0, 1], [1, 0], [1, 0]])
+    # 2 is 0's copy, 3 is 1's (within the tolerance); 4 sits at 0 but blends other bones.
+    assert seam_groups(points, bones).tolist() == [0, 1, 0, 1, 2]
+
+
+@pytest.mark.parametrize("share", [True, False])
+def test_learned_skinning_keeps_a_split_surface_closed_only_when_seams_are_shared(share):
+    """Skinning learned per copy opens cracks between a flat-shaded mesh's faces; shared per
+    position, the copies move as one vertex (what the exported character shows)."""
+    from zooctl.rig.skinning import seam_groups
+
+    asset = unweld(tube_asset(bones=3, rings_per_bone=2, segments=8))
+    model = ArticulatedModel(asset, share_seams=share)
+    groups = torch.as_tensor(seam_groups(asset.vertices.astype(np.float64), model.skin.bones.numpy()))
+    assert (model.skin.logits.shape[0] < asset.num_vertices) == share
+    g = torch.Generator().manual_seed(0)
+    pull = torch.randn(asset.num_vertices, 3, generator=g)  # a different pull on every copy
+    opt = torch.optim.Adam([model.skin.logits], lr=0.1)
+    rot = model.rest_rotation.clone()
+    rot[1] = axis_angle_to_quat(torch.tensor([0.0, 0.0, 0.8]))
+    for _ in range(20):
+        opt.zero_grad()
+        (model(rot).vertices * pull).sum().backward()
+        opt.step()
+    with torch.no_grad():
+        v = model(rot).vertices
+    first = torch.as_tensor(np.unique(groups.numpy(), return_index=True)[1])  # a vertex per group
+    spread = (v - v[first[groups]]).norm(dim=-1).max()  # how far copies of a vertex moved apart
+    assert (spread < 1e-5) == share
+
+
+def test_a_model_state_saved_with_a_row_per_vertex_loads_as_their_mean():
+    """A state with a row of skin logits per copy (saved without shared seams) loads with them."""
+    asset = unweld(tube_asset(bones=2, rings_per_bone=2, segments=6))
+    old = ArticulatedModel(asset, share_seams=False)
+    with torch.no_grad():
+        old.skin.logits.add_(torch.randn_like(old.skin.logits))
+    state = {k: v for k, v in old.state_dict().items() if k != "skin.groups"}
+    new = ArticulatedModel(asset, share_seams=True)
+    new.load_state_dict(state)
+    g = new.skin.groups
+    want = torch.zeros_like(new.skin.logits).index_add_(0, g, old.skin.logits.detach())
+    want /= torch.bincount(g)[:, None].float()
+    torch.testing.assert_close(new.skin.logits.detach(), want)
+
+
+def test_a_fit_state_saved_with_a_row_per_vertex_resumes():
+    from zooctl.fit.scene import FitScene
+
+    asset = unweld(tube_asset(bones=2, rings_per_bone=2, segments=6))
+    old = FitScene(asset, 3, 16, 16, focal=20.0, hidden=8, share_seams=False)
+    state = {k: v for k, v in old.state_dict().items() if not k.endswith("groups")}
+    new = FitScene(asset, 3, 16, 16, focal=20.0, hidden=8, share_seams=True)
+    new.load_state_dict(state)
+    assert new.init_logits.shape == new.model.skin.logits.shape
+    torch.testing.assert_close(new.model.skin(), old.model.skin(), atol=1e-6, rtol=0)  # copies started equal

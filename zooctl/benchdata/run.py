@@ -43,6 +43,7 @@ COLUMNS = (
     "joint",
     "skinning",
     "reanimation",
+    "surface_tear",
     "wall_s",
 )
 _FIT_METRICS = tuple(k for k in COLUMNS if k not in ("view_psnr", "wall_s"))  # from the fit's record
@@ -298,7 +299,7 @@ def markdown_table(res: dict[str, Any]) -> str:
     """The summary (one row per ablation) and the per-video rows, as markdown."""
     head = (
         "| ablation | videos | 2D mask IoU | novel-view IoU | held-out PSNR dB | mIoU | mCham | Joint (CD-J2J) "
-        "| Skinning | Re-animation | wall s |"
+        "| Skinning | Re-animation | torn edges | wall s |"
     )
     camera = (
         "known (each video's own camera rotations)" if res.get("known_camera") else "estimated from the masks"
@@ -317,7 +318,7 @@ def markdown_table(res: dict[str, Any]) -> str:
         "the pixels both cover (`zooctl.benchdata.appearance`); n/a for videos made without "
         "`--appearance textured`."
     )
-    lines += ["", head, "|" + "---|" * 11]
+    lines += ["", head, "|" + "---|" * 12]
 
     def f(x, k=""):
         if x is None:
@@ -337,12 +338,12 @@ def markdown_table(res: dict[str, Any]) -> str:
     lines += [
         "",
         "| video | ablation | template | 2D mask IoU | novel-view IoU | held-out PSNR | mIoU | mCham | Joint "
-        "| Skinning | Re-anim. | wall s |",
-        "|" + "---|" * 12,
+        "| Skinning | Re-anim. | torn | wall s |",
+        "|" + "---|" * 13,
     ]
     for r in res["rows"]:
         if "error" in r:
-            lines.append(f"| {r['video']} | {r['ablation']} | error: {r['error']} |" + " |" * 9)
+            lines.append(f"| {r['video']} | {r['ablation']} | error: {r['error']} |" + " |" * 10)
         else:
             right = r.get("plan", {}).get("right")
             mark = "" if right is None else (" (right plan)" if right else " (other plan)")

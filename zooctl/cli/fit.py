@@ -202,7 +202,9 @@ def fit(
     m = rec["metrics"]
     console.print(
         f"fitted [bold]{escape(rec['name'])}[/] with template {escape(rec['template'])}: mask IoU {m['mask_iou']:.3f} "
-        f"(against {escape(masks_measured_against(rec.get('mask_source')))}), {rec['timings']['total_wall']:.1f} s",
+        f"(against {escape(masks_measured_against(rec.get('mask_source')))})"
+        + (f", surface torn {100 * m['surface_tear']:.1f} %" if m.get("surface_tear") is not None else "")
+        + f", {rec['timings']['total_wall']:.1f} s",
         highlight=False,
     )
     for k, p in rec["outputs"].items():

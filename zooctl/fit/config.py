@@ -162,6 +162,13 @@ class LossWeights:
         required=False,
         **_WEIGHT,
     )
+    edge_stretch: float = spec(
+        0.0,
+        help="stage 2: each posed edge's stretch or squeeze beyond 1.5 times its length in the rest "
+        "shape, squared (of the log), which keeps the skinning from tearing the surface (0: off)",
+        required=False,
+        **_WEIGHT,
+    )
 
 
 @dataclass
@@ -246,6 +253,13 @@ class Ablation:
     stretch: bool = spec(True, required=False)
     displacement: bool = spec(True, required=False)
     learn_skinning: bool = spec(True, required=False)
+    # Off: measured on the DAVIS videos, it changed little and tore no less (BENCHMARKS.md, Fit).
+    share_seams: bool = spec(
+        False,
+        help="copies of a template vertex at one position (a flat-shaded or UV-split mesh's seams) "
+        "learn one set of skinning weights, so the surface cannot crack open along them",
+        required=False,
+    )
     optimise: bool = spec(True, help="false: retrieval (template and camera) only", required=False)
 
 

@@ -525,6 +525,7 @@ def write_outputs(
         bake_colours,
         exported_mask_iou,
         stage_summary,
+        surface_tear,
         write_glb,
         write_loss_png,
         write_overlay,
@@ -577,6 +578,7 @@ def write_outputs(
             f"masks ({result.video.mask_source})"
         ),
         "mask_iou_model": _nanmean(model_iou),
+        "surface_tear": round(surface_tear(asset), 5),
     }
     if result.video.gt:
         from .metrics import evaluate_fit

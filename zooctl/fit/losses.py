@@ -13,6 +13,7 @@
 | limits | `joint_limit_loss` (the template clips' joint ranges, `zooctl.fit.pose_prior.clip_joint_limits`) | ``joint_limits`` |
 | ground | `sinking_loss` + `foot_sliding_loss` in the root's frame (`body_frame`), the ground from `ground_height` | ``ground_contact`` |
 | smooth_3d | `vertex_acceleration_loss` (the posed vertices in world space) | ``smooth_3d`` |
+| edge_stretch | `edge_stretch_loss` (the posed surface's edges against the rest shape's, `mesh_edges`) | ``edge_stretch`` |
 | smooth, symmetry, bone_length | the articulation model's ``smoothness_loss``, ``symmetry_loss``, ``bone_length_loss`` (CASA eq. 6, 7; `zooctl.rig.priors`, since they belong to the model) | ``smooth`` (lambda2), ``symmetry`` (lambda3), ``bone_length`` |
 
 `zooctl.fit.stages.StageRunner.loss` weights and sums them; change a weight's default in
@@ -25,6 +26,7 @@ it) and a fixed sample of mask pixels (that some vertex should cover).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -274,3 +276,29 @@ def vertex_acceleration_loss(verts: Tensor, size: float) -> Tensor:
         return verts.sum() * 0.0
     acc = verts[2:] - 2.0 * verts[1:-1] + verts[:-2]
     return acc.square().sum(-1).mean() / size**2
+
+
+def mesh_edges(faces: Tensor) -> Tensor:
+    """(E, 2) the unique undirected edges of triangles ``faces`` (F, 3), lower index first."""
+    e = torch.cat((faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]))
+    return torch.unique(torch.sort(e, dim=1).values, dim=0)
+
+
+def edge_log_stretch(verts: Tensor, rest: Tensor, edges: Tensor) -> Tensor:
+    """(..., E) log of each edge's length in ``verts`` (..., V, 3) over its length in ``rest``
+    (V, 3): 0 where articulation kept the surface's metric, log 2 where it doubled an edge."""
+
+    def length(v: Tensor) -> Tensor:
+        return (v[..., edges[:, 0], :] - v[..., edges[:, 1], :]).norm(dim=-1).clamp(min=1e-9)
+
+    return torch.log(length(verts) / length(rest))
+
+
+def edge_stretch_loss(verts: Tensor, rest: Tensor, edges: Tensor, free: float = math.log(1.5)) -> Tensor:
+    """Mean over the edges and frames of how far each posed edge of ``verts`` (B, V, 3) is
+    stretched or squeezed beyond ``free`` (a log ratio) against the ``rest`` shape (V, 3) at the
+    same global scale, squared. A surface torn by its skinning (neighbouring vertices following
+    different bones) has edges at several times their length; bending at a joint, as artists'
+    own clips do, stays within 1.5 times (their 99th percentile: 1.05-1.6 times, BENCHMARKS.md)."""
+    excess = (edge_log_stretch(verts, rest, edges).abs() - free).clamp(min=0.0)
+    return excess.square().mean()

@@ -94,6 +94,50 @@ def exported_mask_iou(asset: RiggedAsset, camera, masks: np.ndarray, batch: int 
     return np.concatenate(out)
 
 
+TEAR_RATIO = 2.0
+
+
+def surface_tear(asset: RiggedAsset, clip: str = "fit") -> float:
+    """The share of the character's surface edges that its pose tears, over the frames of
+    ``clip`` (0-1): an edge is torn when it stretches beyond ``TEAR_RATIO`` times its rest length
+    or shrinks below one over it, or when the copies of its end vertices (a flat-shaded or
+    UV-split mesh's seams: several vertices at one rest position) move apart so far that some
+    pair of them would be. Each frame's lengths are taken relative to their median ratio (a
+    pose's overall scale is not a tear). The 197 artists' clips of the 28 shared animals: a mean
+    0.2 %, 90th percentile 0.65 %."""
+    from ..rig.skinning import seam_groups
+
+    points = np.asarray(asset.vertices, np.float64)
+    g = seam_groups(points, np.zeros((len(points), 1), np.int64))  # one node per rest position
+    U = int(g.max()) + 1
+    e = np.unique(
+        np.sort(g[asset.faces.reshape(-1, 3)][:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0
+    )
+    e = e[e[:, 0] != e[:, 1]]
+    count = np.bincount(g, minlength=U)[:, None]
+    rest_nodes = np.zeros((U, 3))
+    np.add.at(rest_nodes, g, points)
+    rest_nodes /= count
+    rest = np.linalg.norm(rest_nodes[e[:, 0]] - rest_nodes[e[:, 1]], axis=-1)
+    keep = rest > 1e-9 * max(float(rest.max(initial=0.0)), 1e-12)
+    e, rest = e[keep], rest[keep]
+    n = asset.clips[clip].num_frames
+    torn = 0.0
+    for s in range(0, n, 16):
+        for v in asset.pose(clip, np.arange(s, min(s + 16, n))).astype(np.float64):
+            nodes = np.zeros((U, 3))
+            np.add.at(nodes, g, v)
+            nodes /= count
+            spread = np.zeros(U)
+            np.maximum.at(spread, g, np.linalg.norm(v - nodes[g], axis=-1))  # a crack's half-width
+            d = np.linalg.norm(nodes[e[:, 0]] - nodes[e[:, 1]], axis=-1)
+            scale = np.exp(np.median(np.log(np.maximum(d, 1e-30) / rest)))
+            gap = spread[e[:, 0]] + spread[e[:, 1]]
+            longest, shortest = (d + gap) / (rest * scale), (d - gap) / (rest * scale)
+            torn += float(((longest > TEAR_RATIO) | (shortest < 1.0 / TEAR_RATIO)).mean())
+    return torn / max(n, 1)
+
+
 # -- overlay video -------------------------------------------------------------------------------
 
 

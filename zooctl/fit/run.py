@@ -269,6 +269,8 @@ def new_scene(
     template: RiggedAsset, cfg: FitConfig, num_frames: int, h: int, w: int, principal: tuple[float, float]
 ) -> FitScene:
     """A `FitScene` of ``num_frames`` frames in (h, w) fit images as ``cfg`` sets it up."""
+    # Passed only when switched on: articulation plugins need not know the option.
+    options = {"share_seams": True} if cfg.ablation.share_seams else {}
     return FitScene(
         template,
         num_frames,
@@ -281,6 +283,7 @@ def new_scene(
         device=cfg.device,
         principal=principal,
         articulation=cfg.articulation,
+        **options,
     )
 
 

@@ -16,6 +16,7 @@ its centre.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import torch
@@ -25,6 +26,7 @@ from ..asset import RiggedAsset
 from ..render.camera import Camera
 from ..rig.base import get_articulation_model
 from ..rig.model import Pose
+from ..rig.skinning import mean_by_group
 
 Tensor = torch.Tensor
 CAMERA_ROTATION = np.diag([1.0, -1.0, -1.0])  # world -> OpenCV camera frame (looks down world -Z)
@@ -50,13 +52,20 @@ class FitScene(nn.Module):
         device: str = "cpu",
         principal: tuple[float, float] | None = None,
         articulation: str = "casa",
+        **options: Any,
     ):
         super().__init__()
         self.height, self.width = int(height), int(width)
         # Principal point in fit pixels: the image centre, or where it falls in a crop.
         self.principal = principal if principal is not None else (width / 2.0, height / 2.0)
         self.model = get_articulation_model(
-            articulation, asset, device=device, stretch=stretch, displacement=displacement, hidden=hidden
+            articulation,
+            asset,
+            device=device,
+            stretch=stretch,
+            displacement=displacement,
+            hidden=hidden,
+            **options,
         )
         T, J = int(num_frames), self.model.num_joints
         rest_q = self.model.rest_rotation.detach().clone()
@@ -65,11 +74,24 @@ class FitScene(nn.Module):
         self.root_translation = nn.Parameter(torch.zeros(T, 3, device=device))  # (T, 3)
         self.log_focal = nn.Parameter(torch.tensor(math.log(focal), device=device))
         self.register_buffer("init_logits", self.model.skin.logits.detach().clone())
+        self._register_load_state_dict_pre_hook(self._shared_init_logits)
         self.size = float(asset.size())
         self.num_joints = J
         self.clip_stats = None  # `zooctl.fit.pose_prior.ClipPoseStats` for the clips pose prior
         self.joint_limits = None  # `zooctl.fit.pose_prior.JointLimits` for ``weights.joint_limits``
         self.sequence_prior = None  # the motion pose prior (`zooctl.fit.pose_prior.motion_sequence_prior`)
+
+    def _shared_init_logits(self, state, prefix, *args) -> None:
+        """A state saved without shared seams (a row of initial logits per vertex) loads into a
+        scene whose model shares them: each group's mean."""
+        key, skin = prefix + "init_logits", self.model.skin
+        groups = getattr(skin, "groups", None)
+        if (
+            key in state
+            and groups is not None
+            and state[key].shape[0] == len(groups) != len(self.init_logits)
+        ):
+            state[key] = mean_by_group(state[key], groups.to(state[key].device), len(self.init_logits))
 
     @property
     def num_frames(self) -> int:

@@ -35,11 +35,13 @@ from .losses import (
     clip_pose_loss,
     contour_loss,
     displacement_prior,
+    edge_stretch_loss,
     flow_loss,
     foot_sliding_loss,
     ground_height,
     joint_limit_loss,
     lowest_heights,
+    mesh_edges,
     pose_prior,
     root_smoothness,
     scale_prior,
@@ -137,6 +139,7 @@ class StageRunner:
         self.present_idx = np.nonzero(present[: self.hi])[0]
         self.present_idx = self.present_idx[self.present_idx >= self.steps_from]
         self._queue: list[int] = []
+        self.edges: Tensor | None = None  # the mesh's edges, once a term needs them
         # Each frame's lowest height in the root frame, refreshed from every step's window (no
         # extra posing): the ground is their median over the frames (`ground_height`).
         self.lowest = self._lowest_heights() if stage == 2 and cfg.weights.ground_contact > 0 else None
@@ -256,6 +259,12 @@ class StageRunner:
                 )
             if w.smooth_3d > 0:
                 terms["smooth_3d"] = w.smooth_3d * vertex_acceleration_loss(verts, size)
+            if w.edge_stretch > 0:
+                if self.edges is None:
+                    self.edges = mesh_edges(scene.faces)
+                with torch.no_grad():  # the reference: the rest shape as it is now (stretch, field)
+                    rest = scene.model().vertices
+                terms["edge_stretch"] = w.edge_stretch * edge_stretch_loss(verts, rest, self.edges)
             if scene.joint_limits is not None and w.joint_limits > 0:
                 q = scene.rotations[frames]
                 terms["limits"] = w.joint_limits * joint_limit_loss(

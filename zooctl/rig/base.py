@@ -11,7 +11,8 @@ which a model may ignore. The object is a ``torch.nn.Module`` with:
 - buffers ``points`` (V, 3) bind vertices, ``faces`` (F, 3) long, ``rest_rotation`` (J, 4);
   ``num_joints``, ``num_vertices``;
 - learnable shape: ``log_scale`` () (``global_scale()`` = its exp), ``log_bone_scales`` (J,),
-  ``skin.logits`` (V, K) and ``displacement`` (an ``nn.Module`` of (V, 3) points, or None);
+  ``skin.logits`` (V, K), or (U, K) a row per group of vertices sharing their weights, with
+  ``skin()`` the (V, K) weights, and ``displacement`` (an ``nn.Module`` of (V, 3) points, or None);
 - the priors the fit weights: ``symmetry_loss(sample)``, ``bone_length_loss()``,
   ``smoothness_loss(rotations)`` (scalars), and ``canonical_vertices()`` (V, 3);
 - optionally ``shared_displacement()``, a context manager within which the displacement field is

@@ -41,6 +41,7 @@ from .skinning import (
     child_offset_shift,
     endpoint_weights,
     linear_blend_skinning,
+    seam_groups,
     stretch_vectors,
 )
 
@@ -75,7 +76,9 @@ class ArticulatedModel(nn.Module):
 
     Options: ``num_candidates`` K bones per vertex for the skinning softmax; ``stretch`` enables
     stretchable bones (else plain LBS with bone scales ignored); ``displacement`` adds the MLP
-    field (``hidden`` width, ``num_freqs`` positional-encoding octaves); ``dtype``/``device``.
+    field (``hidden`` width, ``num_freqs`` positional-encoding octaves); ``dtype``/``device``;
+    ``share_seams``: copies of a vertex at one bind position share their learned skinning weights
+    (`zooctl.rig.skinning.seam_groups`; off by default: each copy learns its own).
     ``skinning`` (a class attribute) blends the bone transforms: a subclass replaces it (the
     interface is in `zooctl.rig.base`).
     """
@@ -92,6 +95,7 @@ class ArticulatedModel(nn.Module):
         num_freqs: int = 0,
         device: torch.device | str = "cpu",
         dtype: torch.dtype = torch.float32,
+        share_seams: bool = False,
     ):
         super().__init__()
         self.asset_name = asset.name
@@ -135,7 +139,8 @@ class ArticulatedModel(nn.Module):
             torch.as_tensor(tails, dtype=dtype)[bones_t],
         )
         self.register_buffer("endpoint", e)
-        self.skin = SkinWeights(bones_t, torch.as_tensor(init, dtype=dtype))
+        groups = torch.as_tensor(seam_groups(points, bones)) if share_seams else None
+        self.skin = SkinWeights(bones_t, torch.as_tensor(init, dtype=dtype), groups=groups)
         self.log_bone_scales = nn.Parameter(torch.zeros(asset.num_joints, dtype=dtype))
         self.log_scale = nn.Parameter(torch.zeros((), dtype=dtype))
         self.displacement = (

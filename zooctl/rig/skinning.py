@@ -216,20 +216,64 @@ def candidate_bones(
     return order.astype(np.int64), w
 
 
+def seam_groups(points: np.ndarray, bones: np.ndarray, tol: float = 1e-6) -> np.ndarray:
+    """(V,) int64 a group per vertex: vertices at one bind position (within ``tol`` of the mesh's
+    size) with the same candidate bones (V, K) share a group, numbered in order of first vertex.
+
+    Flat-shaded and UV-mapped meshes split the surface at every seam into copies of a vertex (the
+    Quaternius animals: a copy per face, 3,966 vertices at 977 positions); skinning weights
+    learned per copy pull the copies apart and crack the surface open between its faces."""
+    size = float(np.ptp(points, axis=0).max()) if len(points) else 0.0
+    cell = np.round(points / max(tol * size, 1e-30)).astype(np.int64)
+    _, first, inverse = np.unique(
+        np.concatenate([cell, bones], 1), axis=0, return_index=True, return_inverse=True
+    )
+    rank = np.empty(len(first), np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+    return rank[inverse.reshape(-1)]
+
+
+def mean_by_group(rows: Tensor, groups: Tensor, num_groups: int) -> Tensor:
+    """(U, ...) the mean of ``rows`` (V, ...) over each group of ``groups`` (V,) in [0, U)."""
+    total = rows.new_zeros((num_groups, *rows.shape[1:])).index_add_(0, groups, rows)
+    count = torch.bincount(groups, minlength=num_groups).clamp(min=1).to(rows.dtype)
+    return total / count.view(-1, *([1] * (rows.dim() - 1)))
+
+
 class SkinWeights(nn.Module):
     """Learnable skinning weights on the simplex: softmax over each vertex's K candidate bones.
 
-    bones: (V, K) candidate bones; init: (V, K) initial weights on the simplex.
+    bones: (V, K) candidate bones; init: (V, K) initial weights on the simplex; groups: (V,) which
+    vertices share their weights (`seam_groups`; default: none). ``logits`` (U, K), a row per group;
     ``forward()`` -> (V, K) weights, rows summing to one.
     """
 
-    def __init__(self, bones: Tensor, init: Tensor, floor: float = 1e-8):
+    def __init__(self, bones: Tensor, init: Tensor, floor: float = 1e-8, groups: Tensor | None = None):
         super().__init__()
         self.register_buffer("bones", bones.long())
-        self.logits = nn.Parameter(torch.log(init.clamp_min(floor)))
+        logits = torch.log(init.clamp_min(floor))
+        V = len(logits)
+        if groups is None:
+            groups = torch.arange(V)
+        self.register_buffer("groups", groups.long())
+        self.shared = int(groups.max()) + 1 < V if V else False
+        self.logits = nn.Parameter(
+            mean_by_group(logits, self.groups, int(groups.max()) + 1) if self.shared else logits
+        )
+        self._register_load_state_dict_pre_hook(self._from_per_vertex)
+
+    def _from_per_vertex(self, state, prefix, *args) -> None:
+        """A state saved without shared seams (a logit row per vertex) loads as each group's
+        mean; one saved before the groups buffer existed gets this model's."""
+        key = prefix + "logits"
+        if prefix + "groups" not in state:
+            state[prefix + "groups"] = self.groups
+        if key in state and state[key].shape[0] == len(self.groups) != self.logits.shape[0]:
+            state[key] = mean_by_group(state[key], self.groups.to(state[key].device), self.logits.shape[0])
 
     def forward(self) -> Tensor:
-        return torch.softmax(self.logits, dim=-1)
+        w = torch.softmax(self.logits, dim=-1)
+        return w[self.groups] if self.shared else w
 
     def dense(self, num_joints: int) -> Tensor:
         """(V, J) dense weights (for inspection and export)."""
