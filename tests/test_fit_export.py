@@ -86,3 +86,11 @@ def test_surface_tear_sees_stretched_edges_and_opened_seams_not_bending_or_scale
     cracked[1][first, 0] = 1.0  # skinned to the root bone: left behind when the tube bends
     torn = dataclasses.replace(split, skin_joints=cracked[0], skin_weights=cracked[1])
     assert 0.0 < surface_tear(torn) < 0.5
+
+
+def test_a_torn_fit_gets_a_note_that_says_what_to_do():
+    from zooctl.fit.outputs import surface_tear_note
+
+    assert surface_tear_note(0.013) is None  # as much as an artist's clip tears at most
+    note = surface_tear_note(0.063)
+    assert "6.3 %" in note and "edge_stretch" in note

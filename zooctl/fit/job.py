@@ -526,6 +526,7 @@ def write_outputs(
         exported_mask_iou,
         stage_summary,
         surface_tear,
+        surface_tear_note,
         write_glb,
         write_loss_png,
         write_overlay,
@@ -580,6 +581,9 @@ def write_outputs(
         "mask_iou_model": _nanmean(model_iou),
         "surface_tear": round(surface_tear(asset), 5),
     }
+    note = surface_tear_note(metrics["surface_tear"]) if result.config.weights.edge_stretch == 0 else None
+    if note is not None:
+        notes.append(note)
     if result.video.gt:
         from .metrics import evaluate_fit
 
