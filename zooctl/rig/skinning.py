@@ -222,7 +222,8 @@ def seam_groups(points: np.ndarray, bones: np.ndarray, tol: float = 1e-6) -> np.
 
     Flat-shaded and UV-mapped meshes split the surface at every seam into copies of a vertex (the
     Quaternius animals: a copy per face, 3,966 vertices at 977 positions); skinning weights
-    learned per copy pull the copies apart and crack the surface open between its faces."""
+    learned per copy can pull the copies apart and open cracks between the faces (rare in the
+    fits measured: BENCHMARKS.md, "A torn surface")."""
     size = float(np.ptp(points, axis=0).max()) if len(points) else 0.0
     cell = np.round(points / max(tol * size, 1e-30)).astype(np.int64)
     _, first, inverse = np.unique(
