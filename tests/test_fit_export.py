@@ -86,6 +86,8 @@ def test_surface_tear_sees_stretched_edges_and_opened_seams_not_bending_or_scale
     cracked[1][first, 0] = 1.0  # skinned to the root bone: left behind when the tube bends
     torn = dataclasses.replace(split, skin_joints=cracked[0], skin_weights=cracked[1])
     assert 0.0 < surface_tear(torn) < 0.5
+    flat = dataclasses.replace(bent, faces=np.zeros((1, 3), np.int32))  # one face on one vertex
+    assert surface_tear(flat) == 0.0
 
 
 def test_a_torn_fit_gets_a_note_that_says_what_to_do():

@@ -122,6 +122,8 @@ def surface_tear(asset: RiggedAsset, clip: str = "fit") -> float:
     keep = rest > 1e-9 * max(float(rest.max(initial=0.0)), 1e-12)
     e, rest = e[keep], rest[keep]
     n = asset.clips[clip].num_frames
+    if len(e) == 0 or n == 0:  # no surface (points, degenerate faces) or no frames: nothing to tear
+        return 0.0
     torn = 0.0
     for s in range(0, n, 16):
         for v in asset.pose(clip, np.arange(s, min(s + 16, n))).astype(np.float64):
