@@ -19,11 +19,17 @@ from pathlib import Path
 
 
 def fits(args) -> None:
+    from zooctl.errors import NotFoundError
     from zooctl.fit.outputs import surface_tear
     from zooctl.store.fits import FitStore
 
     store = FitStore(Path(args.store))
-    tears = {name: surface_tear(store.character(name)) for name in sorted(store.names())}
+    tears = {}
+    for name in sorted(store.names()):
+        try:
+            tears[name] = surface_tear(store.character(name))
+        except NotFoundError:  # a fit that did not finish (or is running) has no character yet
+            print(f"{name}: no character, skipped")
     if args.out:
         Path(args.out).write_text(json.dumps(tears, indent=1))
     for suffix in args.suffix or [""]:
