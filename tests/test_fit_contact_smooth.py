@@ -1,4 +1,4 @@
-"""Ground contact, 3D smoothness and edge stretch, the fit's terms beyond silhouettes (`zooctl.fit.losses`): what
+"""Ground contact, 3D smoothness, edge stretch and gait symmetry, the fit's terms beyond silhouettes (`zooctl.fit.losses`): what
 each costs, where its gradient goes, and that a fit computes them only when weighted."""
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from zooctl.fit.losses import (
     edge_log_stretch,
     edge_stretch_loss,
     foot_sliding_loss,
+    gait_symmetry_loss,
     ground_height,
     lowest_heights,
     mesh_edges,
@@ -146,7 +147,8 @@ def test_a_fit_computes_the_terms_only_when_weighted(tmp_path):
     from zooctl.fit.inputs import load_fit_video
     from zooctl.fit.run import fit_video
 
-    tiny = tiny_overrides(3) | {"weights": {"ground_contact": 1.0, "smooth_3d": 1.0, "edge_stretch": 1.0}}
+    on = {"ground_contact": 1.0, "smooth_3d": 1.0, "edge_stretch": 1.0, "gait_symmetry": 1.0}
+    tiny = tiny_overrides(3) | {"weights": on}
     cfg = FitConfig.from_dict(json.loads(json.dumps(tiny)))
     assert cfg.to_dict()["weights"]["ground_contact"] == 1.0
     asset = tube_asset(bones=3, name="tube")
@@ -155,11 +157,16 @@ def test_a_fit_computes_the_terms_only_when_weighted(tmp_path):
     hist = res.history["stage2"]
     assert all("ground" in s and "smooth_3d" in s and s["edge_stretch"] >= 0 for s in hist)
     assert all(math.isfinite(s["ground"]) and s["smooth_3d"] >= 0 for s in hist)
-    off = fit_video(video, asset, FitConfig.from_dict(tiny_overrides(3)))
-    assert all(not {"ground", "smooth_3d", "edge_stretch"} & set(s) for s in off.history["stage2"])
+    assert all(math.isfinite(s["gait"]) and s["gait"] >= 0 for s in hist)  # the tube's ends mirror
+    off = fit_video(
+        video, asset, FitConfig.from_dict(tiny_overrides(3) | {"weights": dict.fromkeys(on, 0.0)})
+    )
+    assert all(not {"ground", "smooth_3d", "edge_stretch", "gait"} & set(s) for s in off.history["stage2"])
     defaults = FitConfig().weights
     assert defaults.ground_contact == 0.0 and defaults.smooth_3d == 0.0  # measured, not adopted
-    assert defaults.edge_stretch == 0.0 and not FitConfig().ablation.share_seams  # the same
+    assert defaults.gait_symmetry == 0.0
+    assert defaults.edge_stretch == 0.5  # adopted, chosen leave-one-video-out (BENCHMARKS.md)
+    assert not FitConfig().ablation.share_seams  # measured, not adopted
 
 
 def test_mesh_edges_are_each_undirected_edge_once():
@@ -201,3 +208,46 @@ def test_the_stretch_gradient_reaches_the_skinning_weights():
     loss = edge_stretch_loss(model(rot).vertices, rest, edges)
     grad_rot, grad_skin = torch.autograd.grad(loss, (rot, model.skin.logits))
     assert loss.item() > 0 and grad_rot.abs().sum() > 0 and grad_skin.abs().sum() > 0
+
+
+def _legs(front: float) -> torch.Tensor:
+    """(40, 2, 3) a left (x = -1) and a right (x = +1) foot swinging along z over one cycle,
+    half a cycle apart, around ``front`` (left) and ``-front`` (right)."""
+    t = torch.linspace(0.0, 2.0 * math.pi, 41, dtype=torch.float64)[:-1]
+    left = torch.stack((-torch.ones_like(t), torch.zeros_like(t), front + 0.3 * torch.sin(t)), -1)
+    right = torch.stack((torch.ones_like(t), torch.zeros_like(t), -front + 0.3 * torch.sin(t + math.pi)), -1)
+    return torch.stack((left, right), 1)
+
+
+def test_a_mirrored_gait_costs_nothing_and_a_leg_kept_in_front_costs_its_offset():
+    pairs, normal = torch.tensor([[0, 1]]), torch.tensor([1.0, 0.0, 0.0], dtype=torch.float64)
+    assert gait_symmetry_loss(_legs(0.0), pairs, normal, 0.0, SIZE).item() < 1e-12
+    kept = gait_symmetry_loss(_legs(0.5), pairs, normal, 0.0, SIZE)
+    assert kept.item() == pytest.approx((1.0 / SIZE) ** 2, rel=1e-6)  # the means 1.0 apart along z
+    stiff = _legs(0.0)
+    stiff[:, 0, 2] = stiff[:, 0, 2].mean()  # the left leg held still: the spreads differ
+    assert gait_symmetry_loss(stiff, pairs, normal, 0.0, SIZE).item() > 0.01
+    assert gait_symmetry_loss(_legs(0.5), pairs[:0], normal, 0.0, SIZE).item() == 0.0
+
+
+def test_the_gait_gradient_reaches_both_legs_and_is_finite_for_a_still_pair():
+    joints = _legs(0.5).requires_grad_(True)
+    pairs, normal = torch.tensor([[0, 1]]), torch.tensor([1.0, 0.0, 0.0], dtype=torch.float64)
+    (grad,) = torch.autograd.grad(gait_symmetry_loss(joints, pairs, normal, 0.0, SIZE), joints)
+    assert grad[:, 0].abs().sum() > 0 and grad[:, 1].abs().sum() > 0
+    still = torch.zeros(5, 2, 3, dtype=torch.float64, requires_grad=True)
+    (grad,) = torch.autograd.grad(gait_symmetry_loss(still, pairs, normal, 0.5, SIZE), still)
+    assert torch.isfinite(grad).all()
+
+
+def test_a_quadrupeds_mirrored_joints_reflect_onto_each_other():
+    from zooctl.procedural import build_animal
+    from zooctl.rig.model import ArticulatedModel
+    from zooctl.rig.priors import reflect
+
+    model = ArticulatedModel(build_animal("quadruped"))
+    normal, offset, pairs = model.mirrored_joints()
+    assert len(pairs) >= 4  # at least the four legs' joints
+    heads = model(None).joints.detach()
+    gap = (reflect(heads[pairs[:, 0]], normal, offset) - heads[pairs[:, 1]]).norm(dim=-1)
+    assert gap.max() < 0.02 * model.points.max(0).values.sub(model.points.min(0).values).norm()

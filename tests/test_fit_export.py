@@ -93,6 +93,6 @@ def test_surface_tear_sees_stretched_edges_and_opened_seams_not_bending_or_scale
 def test_a_torn_fit_gets_a_note_that_says_what_to_do():
     from zooctl.fit.outputs import surface_tear_note
 
-    assert surface_tear_note(0.013) is None  # as much as an artist's clip tears at most
-    note = surface_tear_note(0.063)
-    assert "6.3 %" in note and "edge_stretch" in note
+    assert surface_tear_note(0.013, 0.5) is None  # as much as an artist's clip tears at most
+    note = surface_tear_note(0.063, 0.5)
+    assert "6.3 %" in note and '"edge_stretch": 2}' in note and "(this fit: 0.5)" in note

@@ -522,6 +522,7 @@ def write_outputs(
     """Character, USD, GLB, overlay video, loss plot and metrics; the record fields they fill."""
     from .fitted_asset import fitted_asset
     from .outputs import (
+        TORN_NOTE_WEIGHT,
         bake_colours,
         exported_mask_iou,
         stage_summary,
@@ -581,7 +582,8 @@ def write_outputs(
         "mask_iou_model": _nanmean(model_iou),
         "surface_tear": round(surface_tear(asset), 5),
     }
-    note = surface_tear_note(metrics["surface_tear"]) if result.config.weights.edge_stretch == 0 else None
+    weight = result.config.weights.edge_stretch
+    note = surface_tear_note(metrics["surface_tear"], weight) if weight < TORN_NOTE_WEIGHT else None
     if note is not None:
         notes.append(note)
     if result.video.gt:

@@ -14,6 +14,7 @@
 | ground | `sinking_loss` + `foot_sliding_loss` in the root's frame (`body_frame`), the ground from `ground_height` | ``ground_contact`` |
 | smooth_3d | `vertex_acceleration_loss` (the posed vertices in world space) | ``smooth_3d`` |
 | edge_stretch | `edge_stretch_loss` (the posed surface's edges against the rest shape's, `mesh_edges`) | ``edge_stretch`` |
+| gait | `gait_symmetry_loss` (mirrored joints' positions over the clip in the root's frame; the model's ``mirrored_joints``) | ``gait_symmetry`` |
 | smooth, symmetry, bone_length | the articulation model's ``smoothness_loss``, ``symmetry_loss``, ``bone_length_loss`` (CASA eq. 6, 7; `zooctl.rig.priors`, since they belong to the model) | ``smooth`` (lambda2), ``symmetry`` (lambda3), ``bone_length`` |
 
 `zooctl.fit.stages.StageRunner.loss` weights and sums them; change a weight's default in
@@ -35,6 +36,7 @@ import torch
 import torch.nn.functional as F
 
 from ..render import _kernels
+from ..rig.priors import reflect
 from ..rig.rotations import quat_conjugate, quat_mul, quat_normalize, quat_to_axis_angle, quat_to_matrix
 
 if TYPE_CHECKING:
@@ -241,7 +243,7 @@ def ground_height(lowest: Tensor) -> Tensor:
     return lowest.median()
 
 
-def sinking_loss(body: Tensor, ground: Tensor | float, size: float) -> Tensor:
+def sinking_loss(body: Tensor, ground: Tensor | float, size: Tensor | float) -> Tensor:
     """Mean squared depth of the vertices below the ground, relative to ``size`` squared; body
     (B, V, 3) in the root frame, ground its height. Zero when nothing is below it."""
     depth = torch.relu(ground - body[..., UP_AXIS]) / size  # (B, V)
@@ -250,7 +252,7 @@ def sinking_loss(body: Tensor, ground: Tensor | float, size: float) -> Tensor:
 
 
 def foot_sliding_loss(
-    body: Tensor, ground: Tensor | float, size: float, band: float = CONTACT_BAND
+    body: Tensor, ground: Tensor | float, size: Tensor | float, band: float = CONTACT_BAND
 ) -> Tensor:
     """Mean squared motion along the ground, relative to ``size`` squared, of the vertices touching
     it in two consecutive frames of body (B, V, 3) (root frame, frames in order). A vertex's
@@ -268,7 +270,7 @@ def foot_sliding_loss(
     return (along * weight).sum() / weight.sum().clamp_min(1e-6) / size**2
 
 
-def vertex_acceleration_loss(verts: Tensor, size: float) -> Tensor:
+def vertex_acceleration_loss(verts: Tensor, size: Tensor | float) -> Tensor:
     """Mean squared second difference over consecutive frames of verts (B, V, 3) (frames in
     order, world space), relative to ``size`` squared: 3D temporal smoothness of the whole
     surface, root and joints together. Zero under three frames."""
@@ -302,3 +304,27 @@ def edge_stretch_loss(verts: Tensor, rest: Tensor, edges: Tensor, free: float = 
     own clips do, stays within 1.5 times (their 99th percentile: 1.05-1.6 times, BENCHMARKS.md)."""
     excess = (edge_log_stretch(verts, rest, edges).abs() - free).clamp(min=0.0)
     return excess.square().mean()
+
+
+def gait_symmetry_loss(
+    joints: Tensor, pairs: Tensor, normal: Tensor, offset: Tensor | float, size: Tensor | float
+) -> Tensor:
+    """Left/right symmetry of a clip's motion. joints (T, J, 3): every frame's joints in the root
+    frame (`body_frame`); pairs (P, 2) the joints (left, right) that mirror each other through the
+    plane ``normal . x = offset`` (the model's ``mirrored_joints``).
+
+    A walking or trotting animal's left and right legs pass through the same positions half a
+    cycle apart, so over the clip each mirrored pair has the same mean position and the same
+    spread; a fit that keeps the leg nearer the camera in front on every frame breaks both. The
+    squared gaps of the two (the left joint reflected), relative to ``size``, averaged over the
+    pairs. 0 without pairs or with fewer than two frames."""
+    if len(pairs) == 0 or joints.shape[0] < 2:
+        return joints.sum() * 0.0
+    left = reflect(joints[:, pairs[:, 0]], normal, offset) / size  # (T, P, 3)
+    right = joints[:, pairs[:, 1]] / size
+
+    def spread(x: Tensor) -> Tensor:  # the standard deviation, with a finite gradient at rest
+        return (x.var(0, correction=0) + 1e-8).sqrt()
+
+    gap = (left.mean(0) - right.mean(0)).square() + (spread(left) - spread(right)).square()
+    return gap.sum(-1).mean()

@@ -141,16 +141,18 @@ def surface_tear(asset: RiggedAsset, clip: str = "fit") -> float:
 
 
 TORN_NOTE_SHARE = 0.02  # above every artist's clip of the 28 shared animals (the most: 1.3 %)
+TORN_NOTE_WEIGHT = 2.0  # the edge-stretch weight the note recommends
 
 
-def surface_tear_note(share: float) -> str | None:
-    """The fit record's note for a character whose pose tears ``share`` of its edges, or None."""
+def surface_tear_note(share: float, weight: float) -> str | None:
+    """The fit record's note for a character whose pose tears ``share`` of its edges under the
+    edge-stretch ``weight`` it was fitted with, or None."""
     if share <= TORN_NOTE_SHARE:
         return None
     return (
         f"the fitted pose tears {100 * share:.1f} % of the surface's edges (artists' clips of the shared "
-        'animals: at most 1.3 %); --config with {"weights": {"edge_stretch": 2}} keeps the surface whole '
-        "for about 0.01 of mask IoU (BENCHMARKS.md, A torn surface)"
+        f'animals: at most 1.3 %); --config with {{"weights": {{"edge_stretch": {TORN_NOTE_WEIGHT:g}}}}} '
+        f"(this fit: {weight:g}) keeps the surface whole for about 0.01 of mask IoU (BENCHMARKS.md, A torn surface)"
     )
 
 

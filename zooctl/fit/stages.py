@@ -38,6 +38,7 @@ from .losses import (
     edge_stretch_loss,
     flow_loss,
     foot_sliding_loss,
+    gait_symmetry_loss,
     ground_height,
     joint_limit_loss,
     lowest_heights,
@@ -142,17 +143,26 @@ class StageRunner:
         self.edges: Tensor | None = None  # the mesh's edges, once a term needs them
         # Each frame's lowest height in the root frame, refreshed from every step's window (no
         # extra posing): the ground is their median over the frames (`ground_height`).
-        self.lowest = self._lowest_heights() if stage == 2 and cfg.weights.ground_contact > 0 else None
+        # Likewise every frame's joints in the root frame, for the gait term's clip statistics.
+        w = cfg.weights
+        ground = stage == 2 and w.ground_contact > 0
+        gait = stage == 2 and w.gait_symmetry > 0 and hasattr(scene.model, "mirrored_joints")
+        low, joints = self._root_frame_buffers() if ground or gait else (None, None)
+        self.lowest = low if ground else None
+        self.joints = joints if gait else None
 
     @torch.no_grad()
-    def _lowest_heights(self, batch: int = 16) -> Tensor:
-        """(hi - sequence_from,) every frame's lowest height in its root frame, as posed now."""
-        sc, out = self.scene, []
+    def _root_frame_buffers(self, batch: int = 16) -> tuple[Tensor, Tensor]:
+        """(hi - sequence_from,) every frame's lowest height and (hi - sequence_from, J, 3) its
+        joints, in its root frame, as posed now."""
+        sc, low, joints = self.scene, [], []
         for s in range(self.sequence_from, self.hi, batch):
             idx = torch.arange(s, min(s + batch, self.hi), device=sc.rotations.device)
-            v = sc.pose(idx).vertices
-            out.append(lowest_heights(body_frame(v, sc.root_rotation[idx], sc.root_translation[idx])))
-        return torch.cat(out)
+            p = sc.pose(idx)
+            R, t = sc.root_rotation[idx], sc.root_translation[idx]
+            low.append(lowest_heights(body_frame(p.vertices, R, t)))
+            joints.append(body_frame(p.joints, R, t))
+        return torch.cat(low), torch.cat(joints)
 
     def window(self) -> Tensor:
         """Stage 1: up to ``batch`` frames spread over the video (random offset). Stage 2: the next
@@ -195,7 +205,8 @@ class StageRunner:
     def _loss(self, frames: Tensor, it: int) -> tuple[Tensor, dict[str, Tensor]]:
         scene, w, ab = self.scene, self.cfg.weights, self.cfg.ablation
         tg = self.targets
-        verts = scene.pose_rigid(frames) if self.stage == 1 else scene.pose(frames).vertices
+        posed = None if self.stage == 1 else scene.pose(frames)
+        verts = scene.pose_rigid(frames) if posed is None else posed.vertices
         cam = scene.camera(len(frames))
         weight = tg.masks.present[frames].to(verts.dtype)
         terms: dict[str, Tensor] = {}
@@ -248,8 +259,8 @@ class StageRunner:
                 terms["pose"] = w.pose_prior * clip_pose_loss(q, scene.model.rest_rotation, scene.clip_stats)
             elif kind == "motion":
                 terms["pose"] = w.pose_prior * scene.sequence_prior.loss(scene.rotations, frames)
-            if w.ground_contact > 0 or w.smooth_3d > 0:
-                size = scene.size * float(scene.model.global_scale().detach())
+            if w.ground_contact > 0 or w.smooth_3d > 0 or self.joints is not None:
+                size = scene.size * scene.model.global_scale().detach()  # a tensor: no host sync
             if w.ground_contact > 0:
                 body = body_frame(verts, scene.root_rotation[frames], scene.root_translation[frames])
                 self.lowest[frames - self.sequence_from] = lowest_heights(body.detach())
@@ -259,6 +270,16 @@ class StageRunner:
                 )
             if w.smooth_3d > 0:
                 terms["smooth_3d"] = w.smooth_3d * vertex_acceleration_loss(verts, size)
+            if self.joints is not None:
+                body = body_frame(posed.joints, scene.root_rotation[frames], scene.root_translation[frames])
+                rows = frames - self.sequence_from
+                self.joints[rows] = body.detach()
+                # The window's frames live, the others as last posed: the clip's statistics.
+                clip = self.joints.index_put((rows,), body)
+                normal, offset, pairs = scene.model.mirrored_joints()
+                terms["gait"] = w.gait_symmetry * gait_symmetry_loss(
+                    clip, pairs, normal, offset.detach(), size
+                )
             if w.edge_stretch > 0:
                 if self.edges is None:
                     self.edges = mesh_edges(scene.faces)

@@ -15,6 +15,9 @@ which a model may ignore. The object is a ``torch.nn.Module`` with:
   ``skin()`` the (V, K) weights, and ``displacement`` (an ``nn.Module`` of (V, 3) points, or None);
 - the priors the fit weights: ``symmetry_loss(sample)``, ``bone_length_loss()``,
   ``smoothness_loss(rotations)`` (scalars), and ``canonical_vertices()`` (V, 3);
+- optionally ``mirrored_joints()`` -> (normal (3,), offset (), pairs (P, 2)): the rest shape's mirror
+  plane and the joints that mirror each other through it (the fit's ``gait_symmetry`` term needs
+  it and is skipped for a model without it);
 - optionally ``shared_displacement()``, a context manager within which the displacement field is
   evaluated once (the fit enters it around each loss evaluation, which poses the model and takes
   the symmetry and displacement terms with the same parameters).

@@ -303,6 +303,12 @@ class ArticulatedModel(nn.Module):
             idx = torch.randperm(self.num_vertices, generator=gen)[:sample].to(self.points.device)
         return symmetry_loss(self.canonical_vertices(), n, d * self.global_scale(), idx)
 
+    def mirrored_joints(self) -> tuple[Tensor, Tensor, Tensor]:
+        """The mirror plane of `canonical_vertices` (unit normal (3,), offset () at the current
+        global scale) and the (P, 2) joint pairs (left, right) that mirror each other through it."""
+        n, d = self.symmetry_plane()
+        return n, d * self.global_scale(), self._pairs
+
     def bone_length_loss(self) -> Tensor:
         """Bone scales near 1 and equal between mirrored joints."""
         self.symmetry_plane()
