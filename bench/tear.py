@@ -6,7 +6,9 @@ stored and for the artists' own clips of a bank: the figures of BENCHMARKS.md, "
 
 ``fits`` reads every stored fit's character (its ``fit`` clip) and prints the mean and median
 share torn, per name suffix when given (``bench run`` names its fits ``bench-VIDEO-ABLATION``), so
-fits made before the metric entered the record can be scored. ``clips`` scores every clip of
+fits made before the metric entered the record can be scored. Seams are found on the fit's
+template, from the store's bank (as the fit does; on the character's own rest shape, with a note,
+where the bank no longer holds it). ``clips`` scores every clip of
 every bank asset: what articulation by an artist tears.
 """
 
@@ -18,18 +20,41 @@ import statistics
 from pathlib import Path
 
 
+def seam_positions(character, template):
+    """(V, 3) each of the character's vertices at its template vertex's position, through the
+    faces (the colour bake's atlas splits vertices but keeps the faces and their order), or None
+    when the two do not share their faces."""
+    import numpy as np
+
+    if template is None or template.faces.shape != character.faces.shape:
+        return None
+    at = np.zeros_like(np.asarray(character.vertices, np.float64))
+    at[character.faces.reshape(-1)] = np.asarray(template.vertices, np.float64)[template.faces.reshape(-1)]
+    return at
+
+
 def fits(args) -> None:
     from zooctl.errors import NotFoundError
     from zooctl.fit.outputs import surface_tear
+    from zooctl.store.bank import Bank
     from zooctl.store.fits import FitStore
 
-    store = FitStore(Path(args.store))
-    tears = {}
+    store, bank = FitStore(Path(args.store)), Bank(Path(args.store))
+    tears, templates = {}, {}
     for name in sorted(store.names()):
         try:
-            tears[name] = surface_tear(store.character(name))
+            character = store.character(name)
         except NotFoundError:  # a fit that did not finish (or is running) has no character yet
             print(f"{name}: no character, skipped")
+            continue
+        template = store.get(name).get("template")
+        if template not in templates:
+            try:
+                templates[template] = bank.get(template)
+            except NotFoundError:
+                templates[template] = None
+                print(f"template {template} not in the bank: its fits' seams found on their own rest shape")
+        tears[name] = surface_tear(character, seams=seam_positions(character, templates[template]))
     if args.out:
         Path(args.out).write_text(json.dumps(tears, indent=1))
     for suffix in args.suffix or [""]:

@@ -90,6 +90,29 @@ def test_surface_tear_sees_stretched_edges_and_opened_seams_not_bending_or_scale
     assert surface_tear(flat) == 0.0
 
 
+def test_surface_tear_finds_the_seams_on_the_template_when_the_rest_shape_is_already_cracked():
+    """A fitted character's rest shape can be cracked (copies with different learned skinning,
+    moved apart by stretched bones): its own rest positions no longer tell which vertices are
+    copies of one, its template's do."""
+    import dataclasses
+
+    from zooctl.fit.outputs import surface_tear
+
+    bent = tube_asset(bones=3, rings_per_bone=4, segments=8)
+    split = unweld(dataclasses.replace(bent, clips={"fit": bent.clips["bend"]}))
+    far = split.vertices[:, 0] > 0.9 * split.vertices[:, 0].max()
+    first = far & (np.arange(split.num_vertices) % 3 == 0)
+    edge = np.linalg.norm(split.vertices[split.faces[:, 0]] - split.vertices[split.faces[:, 1]], axis=1).max()
+    rest = split.vertices.copy()
+    rest[first, 0] += 3.0 * edge  # the tip's copies pulled out at rest: a gaping crack
+    cracked = dataclasses.replace(split, vertices=rest)
+    assert surface_tear(cracked) == 0.0  # blind: each pulled copy is its own position
+    assert surface_tear(cracked, seams=split.vertices) > 0.0
+    assert surface_tear(split, seams=split.vertices) == 0.0
+    with pytest.raises(ValueError):
+        surface_tear(split, seams=split.vertices[:-1])
+
+
 def test_a_torn_fit_gets_a_note_that_says_what_to_do():
     from zooctl.fit.outputs import surface_tear_note
 

@@ -261,9 +261,10 @@ class Ablation:
     stretch: bool = spec(True, required=False)
     displacement: bool = spec(True, required=False)
     learn_skinning: bool = spec(True, required=False)
-    # Off: measured on the DAVIS videos, it changed little and tore no less (BENCHMARKS.md, Fit).
+    # On since 2026-11-29: without it a learned skinning cracks the flat-shaded templates open
+    # (a third of their edges; BENCHMARKS.md, "Shared seams and the edge-stretch term").
     share_seams: bool = spec(
-        False,
+        True,
         help="copies of a template vertex at one position (a flat-shaded or UV-split mesh's seams) "
         "learn one set of skinning weights, so the surface cannot crack open along them",
         required=False,

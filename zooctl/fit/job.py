@@ -542,6 +542,9 @@ def write_outputs(
         result.video.fps,
         {"source": f"zooctl fit of {result.video.name}"},
     )
+    # Before the bake, whose atlas splits vertices: the template's vertices tell which are copies.
+    same = result.template.vertices.shape == asset.vertices.shape
+    tear = surface_tear(asset, seams=result.template.vertices if same else None)
     cam = result.input_camera().to("cpu")  # the outputs pose and render the exported asset on the CPU
     texture = None
     if result.config.texture:
@@ -580,7 +583,7 @@ def write_outputs(
             f"masks ({result.video.mask_source})"
         ),
         "mask_iou_model": _nanmean(model_iou),
-        "surface_tear": round(surface_tear(asset), 5),
+        "surface_tear": round(tear, 5),
     }
     weight = result.config.weights.edge_stretch
     note = surface_tear_note(metrics["surface_tear"], weight) if weight < TORN_NOTE_WEIGHT else None

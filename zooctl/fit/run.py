@@ -269,8 +269,8 @@ def new_scene(
     template: RiggedAsset, cfg: FitConfig, num_frames: int, h: int, w: int, principal: tuple[float, float]
 ) -> FitScene:
     """A `FitScene` of ``num_frames`` frames in (h, w) fit images as ``cfg`` sets it up."""
-    # Passed only when switched on: articulation plugins need not know the option.
-    options = {"share_seams": True} if cfg.ablation.share_seams else {}
+    # Articulation plugins need not know the option (`get_articulation_model` leaves it out).
+    options = {"share_seams": cfg.ablation.share_seams}
     return FitScene(
         template,
         num_frames,

@@ -2,8 +2,10 @@
 the plugin registry (`zooctl.hookspecs.register_articulation_models`).
 
 A factory is called as ``factory(asset, device="cpu", **options)``; the fit passes the options
-``stretch``, ``displacement`` (its ablation switches) and ``hidden`` (displacement MLP width),
-which a model may ignore. The object is a ``torch.nn.Module`` with:
+``stretch``, ``displacement`` (its ablation switches), ``hidden`` (displacement MLP width) and
+``share_seams`` (copies of a vertex learn one skinning row), which a model may ignore; a factory
+that names its options and takes no ``**options`` gets only those it names. The object is a
+``torch.nn.Module`` with:
 
 - ``forward(rotations (..., J, 4) wxyz, root_rotation (..., 4), root_translation (..., 3))`` ->
   `zooctl.rig.model.Pose` with ``vertices`` (..., V, 3), ``joints`` (..., J, 3) and ``transforms``
@@ -70,7 +72,19 @@ class ArticulationModel(Protocol):
 def get_articulation_model(
     name: str, asset: RiggedAsset, device: str = "cpu", **options: Any
 ) -> ArticulationModel:
-    """Build the articulation model registered as ``name`` for ``asset``."""
+    """Build the articulation model registered as ``name`` for ``asset``. Options its factory does
+    not name (and it takes no ``**options``) are left out: a plugin written before an option
+    existed ignores it instead of failing."""
+    import inspect
+
     from ..plugins import get_registry
 
-    return get_registry().get("articulation_model", name).create(asset=asset, device=device, **options)
+    spec = get_registry().get("articulation_model", name)
+    try:
+        params = inspect.signature(spec.factory).parameters.values()
+    except (TypeError, ValueError):  # no signature to read (a builtin): pass everything
+        params = None
+    if params is not None and not any(p.kind is p.VAR_KEYWORD for p in params):
+        named = {p.name for p in params}
+        options = {k: v for k, v in options.items() if k in named}
+    return spec.create(asset=asset, device=device, **options)

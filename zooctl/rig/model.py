@@ -78,7 +78,8 @@ class ArticulatedModel(nn.Module):
     stretchable bones (else plain LBS with bone scales ignored); ``displacement`` adds the MLP
     field (``hidden`` width, ``num_freqs`` positional-encoding octaves); ``dtype``/``device``;
     ``share_seams``: copies of a vertex at one bind position share their learned skinning weights
-    (`zooctl.rig.skinning.seam_groups`; off by default: each copy learns its own).
+    (`zooctl.rig.skinning.seam_groups`; off by default here, each copy learning its own; the fit
+    turns it on, ``ablation.share_seams``).
     ``skinning`` (a class attribute) blends the bone transforms: a subclass replaces it (the
     interface is in `zooctl.rig.base`).
     """
