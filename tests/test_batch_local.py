@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -42,6 +44,12 @@ def holds_scratch(folder, report):
         time.sleep(120)
     finally:
         shutil.rmtree(folder)
+
+
+def holds_scratch_with_pid(folder, report):
+    """`holds_scratch`, leaving its process id beside the folder."""
+    folder.with_suffix(".pid").write_text(str(os.getpid()))
+    holds_scratch(folder, report)
 
 
 def test_pool_retries_a_dead_worker_and_reports_bad_input(tmp_path):
@@ -298,3 +306,44 @@ def test_workers_ended_by_the_driver_remove_their_scratch_folders(tmp_path):
     with pytest.raises(KeyboardInterrupt):
         list(ex.map(holds_scratch, folders, on_stage))
     assert not any(f.exists() for f in folders)
+
+
+@pytest.mark.skipif(
+    not sys.platform.startswith("linux"), reason="the workers' end with the driver uses Linux's prctl"
+)
+def test_workers_of_a_killed_driver_end_and_remove_their_scratch_folders(tmp_path):
+    """A driver killed outright (SIGKILL: no handler runs) takes its workers with it: they do not
+    go on working for nobody, and their tasks unwind."""
+    folders = [tmp_path / "a", tmp_path / "b"]
+    driver = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import sys; from pathlib import Path; sys.path.insert(0, sys.argv[1]);"
+            "from test_batch_local import holds_scratch_with_pid; from zooctl.executors import get_executor;"
+            "list(get_executor('local', jobs=2).map(holds_scratch_with_pid, [Path(p) for p in sys.argv[2:]]))",
+            str(Path(__file__).parent),
+            *map(str, folders),
+        ]
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while not all(f.with_suffix(".pid").exists() and f.exists() for f in folders):
+            assert time.monotonic() < deadline and driver.poll() is None, "the workers never started"
+            time.sleep(0.2)
+    finally:
+        driver.kill()
+        driver.wait()
+    pids = [int(f.with_suffix(".pid").read_text()) for f in folders]
+    deadline = time.monotonic() + 30
+    while any(f.exists() for f in folders) or any(_alive(p) for p in pids):
+        assert time.monotonic() < deadline, "the workers outlived their driver"
+        time.sleep(0.2)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return Path(f"/proc/{pid}/stat").exists() and Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"

@@ -32,10 +32,28 @@ def _on_sigterm(signum: int, frame: Any) -> None:
     os._exit(128 + signum)
 
 
-def _init_worker(stages: Any) -> None:
+def _end_with_driver(driver: int) -> None:
+    """Linux: SIGTERM this worker when the driver dies (SIGKILL, a crash), so that it does not fit on
+    for nobody and its task unwinds as on the driver's own SIGTERM. Elsewhere a worker ends when it
+    next reads the driver's queue."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        if libc.prctl(1, signal.SIGTERM, 0, 0, 0) != 0:  # PR_SET_PDEATHSIG
+            return
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != driver:  # the driver died before the request was in place
+        os._exit(128 + signal.SIGTERM)
+
+
+def _init_worker(stages: Any, driver: int | None = None) -> None:
     global _STAGES
     _STAGES = stages
     signal.signal(signal.SIGTERM, _on_sigterm)
+    if driver is not None:
+        _end_with_driver(driver)
 
 
 def _report_to_queue(index: int):
@@ -91,7 +109,9 @@ class LocalExecutor(ExecutorBase):
     # -- process pool ----------------------------------------------------------------------
     def _new_pool(self, stages: Any) -> ProcessPoolExecutor:
         ctx = multiprocessing.get_context("spawn")
-        return ProcessPoolExecutor(self.slots, mp_context=ctx, initializer=_init_worker, initargs=(stages,))
+        return ProcessPoolExecutor(
+            self.slots, mp_context=ctx, initializer=_init_worker, initargs=(stages, os.getpid())
+        )
 
     def _map_pool(self, fn: Task, items: list[Any], on_stage: StageCallback | None):
         stages = multiprocessing.get_context("spawn").SimpleQueue()
