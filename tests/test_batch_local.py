@@ -320,8 +320,9 @@ def test_workers_of_a_killed_driver_end_and_remove_their_scratch_folders(tmp_pat
             sys.executable,
             "-c",
             "import sys; from pathlib import Path; sys.path.insert(0, sys.argv[1]);"
-            "from test_batch_local import holds_scratch_with_pid; from zooctl.executors import get_executor;"
-            "list(get_executor('local', jobs=2).map(holds_scratch_with_pid, [Path(p) for p in sys.argv[2:]]))",
+            f"from test_batch_local import {holds_scratch_with_pid.__name__} as task;"
+            "from zooctl.executors import get_executor;"
+            "list(get_executor('local', jobs=2).map(task, [Path(p) for p in sys.argv[2:]]))",
             str(Path(__file__).parent),
             *map(str, folders),
         ]

@@ -22,6 +22,7 @@ from .base import ExecutorBase, StageCallback, Task, TaskOutcome, call_task, cra
 
 _STAGES: Any = None  # the worker's end of the driver's stage queue (set by _init_worker)
 _IN_TASK = False
+_DRIVER: int | None = None  # the driver's process id, where a worker ends with it (Linux)
 
 
 def _on_sigterm(signum: int, frame: Any) -> None:
@@ -49,8 +50,8 @@ def _end_with_driver(driver: int) -> None:
 
 
 def _init_worker(stages: Any, driver: int | None = None) -> None:
-    global _STAGES
-    _STAGES = stages
+    global _STAGES, _DRIVER
+    _STAGES, _DRIVER = stages, driver
     signal.signal(signal.SIGTERM, _on_sigterm)
     if driver is not None:
         _end_with_driver(driver)
@@ -73,6 +74,10 @@ def _pool_task(fn: Task, item: Any, index: int, env: dict[str, str], threads: in
         return call_task(fn, item, _report_to_queue(index), env, threads)
     finally:
         _IN_TASK = False
+        # A driver gone: nobody reads the result, and the queue's write end, which every worker
+        # holds too, never closes, so the pool's loop would wait for work forever.
+        if _DRIVER is not None and os.getppid() != _DRIVER:
+            os._exit(128 + signal.SIGTERM)
 
 
 class LocalExecutor(ExecutorBase):
