@@ -35,8 +35,8 @@ def _on_sigterm(signum: int, frame: Any) -> None:
 
 def _end_with_driver(driver: int) -> None:
     """Linux: SIGTERM this worker when the driver dies (SIGKILL, a crash), so that it does not fit on
-    for nobody and its task unwinds as on the driver's own SIGTERM. Elsewhere a worker ends when it
-    next reads the driver's queue."""
+    for nobody and its task unwinds as on the driver's own SIGTERM. Elsewhere a worker whose driver
+    died outright finishes its task and then waits, idle, until it is killed."""
     try:
         import ctypes
 

@@ -262,7 +262,7 @@ class Ablation:
     displacement: bool = spec(True, required=False)
     learn_skinning: bool = spec(True, required=False)
     # On since 2026-11-29: without it a learned skinning cracks the flat-shaded templates open
-    # (a third of their edges; BENCHMARKS.md, "Shared seams and the edge-stretch term").
+    # (17-42 % of their edges; BENCHMARKS.md, "Shared seams and the edge-stretch term").
     share_seams: bool = spec(
         True,
         help="copies of a template vertex at one position (a flat-shaded or UV-split mesh's seams) "
