@@ -26,7 +26,6 @@ from ..asset import RiggedAsset
 from ..render.camera import Camera
 from ..rig.base import get_articulation_model
 from ..rig.model import Pose
-from ..rig.skinning import mean_by_group
 
 Tensor = torch.Tensor
 CAMERA_ROTATION = np.diag([1.0, -1.0, -1.0])  # world -> OpenCV camera frame (looks down world -Z)
@@ -85,13 +84,8 @@ class FitScene(nn.Module):
         """A state saved without shared seams (a row of initial logits per vertex) loads into a
         scene whose model shares them: each group's mean."""
         key, skin = prefix + "init_logits", self.model.skin
-        groups = getattr(skin, "groups", None)
-        if (
-            key in state
-            and groups is not None
-            and state[key].shape[0] == len(groups) != len(self.init_logits)
-        ):
-            state[key] = mean_by_group(state[key], groups.to(state[key].device), len(self.init_logits))
+        if key in state and hasattr(skin, "as_groups"):  # a plugin's skinning may not group
+            state[key] = skin.as_groups(state[key])
 
     @property
     def num_frames(self) -> int:

@@ -222,8 +222,8 @@ def seam_groups(points: np.ndarray, bones: np.ndarray, tol: float = 1e-6) -> np.
 
     Flat-shaded and UV-mapped meshes split the surface at every seam into copies of a vertex (the
     Quaternius animals: a copy per face, 3,966 vertices at 977 positions); skinning weights
-    learned per copy can pull the copies apart and open cracks between the faces (rare in the
-    fits measured: BENCHMARKS.md, "A torn surface")."""
+    learned per copy pull the copies apart and open cracks between the faces (17-42 % of the
+    edges of the fits measured: BENCHMARKS.md, "Shared seams and the edge-stretch term")."""
     size = float(np.ptp(points, axis=0).max()) if len(points) else 0.0
     cell = np.round(points / max(tol * size, 1e-30)).astype(np.int64)
     _, first, inverse = np.unique(
@@ -263,14 +263,21 @@ class SkinWeights(nn.Module):
         )
         self._register_load_state_dict_pre_hook(self._from_per_vertex)
 
+    def as_groups(self, rows: Tensor) -> Tensor:
+        """``rows`` (V, ...), a row per vertex, as (U, ...) a row per group (each group's mean);
+        rows that are per group already are returned as they are."""
+        if rows.shape[0] == len(self.groups) != self.logits.shape[0]:
+            return mean_by_group(rows, self.groups.to(rows.device), self.logits.shape[0])
+        return rows
+
     def _from_per_vertex(self, state, prefix, *args) -> None:
         """A state saved without shared seams (a logit row per vertex) loads as each group's
         mean; one saved before the groups buffer existed gets this model's."""
         key = prefix + "logits"
         if prefix + "groups" not in state:
             state[prefix + "groups"] = self.groups
-        if key in state and state[key].shape[0] == len(self.groups) != self.logits.shape[0]:
-            state[key] = mean_by_group(state[key], self.groups.to(state[key].device), self.logits.shape[0])
+        if key in state:
+            state[key] = self.as_groups(state[key])
 
     def forward(self) -> Tensor:
         w = torch.softmax(self.logits, dim=-1)
