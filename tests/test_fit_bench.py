@@ -9,7 +9,7 @@ import pytest
 from fit_helpers import tiny_overrides
 
 from zooctl.benchdata.make import make_video
-from zooctl.benchdata.run import markdown_table, run_benchmark
+from zooctl.benchdata.run import ABLATIONS, markdown_table, run_benchmark
 from zooctl.errors import UsageError
 from zooctl.rig.synthetic import tube_asset
 
@@ -288,3 +288,43 @@ def test_a_named_clip_is_the_one_filmed(tmp_path):
     with pytest.raises(UsageError, match="no clip 'gallop'.*") as err:
         make_video(asset, tmp_path / "b", frames=4, size=48, motion="clips", clip="gallop")
     assert "walk" in err.value.hint
+
+
+def _edge_lengths(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    return np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1)
+
+
+def _dense(asset) -> np.ndarray:
+    w = np.zeros((asset.num_vertices, asset.num_joints))
+    np.add.at(w, (np.arange(asset.num_vertices)[:, None], asset.skin_joints), asset.skin_weights)
+    return w
+
+
+def test_keep_shape_fits_only_the_pose_and_keeps_the_templates_shape_and_skinning(tmp_path):
+    """`zooctl fit --keep-shape` (`FitConfig.keep_shape`, `bench run --ablation shape-kept`): the
+    exported character is the template scaled by the fit's global scale, with the template's
+    skinning, while the default fit of the same video reshapes both; the pose is fitted in both."""
+    from zooctl.fit.config import FitConfig
+    from zooctl.fit.fitted_asset import fitted_asset
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.run import fit_video
+
+    template = tube_asset(bones=3, name="tube")
+    video = load_fit_video(
+        make_video(tube_asset(bones=3, radius=0.3, name="fat"), tmp_path / "v", frames=4, size=32)
+    )
+    shapes = {}
+    for kept in (False, True):
+        cfg = FitConfig.from_dict(json.loads(json.dumps(TINY)))
+        res = fit_video(video, template, cfg.keep_shape() if kept else cfg)
+        out = fitted_asset(res.scene, res.template, "fit", res.video.fps)
+        ratio = _edge_lengths(out.vertices, out.faces) / _edge_lengths(template.vertices, template.faces)
+        shapes[kept] = (ratio.std() / ratio.mean(), np.abs(_dense(out) - _dense(template)).max(), out)
+    spread, skin_drift, out = shapes[True]
+    assert spread < 1e-4 and skin_drift < 1e-5  # one scale for every edge; the template's weights
+    assert shapes[False][0] > 1e-4 and shapes[False][1] > 1e-3  # the default reshapes and reskins
+    q = out.clips["fit"].rotations
+    assert np.abs(q[1:, 1:] - q[:1, 1:]).max() > 1e-3  # the joints still move from frame to frame
+    bench = FitConfig.from_dict(json.loads(json.dumps(ABLATIONS["shape-kept"])))
+    assert bench.ablation == FitConfig().keep_shape().ablation

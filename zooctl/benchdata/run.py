@@ -5,7 +5,8 @@ the bank minus that asset); ``template`` fixes the template instead, and ``own_t
 each video with its own asset (what a bank that holds the animal allows: the bound the
 leave-one-out bank is measured against). Ablations (CASA tables 2-5)
 are config switches applied on top of the preset: ``no-flow``, ``no-symmetry``, ``no-smoothness``,
-``no-stretch``, ``no-displacement``, ``fixed-skinning`` and ``retrieval-only``.
+``no-stretch``, ``no-displacement``, ``fixed-skinning``, ``retrieval-only`` and ``shape-kept``
+(``no-stretch``, ``no-displacement`` and ``fixed-skinning`` together: `zooctl fit --keep-shape`).
 
 With retrieval, each row also says whether the fit's template has the video's body plan
 (`zooctl.retrieval.evaluate.body_plan`), and the summary counts the videos whose plan is right at
@@ -22,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError, UsageError
-from ..fit.config import FitConfig, preset
+from ..fit.config import KEEP_SHAPE, FitConfig, preset
 
 ABLATIONS: dict[str, dict[str, Any]] = {
     "full": {},
@@ -33,6 +34,7 @@ ABLATIONS: dict[str, dict[str, Any]] = {
     "no-displacement": {"ablation": {"displacement": False}},
     "fixed-skinning": {"ablation": {"learn_skinning": False}},
     "retrieval-only": {"ablation": {"optimise": False}},
+    "shape-kept": KEEP_SHAPE,
 }
 COLUMNS = (
     "mask_iou",

@@ -84,7 +84,7 @@ def run(
     ablation: list[str] = typer.Option(
         None,
         "--ablation",
-        help="full, no-flow, no-symmetry, no-smoothness, no-stretch, no-displacement, fixed-skinning, retrieval-only (repeatable).",
+        help="full, no-flow, no-symmetry, no-smoothness, no-stretch, no-displacement, fixed-skinning, retrieval-only, shape-kept (the template's shape, bones and skinning kept, as fit --keep-shape; repeatable).",
     ),
     template: str = typer.Option(
         None, "--template", help="Fit every video with this bank asset instead of retrieval."

@@ -71,6 +71,12 @@ def fit(
         "--template",
         help="Bank asset to fit, as a rule the animal's own rig (its joints step at stage2.lr_joints_given; default: template retrieval).",
     ),
+    keep_shape: bool = typer.Option(
+        False,
+        "--keep-shape",
+        help="The template is the animal's own rig: keep its shape, bone lengths and skinning, and fit "
+        "only the pose, the root and the camera (a truer 3D pose; a little less input IoU).",
+    ),
     masks: str = typer.Option(
         None, "--masks", help="Folder of mask images (one per frame), or 'auto' (GrabCut)."
     ),
@@ -161,6 +167,8 @@ def fit(
         cfg.texture = texture
     if max_frames is not None:
         cfg.max_frames = max_frames
+    if keep_shape:
+        cfg.keep_shape()
     cfg.validate()
     if fit_many.wants_batch(videos, batch.executor):
         opts = dict(template=template, masks=masks, box=box, out=out, name=name, cameras=cameras)

@@ -272,6 +272,12 @@ class Ablation:
     optimise: bool = spec(True, help="false: retrieval (template and camera) only", required=False)
 
 
+# The template is the animal's own rig: its shape, bone lengths and skinning stay, and only the
+# pose, the root and the camera are fitted (`zooctl fit --keep-shape`, `bench run --ablation
+# shape-kept`; BENCHMARKS.md, "A torn surface").
+KEEP_SHAPE: dict[str, Any] = {"ablation": {"learn_skinning": False, "displacement": False, "stretch": False}}
+
+
 @dataclass
 class FitConfig:
     """A whole fit: image sizes, device, seed, the camera search, two stages and the loss weights."""
@@ -385,6 +391,12 @@ class FitConfig:
         if st.lr_joints_given is None:
             return self
         return dataclasses.replace(self, stage2=dataclasses.replace(st, lr_joints=st.lr_joints_given))
+
+    def keep_shape(self) -> FitConfig:
+        """This config with the template's shape, bone lengths and skinning kept (`KEEP_SHAPE`):
+        for a template that is the animal's own rig. Changes ``self``; returns it."""
+        _merge(self, KEEP_SHAPE, "keep_shape")
+        return self
 
     def validate(self) -> FitConfig:
         """Check every field against its rules (`zooctl.fit.config_spec`), then the components
