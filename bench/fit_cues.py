@@ -12,7 +12,8 @@ tie), scored on that video; for every other configuration alone against the base
 and among all of them. In-sample beside it: the configuration best on all videos. A ``--guard
 METRIC=MARGIN`` leaves out of a choice every configuration whose mean METRIC on the choosing
 videos is worse than the baseline's by more than MARGIN (e.g. the least torn surface that costs
-at most 0.005 of input view). Rows with ``surface_tear`` add it as a column.
+at most 0.005 of input view). Rows with ``surface_tear`` or ``view_psnr`` (a textured benchmark's
+held-out colour error, dB) add them as columns.
 """
 
 from __future__ import annotations
@@ -87,8 +88,10 @@ def main() -> None:
     videos = sorted(set.intersection(*(set(r) for r in runs.values())))
     if len(videos) < 2:
         raise SystemExit("the runs share fewer than two fitted videos: nothing to leave out")
-    tear = all("surface_tear" in runs[n][v] for n in names for v in videos)
-    metrics = METRICS + ((("surface_tear", "torn"),) if tear else ())
+    extra = (("surface_tear", "torn"), ("view_psnr", "held-out PSNR"))
+    metrics = METRICS + tuple(
+        (k, lab) for k, lab in extra if all(runs[n][v].get(k) is not None for n in names for v in videos)
+    )
     head = "| video | " + " | ".join(f"{lab}: {' / '.join(names)}" for _, lab in metrics) + " |"
     print(head)
     print("|---" * (1 + len(metrics)) + "|")
@@ -99,7 +102,7 @@ def main() -> None:
                 runs[n][v][k] if v != "mean" else float(np.mean([runs[n][u][k] for u in videos]))
                 for n in names
             ]
-            cells.append(" / ".join(f"{x:.3f}" for x in vals))
+            cells.append(" / ".join(f"{x:.2f}" if k == "view_psnr" else f"{x:.3f}" for x in vals))
         print(f"| {v} | " + " | ".join(cells) + " |")
     within = "".join(f", {k} at most {m} below the baseline" for k, m in guards.items())
     print(f"\nchoice by {args.metric}{within}, {len(videos)} videos:\n")

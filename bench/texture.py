@@ -3,14 +3,16 @@ its stored character, frames and masks, beside the fit's own recorded timings; o
 of the baked character from the input view and from both sides, to look at.
 
     .venv/bin/python bench/texture.py --store STORE --fit NAME [--repeat 3] [--png views.png]
-    .venv/bin/python bench/texture.py --store STORE --bench DIR [--ablation full]
+    .venv/bin/python bench/texture.py --store STORE --bench DIR [--ablation full] [--sheet SHEET.png]
 
 ``--bench``: every video of a `bench make --appearance textured` folder DIR that `bench run`
 fitted into STORE (fit ``bench-<video>-<ablation>``) is baked again three ways on the same fitted
 shape (the character with the template's topology, its seams joined again): the template's
 colours (what ``--no-texture`` exports), vertex colours, and a texture in a generated atlas (the
 default); each is scored by the colour error from the held-out cameras and in sample
-(`zooctl.benchdata.appearance.view_psnr`) and its bake timed (wall and CPU seconds).
+(`zooctl.benchdata.appearance.view_psnr`) and its bake timed (wall and CPU seconds). ``--sheet``
+instead writes a contact sheet: each fit's exported character beside the truth from the input
+and held-out cameras, to look at.
 """
 
 from __future__ import annotations
@@ -107,12 +109,26 @@ def joined(character, template):
     ).validate()
 
 
+def finished_fits(fits, folder: Path, ablation: str):
+    """(video folder, fit name, fit record) of every video of ``folder`` whose `bench run` fit
+    (``bench-<video>-<ablation>``) finished in the FitStore ``fits``."""
+    from zooctl.benchdata.run import bench_videos
+
+    for video in bench_videos(folder):
+        name = f"bench-{video.name}-{ablation}".lower()
+        try:
+            rec = fits.get(name)
+        except Exception:  # noqa: BLE001  (not fitted: skipped)
+            continue
+        if rec.get("status") == "done":
+            yield video, name, rec
+
+
 def compare(store: Path, folder: Path, ablation: str) -> None:
     """The ``--bench`` table (module docstring)."""
     import torch
 
     from zooctl.benchdata.appearance import view_psnr
-    from zooctl.benchdata.run import bench_videos
     from zooctl.fit.scene import CAMERA_ROTATION
     from zooctl.fit.texture import bake
     from zooctl.render.camera import Camera
@@ -121,14 +137,7 @@ def compare(store: Path, folder: Path, ablation: str) -> None:
 
     fits, bank = FitStore(store), Bank(store)
     rows = []
-    for video in bench_videos(folder):
-        name = f"bench-{video.name}-{ablation}".lower()
-        try:
-            rec = fits.get(name)
-        except Exception:  # noqa: BLE001  (not fitted: skipped)
-            continue
-        if rec.get("status") != "done":
-            continue
+    for video, name, rec in finished_fits(fits, folder, ablation):
         template = bank.get(rec["template"])
         plain = joined(fits.character(name), template)
         H, W = rec["image_size"]
@@ -187,6 +196,38 @@ def compare(store: Path, folder: Path, ablation: str) -> None:
         )
 
 
+def contact_sheet(store: Path, folder: Path, ablation: str, png: Path) -> None:
+    """``--sheet``: per fitted video of ``folder`` a row of its stored character (as the fit
+    exported it) beside the truth, from the input camera and both held-out cameras, at the first
+    frame the 3D metrics evaluate, labelled with the video, template, novel-view IoU and PSNR."""
+    import cv2
+
+    from zooctl.benchdata.appearance import view_psnr
+    from zooctl.render.preview import save_png
+    from zooctl.store.fits import FitStore
+
+    fits, rows = FitStore(store), []
+    for video, name, rec in finished_fits(fits, folder, ablation):
+        res = view_psnr(fits.character(name), rec, video, sheet=True)
+        if res is None:
+            raise SystemExit(
+                f"{video} has no held-out frames: make it with `bench make --appearance textured`"
+            )
+        img = np.ascontiguousarray(res["sheet"])
+        novel = rec.get("metrics", {}).get("novel_view_iou")
+        label = (
+            f"{video.name} <- {rec['template']}  novel view "
+            + ("n/a" if novel is None else f"{novel:.2f}")
+            + f"  held-out PSNR {res['view_psnr']:.1f} dB   (truth | fit: input, held-out 1, held-out 2)"
+        )
+        cv2.putText(img, label, (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 255), 1, cv2.LINE_AA)
+        rows.append(img)
+    if not rows:
+        raise SystemExit(f"no fits of {folder}'s videos in {store} (run `zooctl bench run` first)")
+    save_png(png, np.concatenate(rows, axis=0))
+    print(f"wrote {png}: {len(rows)} videos")
+
+
 def _mean_row(rows: list[dict]) -> dict:
     out: dict = {"video": "**mean**", "template": ""}
     out["fit_wall_s"] = float(np.mean([r["fit_wall_s"] for r in rows]))
@@ -209,7 +250,15 @@ def main() -> None:
     ap.add_argument("--ablation", default="full", help="with --bench: whose fits (bench-<video>-<ablation>)")
     ap.add_argument("--repeat", type=int, default=3, help="timed bakes (median)")
     ap.add_argument("--png", type=Path, default=None, help="write the views of the baked character here")
+    ap.add_argument(
+        "--sheet",
+        type=Path,
+        default=None,
+        help="with --bench: write a contact sheet of the fits here instead",
+    )
     args = ap.parse_args()
+    if args.bench is not None and args.sheet is not None:
+        return contact_sheet(args.store, args.bench, args.ablation, args.sheet)
     if args.bench is not None:
         return compare(args.store, args.bench, args.ablation)
     if args.fit is None:

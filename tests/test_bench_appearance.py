@@ -118,6 +118,15 @@ def test_the_colour_error_sees_a_bake_and_not_the_template(textured):
     assert psnr["baked"] > max(psnr["template"], psnr["grey"]) + 3.0, psnr
     assert res["baked"]["input_psnr"] > 28, res["baked"]  # in sample, true shape: close
     assert res["baked"]["input_psnr"] > res["baked"]["view_psnr"]
+    # The contact sheet: truth | render from the input camera and each held-out camera; the
+    # oracle's render covers the animal where the held-out truth shows it, grey or not.
+    sheet = view_psnr(grey, record, folder, sheet=True)["sheet"]
+    assert sheet.shape == (SIZE, 6 * SIZE, 3) and sheet.dtype == np.uint8 and "sheet" not in res["grey"]
+    tiles = sheet.reshape(SIZE, 6, SIZE, 3).transpose(1, 0, 2, 3)
+    for c in range(3):
+        truth, fit = tiles[2 * c].any(-1), tiles[2 * c + 1].any(-1)
+        assert fit.sum() > 50 and (fit & truth).sum() > 0.8 * fit.sum()
+    assert np.allclose(tiles[3][tiles[3].any(-1)], tiles[3][tiles[3].any(-1)][0], atol=1)  # all grey
 
 
 def test_a_flat_video_has_no_colour_error(tmp_path):

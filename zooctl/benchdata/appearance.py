@@ -142,11 +142,15 @@ def _srgb8(linear: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055) * 255.0
 
 
-def view_psnr(character: RiggedAsset, record: dict[str, Any], video: Path) -> dict[str, Any] | None:
+def view_psnr(
+    character: RiggedAsset, record: dict[str, Any], video: Path, sheet: bool = False
+) -> dict[str, Any] | None:
     """The colour error of a finished fit (its stored ``character`` and ``record``) of the
     benchmark video folder ``video`` (module docstring): ``view_psnr`` (mean over the held-out
     cameras), ``view_psnr_per_view``, ``input_psnr`` and ``psnr_pixels`` (the pixels compared, all
-    cameras). None for a video made without ``gt_view_frames``."""
+    cameras). ``sheet``: also ``sheet``, (H, 2 (1 + C) W, 3) uint8 sRGB, the first evaluated frame
+    seen by the input camera and each of the C held-out cameras, the truth beside the fit's
+    render (over black), to look at. None for a video made without ``gt_view_frames``."""
     from ..fit.metrics import scale_line_search, surface_samples
     from ..fit.scene import CAMERA_ROTATION
     from ..render.albedo import decode_texture, render_colours
@@ -186,7 +190,14 @@ def view_psnr(character: RiggedAsset, record: dict[str, Any], video: Path) -> di
         )
         rgb, cover = render_colours(world, character.faces, cam, character.vertex_colors, character.uvs, tex)
         both = cover & masks
+        if sheet:
+            tiles.extend((frames[0], np.where(cover[0, ..., None], _srgb8(rgb[0]), 0).astype(np.uint8)))
         return psnr(_srgb8(rgb[both]), frames[both]), int(both.sum())
+
+    tiles: list[np.ndarray] = []
+    inp, _ = compare(
+        gt["gt_cam_rotation"][sel], gt["gt_cam_translation"][sel], gt["frames"][sel], gt["masks"][sel]
+    )
 
     per_view, pixels = [], 0
     for c in range(gt["gt_view_frames"].shape[0]):
@@ -198,16 +209,16 @@ def view_psnr(character: RiggedAsset, record: dict[str, Any], video: Path) -> di
         )
         per_view.append(p)
         pixels += n
-    inp, _ = compare(
-        gt["gt_cam_rotation"][sel], gt["gt_cam_translation"][sel], gt["frames"][sel], gt["masks"][sel]
-    )
     ok = [p for p in per_view if p is not None]
-    return {
+    out = {
         "view_psnr": float(np.mean(ok)) if ok else None,
         "view_psnr_per_view": per_view,
         "input_psnr": inp,
         "psnr_pixels": pixels,
     }
+    if sheet:
+        out["sheet"] = np.concatenate(tiles, axis=1)
+    return out
 
 
 def fit_psnr(store_root: Path, name: str, video: Path) -> dict[str, Any] | None:
