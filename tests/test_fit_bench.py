@@ -295,12 +295,6 @@ def _edge_lengths(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1)
 
 
-def _dense(asset) -> np.ndarray:
-    w = np.zeros((asset.num_vertices, asset.num_joints))
-    np.add.at(w, (np.arange(asset.num_vertices)[:, None], asset.skin_joints), asset.skin_weights)
-    return w
-
-
 def test_keep_shape_fits_only_the_pose_and_keeps_the_templates_shape_and_skinning(tmp_path):
     """`zooctl fit --keep-shape` (`FitConfig.keep_shape`, `bench run --ablation shape-kept`): the
     exported character is the template scaled by the fit's global scale, with the template's
@@ -320,7 +314,11 @@ def test_keep_shape_fits_only_the_pose_and_keeps_the_templates_shape_and_skinnin
         res = fit_video(video, template, cfg.keep_shape() if kept else cfg)
         out = fitted_asset(res.scene, res.template, "fit", res.video.fps)
         ratio = _edge_lengths(out.vertices, out.faces) / _edge_lengths(template.vertices, template.faces)
-        shapes[kept] = (ratio.std() / ratio.mean(), np.abs(_dense(out) - _dense(template)).max(), out)
+        shapes[kept] = (
+            ratio.std() / ratio.mean(),
+            np.abs(out.skin_weights_dense() - template.skin_weights_dense()).max(),
+            out,
+        )
     spread, skin_drift, out = shapes[True]
     assert spread < 1e-4 and skin_drift < 1e-5  # one scale for every edge; the template's weights
     assert shapes[False][0] > 1e-4 and shapes[False][1] > 1e-3  # the default reshapes and reskins
