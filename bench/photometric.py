@@ -12,7 +12,8 @@ the term is the mean L1 distance of those normalised colours from each vertex's 
 window's frames (vertices seen in two or more). The gradient reaches the pose through where the
 vertices fall in the images. The fit itself is not changed: the term is added by wrapping
 `StageRunner._loss` in this process only (BENCHMARKS.md has the result; it did not help, so it
-is not in zooctl).
+is not in zooctl). The term through the renderer, with learned colours, is ``weights.photometric``
+(`zooctl.fit.photometric`).
 """
 
 import sys

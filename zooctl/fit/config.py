@@ -177,6 +177,14 @@ class LossWeights:
         required=False,
         **_WEIGHT,
     )
+    photometric: float = spec(
+        0.0,
+        help="stage 2: the surface in learned per-vertex colours, rendered through the z-buffer, "
+        "against the frame's colours inside the mask, after a per-frame gain (mean L1 of sRGB; "
+        "0: off)",
+        required=False,
+        **_WEIGHT,
+    )
 
 
 @dataclass

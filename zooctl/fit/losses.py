@@ -15,6 +15,7 @@
 | smooth_3d | `vertex_acceleration_loss` (the posed vertices in world space) | ``smooth_3d`` |
 | edge_stretch | `edge_stretch_loss` (the posed surface's edges against the rest shape's, `mesh_edges`) | ``edge_stretch`` |
 | gait | `gait_symmetry_loss` (mirrored joints' positions over the clip in the root's frame; the model's ``mirrored_joints``) | ``gait_symmetry`` |
+| photo | `zooctl.fit.photometric.photometric_loss` (the surface in learned per-vertex colours against the frames) | ``photometric`` |
 | smooth, symmetry, bone_length | the articulation model's ``smoothness_loss``, ``symmetry_loss``, ``bone_length_loss`` (CASA eq. 6, 7; `zooctl.rig.priors`, since they belong to the model) | ``smooth`` (lambda2), ``symmetry`` (lambda3), ``bone_length`` |
 
 `zooctl.fit.stages.StageRunner.loss` weights and sums them; change a weight's default in

@@ -27,6 +27,7 @@ from .config import FitConfig
 from .depth_mirror import depth_mirror, view_elevation
 from .inputs import FitVideo, MaskWindow, crop_box, fit_resolution, resample_flow, resample_masks
 from .losses import MaskTargets
+from .photometric import colour_targets
 from .pose_prior import clip_joint_limits, clip_pose_stats, motion_sequence_prior
 from .scene import FitScene
 from .stages import StageRunner, Targets, TermLog, make_optimizer, mask_iou, stage_config
@@ -185,6 +186,9 @@ def _fit_window(
         mt,
         None if flow is None else torch.as_tensor(flow[0], device=dev),
         None if flow is None else torch.as_tensor(flow[1], device=dev),
+        colour_targets(video.frames, box, h, w, dev)
+        if cfg.weights.photometric > 0 and cfg.ablation.optimise
+        else None,
     )
     timings.setdefault("targets", time.perf_counter() - t0)
     focal_given = cfg.camera.focal is not None or video.intrinsics is not None
@@ -205,7 +209,7 @@ def _fit_window(
         held.place(scene, crop, cfg, s, (W / 2 - x0, H / 2 - y0), H)
         cam_info: dict[str, Any] = {}
         history: dict[str, list[dict[str, float]]] = {"stage1": [], "stage2": []}
-        start_stage, start_iter, opt_state = 1, 0, None
+        start_stage, start_iter, opt_state, colours = 1, 0, None, None
     elif resume is None:
         rep.message("searching the camera and viewpoint")
         t1 = time.perf_counter()
@@ -232,13 +236,14 @@ def _fit_window(
         timings["camera"] = time.perf_counter() - t1
         cam_info = _camera_info(init, s) | {"elevation_deg": elevation}
         history = {"stage1": [], "stage2": []}
-        start_stage, start_iter, opt_state = 1, 0, None
+        start_stage, start_iter, opt_state, colours = 1, 0, None, None
     else:
         _check_version(resume)
         scene.load_state_dict(resume["scene"])
         cam_info = resume["camera_init"]
         history = resume["history"]
         start_stage, start_iter, opt_state = resume["stage"], resume["iteration"], resume.get("optimizer")
+        colours = resume.get("colours")
     result = FitResult(scene, video, template, cfg, cam_info, s, history, timings)
     if cfg.ablation.optimise:
         span = (0, T) if held is None else (held.anchors, T)
@@ -257,6 +262,7 @@ def _fit_window(
                 checkpoint,
                 opt_state if stage == start_stage else None,
                 pause_at if stage == 2 else None,
+                colours if stage == start_stage else None,
             )
     if held is None:
         t2 = time.perf_counter()
@@ -454,12 +460,18 @@ def _run_stage(
     checkpoint,
     opt_state,
     pause_at: int | None = None,
+    colours=None,
 ) -> None:
     cfg, scene = result.config, result.scene
     st = stage_config(cfg, stage, span[1] - span[0])
     last = st.iters if pause_at is None else min(st.iters, max(pause_at, first))
     runner = StageRunner(scene, targets, cfg, stage, span)
+    if runner.colours is not None and colours is not None and colours.shape == runner.colours.shape:
+        with torch.no_grad():  # the photometric term's colours as the paused fit left them
+            runner.colours.copy_(colours)
     opt = make_optimizer(scene, cfg, stage, learn_focal, shared=held is None)
+    if runner.colours is not None:
+        opt.add_param_group({"params": [runner.colours], "lr": st.lr})
     base_lr = [g["lr"] for g in opt.param_groups]
     if opt_state is not None:
         opt.load_state_dict(opt_state)
@@ -483,7 +495,7 @@ def _run_stage(
             "camera_init": result.camera_init,
             "config": cfg.to_dict(),
             "timings": timings,
-        }
+        } | ({} if runner.colours is None else {"colours": runner.colours.detach().clone()})
 
     try:
         # Skip the runner's random windows already drawn before an interruption (resume = same run).

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+from torch import nn
 
 from ..geometry import silhouette_iou
 from ..render.base import check_silhouette, get_renderer
@@ -51,6 +52,7 @@ from .losses import (
     soft_iou_loss,
     vertex_acceleration_loss,
 )
+from .photometric import initial_colours, photometric_loss
 from .scene import FitScene
 
 Tensor = torch.Tensor
@@ -60,12 +62,15 @@ Tensor = torch.Tensor
 class Targets:
     """What the losses compare against, at the fit resolution (see `MaskTargets`).
 
-    flow (T-1, h, w, 2) observed forward flow in fit pixels and flow_valid (T-1, h, w) bool, or None.
+    flow (T-1, h, w, 2) observed forward flow in fit pixels and flow_valid (T-1, h, w) bool, or None;
+    colours (T, h, w, 3) the frames in sRGB [0, 1] (`zooctl.fit.photometric.colour_targets`), or
+    None: only the photometric term reads them.
     """
 
     masks: MaskTargets
     flow: Tensor | None = None
     flow_valid: Tensor | None = None
+    colours: Tensor | None = None
 
 
 def stage_config(cfg: FitConfig, stage: int, num_frames: int | None = None) -> StageConfig:
@@ -150,6 +155,14 @@ class StageRunner:
         low, joints = self._root_frame_buffers() if ground or gait else (None, None)
         self.lowest = low if ground else None
         self.joints = joints if gait else None
+        # The photometric term's per-vertex colours: a parameter of this stage only, started from
+        # the frames as the surface is posed now (a resumed fit's state has them as they were).
+        self.colours: nn.Parameter | None = None
+        if stage == 2 and w.photometric > 0 and targets.colours is not None:
+            start = initial_colours(
+                scene, targets.colours, targets.masks.coverage, range(self.steps_from, self.hi)
+            )
+            self.colours = nn.Parameter(start)
 
     @torch.no_grad()
     def _root_frame_buffers(self, batch: int = 16) -> tuple[Tensor, Tensor]:
@@ -286,6 +299,11 @@ class StageRunner:
                 with torch.no_grad():  # the reference: the rest shape as it is now (stretch, field)
                     rest = scene.model().vertices
                 terms["edge_stretch"] = w.edge_stretch * edge_stretch_loss(verts, rest, self.edges)
+            if self.colours is not None:
+                valid = (tg.masks.coverage[frames] > 0.5).to(verts.dtype) * weight[:, None, None]
+                terms["photo"] = w.photometric * photometric_loss(
+                    verts, scene.faces, cam, self.colours, tg.colours[frames], valid
+                )
             if scene.joint_limits is not None and w.joint_limits > 0:
                 q = scene.rotations[frames]
                 terms["limits"] = w.joint_limits * joint_limit_loss(
