@@ -186,7 +186,7 @@ def _fit_window(
         mt,
         None if flow is None else torch.as_tensor(flow[0], device=dev),
         None if flow is None else torch.as_tensor(flow[1], device=dev),
-        colour_targets(video.frames, box, h, w, dev)
+        _colour_targets(video, box, h, w, dev)
         if cfg.weights.photometric > 0 and cfg.ablation.optimise
         else None,
     )
@@ -269,6 +269,15 @@ def _fit_window(
         result.iou = input_mask_iou(result)
         timings["evaluate"] = time.perf_counter() - t2
     return result
+
+
+def _colour_targets(video: FitVideo, box: tuple[int, int, int, int], h: int, w: int, device: str):
+    """`colour_targets`, kept in ``video.cache`` as the flow is: the template trials' fits of a
+    video read the same frames (the losses only read them)."""
+    key = ("colours", h, w, *box, str(device))
+    if key not in video.cache:
+        video.cache[key] = colour_targets(video.frames, box, h, w, device)
+    return video.cache[key]
 
 
 def new_scene(
@@ -465,10 +474,7 @@ def _run_stage(
     cfg, scene = result.config, result.scene
     st = stage_config(cfg, stage, span[1] - span[0])
     last = st.iters if pause_at is None else min(st.iters, max(pause_at, first))
-    runner = StageRunner(scene, targets, cfg, stage, span)
-    if runner.colours is not None and colours is not None and colours.shape == runner.colours.shape:
-        with torch.no_grad():  # the photometric term's colours as the paused fit left them
-            runner.colours.copy_(colours)
+    runner = StageRunner(scene, targets, cfg, stage, span, colours)
     opt = make_optimizer(scene, cfg, stage, learn_focal, shared=held is None)
     if runner.colours is not None:
         opt.add_param_group({"params": [runner.colours], "lr": st.lr})

@@ -124,6 +124,7 @@ class StageRunner:
         cfg: FitConfig,
         stage: int,
         span: tuple[int, int] | None = None,
+        colours: Tensor | None = None,
     ):
         self.scene, self.targets, self.cfg, self.stage = scene, targets, cfg, stage
         self.lo, self.hi = span or (0, scene.num_frames)
@@ -155,14 +156,14 @@ class StageRunner:
         low, joints = self._root_frame_buffers() if ground or gait else (None, None)
         self.lowest = low if ground else None
         self.joints = joints if gait else None
-        # The photometric term's per-vertex colours: a parameter of this stage only, started from
-        # the frames as the surface is posed now (a resumed fit's state has them as they were).
+        # The photometric term's per-vertex colours: a parameter of this stage only, ``colours``
+        # (a paused fit's, as it left them) or started from the frames as the surface is posed now.
         self.colours: nn.Parameter | None = None
         if stage == 2 and w.photometric > 0 and targets.colours is not None:
-            start = initial_colours(
-                scene, targets.colours, targets.masks.coverage, range(self.steps_from, self.hi)
-            )
-            self.colours = nn.Parameter(start)
+            if colours is None:
+                cover = targets.masks.coverage
+                colours = initial_colours(scene, targets.colours, cover, range(self.steps_from, self.hi))
+            self.colours = nn.Parameter(colours.detach().clone())
 
     @torch.no_grad()
     def _root_frame_buffers(self, batch: int = 16) -> tuple[Tensor, Tensor]:
