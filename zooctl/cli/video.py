@@ -85,12 +85,16 @@ def add(
     ),
     flow: str = typer.Option("dis", "--flow", help="Flow estimator."),
     flow_preset: str = typer.Option(
-        None, "--flow-preset", help="DIS preset: ultrafast | fast | medium (default medium)."
+        None,
+        "--flow-preset",
+        help="DIS preset: ultrafast | fast | medium (default medium). The automatic masks follow the flow: "
+        "ultrafast is quicker but segments worse (BENCHMARKS.md, Current figures: automatic masks).",
     ),
     flow_size: int = typer.Option(
         None,
         "--flow-size",
-        help="Longest side DIS flow is computed at (the stored flow is upsampled to the frames; default 640; 0: full size).",
+        help="Longest side DIS flow is computed at (the stored flow is upsampled to the frames; default 640; 0: full "
+        "size). A smaller size is quicker but the automatic masks, which follow the flow, are worse.",
     ),
     fps: float = typer.Option(
         None,
