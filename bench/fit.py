@@ -3,6 +3,7 @@
     python bench/fit.py speed [--preset fast|quality] [--device cpu|cuda] [--repeat N] [--threads N]
     python bench/fit.py quality [--assets N] [--frames 60] [--size 320] [--ablation ...]
     python bench/fit.py davis [--store DIR] [--videos dog cows blackswan] [--masks given auto]
+        [--template VIDEO=ASSET ...] [--config FIT.json]
     python bench/fit.py length [--frames 240] [--short 60] [--asset Fox] [--template Wolf] [--whole]
 
 ``speed`` renders one 60-frame 320x320 video of a shared Quaternius animal, fits it with another
@@ -10,10 +11,12 @@ animal as the template (`zooctl fit --template`, a fresh process, retrieval excl
 no index exists) and reports the wall time. ``quality`` renders videos from the shared assets,
 adds them all to a scratch bank and runs `zooctl bench run` (each video's own asset excluded).
 ``davis`` fits the shared DAVIS videos (added to the video store the way `zooctl fit PATH`
-does) with their given masks and with automatic GrabCut masks seeded by the first annotation's
-box, and reports the reprojected mask IoU against the DAVIS annotations (the ground truth in
-both cases). The template comes from retrieval over a bank of the 28 shared assets unless
-``--template VIDEO=ASSET`` says otherwise.
+does) with their given masks (``given``), with automatic GrabCut masks seeded by the first
+annotation's box (``auto``) and with the default automatic masks of its frames alone, no box, as a
+user's `zooctl fit FRAMES` makes them (``default``), and reports the reprojected mask IoU against
+the DAVIS annotations (the ground truth in every case). The template comes from retrieval over a bank of the 28 shared assets unless
+``--template VIDEO=ASSET`` says otherwise (then at the named template's joint rate, as `zooctl fit
+--template` fits); ``--config`` is a fit config applied on top of the preset, as `zooctl fit --config`.
 ``length`` renders one long clip (the asset playing its own clips) and fits it whole and its
 first ``--short`` frames alone (`fit_video`, the fast preset, the same template), then compares
 the two fits on the frames both cover: the 3D metrics on 8 frames spread over them and the mask
@@ -141,7 +144,7 @@ def quality(args) -> None:
 def davis(args) -> None:
     import numpy as np
 
-    from zooctl.fit.config import preset
+    from zooctl.fit.config import load_config
     from zooctl.fit.job import load_source
     from zooctl.fit.run import fit_video, input_mask_iou
     from zooctl.fit.template import select_template
@@ -163,10 +166,12 @@ def davis(args) -> None:
         box = (float(xs.min()), float(ys.min()), float(np.ptp(xs) + 1), float(np.ptp(ys) + 1))
         for kind in args.masks:
             t = time.perf_counter()
-            cfg = preset(args.preset)
+            cfg = load_config(Path(args.config) if args.config else None, args.preset).validate()
+            if name in fixed:
+                cfg = cfg.for_named_template()
             cfg.max_frames = args.max_frames
             video = load_source(
-                str(folder),
+                str(folder / "JPEGImages") if kind == "default" else str(folder),
                 store,
                 "auto" if kind == "auto" else None,
                 args.max_frames,
@@ -293,9 +298,10 @@ if __name__ == "__main__":
     dv = sub.add_parser("davis")
     dv.add_argument("--store", default=None, help="store with the bank (default: a new one, 28 assets)")
     dv.add_argument("--videos", nargs="+", default=["dog", "cows", "blackswan"])
-    dv.add_argument("--masks", nargs="+", default=["given", "auto"], choices=["given", "auto"])
+    dv.add_argument("--masks", nargs="+", default=["given", "auto"], choices=["given", "auto", "default"])
     dv.add_argument("--template", action="append", default=[], help="VIDEO=ASSET instead of retrieval")
     dv.add_argument("--preset", default="fast")
+    dv.add_argument("--config", default=None, help="a fit config (JSON) on top of the preset")
     dv.add_argument("--max-frames", type=int, default=60)
     ln = sub.add_parser("length")
     ln.add_argument("--frames", type=int, default=240)

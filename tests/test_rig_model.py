@@ -233,3 +233,54 @@ def test_a_fit_state_saved_with_a_row_per_vertex_resumes():
     new.load_state_dict(state)
     assert new.init_logits.shape == new.model.skin.logits.shape
     torch.testing.assert_close(new.model.skin(), old.model.skin(), atol=1e-6, rtol=0)  # copies started equal
+
+
+def test_girth_thickens_one_bone_across_its_axis_in_every_direction():
+    asset = tube_asset(bones=3, rings_per_bone=8, blend=0.25)
+    model = ArticulatedModel(asset, dtype=torch.float64, displacement=False, girth=True)
+    np.testing.assert_allclose(model().vertices.detach().numpy(), asset.vertices, atol=1e-9)
+    dense = asset.skin_weights_dense()
+    with torch.no_grad():
+        model.log_bone_girth[1] = np.log(1.5)  # the middle bone: [1, 2] along x
+        moved = model().vertices.numpy()
+    inside = (dense[:, 1] > 0.999) & (asset.vertices[:, 0] > 1.0) & (asset.vertices[:, 0] < 2.0)
+    assert inside.sum() > 10
+    radius = np.linalg.norm(asset.vertices[inside, 1:], axis=1)
+    # Every ring vertex 1.5 times as far from the axis, in y (what a side view shows) and z alike.
+    np.testing.assert_allclose(np.linalg.norm(moved[inside, 1:], axis=1), 1.5 * radius, rtol=1e-6)
+    np.testing.assert_allclose(moved[inside, 0], asset.vertices[inside, 0], atol=1e-9)
+    np.testing.assert_allclose(moved[inside, 1:], 1.5 * asset.vertices[inside, 1:], atol=1e-6)
+    far = dense[:, 1] == 0
+    np.testing.assert_allclose(moved[far], asset.vertices[far], atol=1e-9)  # other bones' vertices stay
+    # The rest shape the exporter and the symmetry term read carries it too.
+    np.testing.assert_allclose(model.canonical_vertices().detach().numpy(), moved, atol=1e-9)
+    # Its prior: zero at the template, and it grows with the girth.
+    assert float(model.bone_length_loss()) > 0
+
+
+def test_girth_is_learned_with_the_shape_and_kept_by_keep_shape():
+    from zooctl.fit.config import FitConfig
+    from zooctl.fit.run import new_scene
+
+    asset = tube_asset(bones=2)
+    scene = new_scene(asset, FitConfig(), 4, 32, 32, (16.0, 16.0))
+    assert any(p is scene.model.log_bone_girth for p in scene.shape_parameters())
+    kept = FitConfig().keep_shape()
+    assert not kept.ablation.girth
+    assert new_scene(asset, kept, 4, 32, 32, (16.0, 16.0)).model.log_bone_girth is None
+    off = FitConfig.from_dict({"ablation": {"girth": False}})
+    assert new_scene(asset, off, 4, 32, 32, (16.0, 16.0)).model.log_bone_girth is None
+
+
+def test_a_state_saved_before_girths_loads_with_every_girth_at_one():
+    asset = tube_asset(bones=3)
+    old = ArticulatedModel(asset, dtype=torch.float64)
+    with torch.no_grad():
+        old.log_bone_scales[1] = 0.3
+    state = old.state_dict()
+    assert not any("girth" in k for k in state)
+    new = ArticulatedModel(asset, dtype=torch.float64, girth=True)
+    new.load_state_dict(state)  # strict: nothing missing, nothing left over
+    assert float(new.log_bone_girth.abs().max()) == 0.0
+    torch.testing.assert_close(new().vertices, old().vertices)
+    assert not any("girth_radial" in k for k in new.state_dict())

@@ -29,7 +29,7 @@ def _lbs(asset: RiggedAsset, device: str = "cpu", **options: Any) -> Articulatio
     from ..rig.model import ArticulatedModel
 
     # plain LBS whatever the fit's ablation switches say
-    options.update(stretch=False, displacement=False)
+    options.update(stretch=False, displacement=False, girth=False)
     return ArticulatedModel(asset, device=device, **options)
 
 

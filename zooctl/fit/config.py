@@ -277,13 +277,22 @@ class Ablation:
         "learn one set of skinning weights, so the surface cannot crack open along them",
         required=False,
     )
+    # On since 2026-12-02 (BENCHMARKS.md, "Bones that thicken across themselves").
+    girth: bool = spec(
+        True,
+        help="each bone also scales the template across itself, in every direction: what a silhouette "
+        "shows of a body's thickness is carried to the side it does not show",
+        required=False,
+    )
     optimise: bool = spec(True, help="false: retrieval (template and camera) only", required=False)
 
 
 # The template is the animal's own rig: its shape, bone lengths and skinning stay, and only the
 # pose, the root and the camera are fitted (`zooctl fit --keep-shape`, `bench run --ablation
 # shape-kept`; BENCHMARKS.md, "A torn surface").
-KEEP_SHAPE: dict[str, Any] = {"ablation": {"learn_skinning": False, "displacement": False, "stretch": False}}
+KEEP_SHAPE: dict[str, Any] = {
+    "ablation": {"learn_skinning": False, "displacement": False, "stretch": False, "girth": False}
+}
 
 
 @dataclass

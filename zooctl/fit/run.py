@@ -285,7 +285,7 @@ def new_scene(
 ) -> FitScene:
     """A `FitScene` of ``num_frames`` frames in (h, w) fit images as ``cfg`` sets it up."""
     # Articulation plugins need not know the option (`get_articulation_model` leaves it out).
-    options = {"share_seams": cfg.ablation.share_seams}
+    options = {"share_seams": cfg.ablation.share_seams, "girth": cfg.ablation.girth}
     return FitScene(
         template,
         num_frames,

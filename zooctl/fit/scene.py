@@ -128,6 +128,8 @@ class FitScene(nn.Module):
 
     def shape_parameters(self) -> list[nn.Parameter]:
         ps = [self.model.log_scale, self.model.log_bone_scales]
+        if getattr(self.model, "log_bone_girth", None) is not None:
+            ps.append(self.model.log_bone_girth)
         if self.model.displacement is not None:
             ps += list(self.model.displacement.parameters())
         return ps

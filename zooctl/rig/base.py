@@ -2,8 +2,9 @@
 the plugin registry (`zooctl.hookspecs.register_articulation_models`).
 
 A factory is called as ``factory(asset, device="cpu", **options)``; the fit passes the options
-``stretch``, ``displacement`` (its ablation switches), ``hidden`` (displacement MLP width) and
-``share_seams`` (copies of a vertex learn one skinning row), which a model may ignore; a factory
+``stretch``, ``displacement`` (its ablation switches), ``hidden`` (displacement MLP width),
+``share_seams`` (copies of a vertex learn one skinning row) and ``girth`` (bones that also thicken
+across themselves, ``log_bone_girth`` (J,)), which a model may ignore; a factory
 that names its options and takes no ``**options`` gets only those it names. The object is a
 ``torch.nn.Module`` with:
 

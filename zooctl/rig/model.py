@@ -1,12 +1,16 @@
 """`ArticulatedModel`: an asset's articulation as one differentiable ``nn.Module``.
 
-Learnable shape (per animal): log bone-length scales ``log b_k`` (J,), skinning-weight logits over
-each vertex's K candidate bones (V, K), the displacement MLP ``V_theta`` and the log global scale
-``log u``. Per-frame motion is an input: local joint rotations, optionally local translations and
-scales (default: the rest pose's), and a root rotation and translation applied on top.
+Learnable shape (per animal): log bone-length scales ``log b_k`` (J,), optionally log bone girths
+``log g_k`` (J,), skinning-weight logits over each vertex's K candidate bones (V, K), the
+displacement MLP ``V_theta`` and the log global scale ``log u``. Per-frame motion is an input:
+local joint rotations, optionally local translations and scales (default: the rest pose's), and a
+root rotation and translation applied on top.
 
 Pipeline for frame t (see `zooctl.rig.skinning` for the stretch rule):
 
+0. p_i <- p_i + sum_k w0_ik (g_k - 1) r_ik   (girth: r_ik is p_i less its nearest point on bone k,
+   w0 the template's weights; a bone thickens in every direction across it, the one a silhouette
+   does not see included)
 1. local_j = T(o_j + stretch shift) @ R(q_j^t) @ S(s_j);  G = FK(local)
 2. v_i = sum_k w_ik (G_k @ inverse_bind_k) (p_i + e_k(p_i) s_k)          (stretchable LBS)
 3. v'_i = u v_i + V_theta(u p_i)                                          (CASA eq. 3)
@@ -79,7 +83,8 @@ class ArticulatedModel(nn.Module):
     field (``hidden`` width, ``num_freqs`` positional-encoding octaves); ``dtype``/``device``;
     ``share_seams``: copies of a vertex at one bind position share their learned skinning weights
     (`zooctl.rig.skinning.seam_groups`; off by default here, each copy learning its own; the fit
-    turns it on, ``ablation.share_seams``).
+    turns it on, ``ablation.share_seams``). ``girth``: each bone also scales the template across
+    itself, by ``log_bone_girth`` (`girth_offsets`; ``ablation.girth``).
     ``skinning`` (a class attribute) blends the bone transforms: a subclass replaces it (the
     interface is in `zooctl.rig.base`).
     """
@@ -97,6 +102,7 @@ class ArticulatedModel(nn.Module):
         device: torch.device | str = "cpu",
         dtype: torch.dtype = torch.float32,
         share_seams: bool = False,
+        girth: bool = False,
     ):
         super().__init__()
         self.asset_name = asset.name
@@ -143,6 +149,17 @@ class ArticulatedModel(nn.Module):
         groups = torch.as_tensor(seam_groups(points, bones)) if share_seams else None
         self.skin = SkinWeights(bones_t, torch.as_tensor(init, dtype=dtype), groups=groups)
         self.log_bone_scales = nn.Parameter(torch.zeros(asset.num_joints, dtype=dtype))
+        self.log_bone_girth: nn.Parameter | None = None
+        if girth:
+            on = torch.as_tensor(tails, dtype=dtype)[bones_t] - torch.as_tensor(heads, dtype=dtype)[bones_t]
+            nearest = torch.as_tensor(heads, dtype=dtype)[bones_t] + e[..., None] * on  # (V, K, 3)
+            w0 = torch.as_tensor(init, dtype=dtype) * self.stretchable[bones_t]
+            # Made from the template, not saved: a fit state from before girths existed still loads.
+            self.register_buffer("girth_bones", bones_t.clone(), persistent=False)
+            radial = w0[..., None] * (pts_t[:, None, :] - nearest)  # (V, K, 3)
+            self.register_buffer("girth_radial", radial, persistent=False)
+            self.log_bone_girth = nn.Parameter(torch.zeros(asset.num_joints, dtype=dtype))
+            self._register_load_state_dict_pre_hook(self._girth_at_one)
         self.log_scale = nn.Parameter(torch.zeros((), dtype=dtype))
         self.displacement = (
             DisplacementField(asset.size(), hidden=hidden, num_freqs=num_freqs).to(dtype)
@@ -205,7 +222,7 @@ class ArticulatedModel(nn.Module):
         mats = G @ self.inverse_bind
         u = self.global_scale()
         R = None if root_rotation is None else quat_to_matrix(root_rotation)  # (..., 3, 3)
-        skin = (self.points, self.skin.bones, self.skin(), s, self.endpoint if s is not None else None)
+        skin = (self.rest_points(), self.skin.bones, self.skin(), s, self.endpoint if s is not None else None)
         d = self.displacement_offsets()
         # The field's mean moves the whole mesh (a fit drifts into one: the root translation can
         # take it just as well); the skeleton goes with it, so it stays where the template has it
@@ -251,6 +268,27 @@ class ArticulatedModel(nn.Module):
                 return tuple(t.shape[:-tail])
         return ()
 
+    def _girth_at_one(self, state, prefix, *args) -> None:
+        """A state saved without girths (before they existed, or with ``girth`` off) loads with
+        every girth at 1: the shape it was saved with."""
+        key = prefix + "log_bone_girth"
+        if key not in state and self.log_bone_girth is not None:
+            state[key] = torch.zeros_like(self.log_bone_girth)
+
+    def girth_offsets(self) -> Tensor | None:
+        """(V, 3) how far the bones' girths move the bind vertices (before skinning); None without
+        girth. A vertex moves across each of its template bones in proportion to its template
+        weight on it, so a bone's whole cross-section scales, not only the side a camera sees."""
+        if self.log_bone_girth is None:
+            return None
+        scale = (self.log_bone_girth.exp() - 1.0)[self.girth_bones]  # (V, K)
+        return (scale[..., None] * self.girth_radial).sum(-2)
+
+    def rest_points(self) -> Tensor:
+        """(V, 3) the bind vertices the skinning poses: ``points``, thickened by the girths."""
+        g = self.girth_offsets()
+        return self.points if g is None else self.points + g
+
     def displacement_offsets(self) -> Tensor | None:
         """(V, 3) the displacement field's offsets ``V(u p)`` (CASA eq. 3, added after skinning);
         None without a field. Inside `shared_displacement` the field runs once."""
@@ -279,8 +317,8 @@ class ArticulatedModel(nn.Module):
             self._shared_disp = None
 
     def canonical_vertices(self) -> Tensor:
-        """(V, 3) the rest-shape template after global scale and displacement: ``u p + V(u p)``."""
-        v = self.global_scale() * self.points
+        """(V, 3) the rest-shape template after girth, global scale and displacement: ``u p + V(u p)``."""
+        v = self.global_scale() * self.rest_points()
         d = self.displacement_offsets()
         return v if d is None else v + d
 
@@ -311,9 +349,12 @@ class ArticulatedModel(nn.Module):
         return n, d * self.global_scale(), self._pairs
 
     def bone_length_loss(self) -> Tensor:
-        """Bone scales near 1 and equal between mirrored joints."""
+        """Bone scales (and girths) near 1 and equal between mirrored joints."""
         self.symmetry_plane()
-        return bone_length_prior(self.log_bone_scales, self._pairs)
+        loss = bone_length_prior(self.log_bone_scales, self._pairs)
+        if self.log_bone_girth is not None:
+            loss = loss + bone_length_prior(self.log_bone_girth, self._pairs)
+        return loss
 
     @staticmethod
     def smoothness_loss(rotations: Tensor) -> Tensor:
