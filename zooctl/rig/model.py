@@ -140,22 +140,18 @@ class ArticulatedModel(nn.Module):
         self.register_buffer("stretchable", torch.as_tensor(dense.sum(0) > 0))
         pts_t = torch.as_tensor(points, dtype=dtype)
         bones_t = torch.as_tensor(bones)
-        e = endpoint_weights(
-            pts_t[:, None, :],
-            torch.as_tensor(heads, dtype=dtype)[bones_t],
-            torch.as_tensor(tails, dtype=dtype)[bones_t],
-        )
+        head_k = torch.as_tensor(heads, dtype=dtype)[bones_t]  # (V, K, 3)
+        tail_k = torch.as_tensor(tails, dtype=dtype)[bones_t]
+        e = endpoint_weights(pts_t[:, None, :], head_k, tail_k)
         self.register_buffer("endpoint", e)
         groups = torch.as_tensor(seam_groups(points, bones)) if share_seams else None
         self.skin = SkinWeights(bones_t, torch.as_tensor(init, dtype=dtype), groups=groups)
         self.log_bone_scales = nn.Parameter(torch.zeros(asset.num_joints, dtype=dtype))
         self.log_bone_girth: nn.Parameter | None = None
         if girth:
-            on = torch.as_tensor(tails, dtype=dtype)[bones_t] - torch.as_tensor(heads, dtype=dtype)[bones_t]
-            nearest = torch.as_tensor(heads, dtype=dtype)[bones_t] + e[..., None] * on  # (V, K, 3)
+            nearest = head_k + e[..., None] * (tail_k - head_k)  # (V, K, 3)
             w0 = torch.as_tensor(init, dtype=dtype) * self.stretchable[bones_t]
             # Made from the template, not saved: a fit state from before girths existed still loads.
-            self.register_buffer("girth_bones", bones_t.clone(), persistent=False)
             radial = w0[..., None] * (pts_t[:, None, :] - nearest)  # (V, K, 3)
             self.register_buffer("girth_radial", radial, persistent=False)
             self.log_bone_girth = nn.Parameter(torch.zeros(asset.num_joints, dtype=dtype))
@@ -281,7 +277,7 @@ class ArticulatedModel(nn.Module):
         weight on it, so a bone's whole cross-section scales, not only the side a camera sees."""
         if self.log_bone_girth is None:
             return None
-        scale = (self.log_bone_girth.exp() - 1.0)[self.girth_bones]  # (V, K)
+        scale = (self.log_bone_girth.exp() - 1.0)[self.skin.bones]  # (V, K): the candidate bones
         return (scale[..., None] * self.girth_radial).sum(-2)
 
     def rest_points(self) -> Tensor:
