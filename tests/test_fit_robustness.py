@@ -239,3 +239,42 @@ def test_ctrl_c_says_interrupted(tube_video, store, capsys, monkeypatch):
     _, _, folder = tube_video
     r = run_inprocess(capsys, "fit", str(folder), "--template", "tube")
     assert r.code == 130 and r.err.strip().endswith("interrupted") and "Traceback" not in r.err
+
+
+def test_a_state_paused_before_girths_existed_resumes_as_it_started(tube_video, store, tmp_path):
+    """A stage-2 state saved by a zooctl without girths (its config names none, its optimiser has
+    no girth parameter) resumes without them, as the fit it was."""
+    from zooctl.fit.job import fit_job
+    from zooctl.store.bank import Bank
+    from zooctl.store.fits import FitStore
+
+    asset, _, folder = tube_video
+    Bank(store).add(asset)
+    cfg = tiny()
+    cfg.stage2.iters = 6
+    cfg.checkpoint_every = 2
+    cfg.ablation.girth = False
+
+    class StopAt:
+        n = 0
+
+        def stage(self, name, total, done=0):
+            self.name = name
+
+        def step(self, terms):
+            self.n += 1
+            if self.name == "stage2" and self.n == cfg.stage1.iters + 4:
+                raise KeyboardInterrupt
+
+        def message(self, text):
+            pass
+
+    with pytest.raises(KeyboardInterrupt):
+        fit_job(str(folder), store, cfg, name="old", template="tube", reporter=StopAt(), outputs=("loss",))
+    fits = FitStore(store)
+    st = fits.load_state("old")
+    assert st["stage"] == 2 and not any("girth" in k for k in st["scene"])
+    del st["config"]["ablation"]["girth"]  # as saved before the switch existed
+    fits.save_state("old", st)
+    rec = fit_job(str(folder), store, name="old", resume=True, outputs=("loss",))
+    assert rec["status"] == "done" and rec["config"]["ablation"]["girth"] is False

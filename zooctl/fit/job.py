@@ -285,6 +285,8 @@ def fit_job(
         state = fits.load_state(name)
         base = preset(state["config"].get("preset", "fast"))
         resumed = FitConfig.from_dict(state["config"], base)
+        if "girth" not in state["config"].get("ablation", {}):
+            resumed.ablation.girth = False  # saved before girths existed: it goes on without them
         if cfg is not None:  # the fit goes on as it started; what it writes follows this command
             resumed.texture = cfg.texture
         cfg = resumed
