@@ -140,6 +140,24 @@ def test_cli_errors_are_one_line(tube_video, store, capsys, tmp_path):
     assert r.code == 2 and "bank" in r.err
 
 
+class StopAt:
+    """A reporter that presses Ctrl-C at stage 2's step that is the ``at``-th step of the fit."""
+
+    def __init__(self, at: int) -> None:
+        self.n, self.at = 0, at
+
+    def stage(self, name, total, done=0):
+        self.name = name
+
+    def step(self, terms):
+        self.n += 1
+        if self.name == "stage2" and self.n == self.at:
+            raise KeyboardInterrupt
+
+    def message(self, text):
+        pass
+
+
 def test_interrupt_then_resume(tube_video, store, tmp_path):
     """Ctrl-C mid stage 2 keeps the store intact and --resume finishes the same fit (the
     smoothness weight's decay, too, goes on from where it stopped)."""
@@ -154,22 +172,8 @@ def test_interrupt_then_resume(tube_video, store, tmp_path):
     cfg.checkpoint_every = 2
     cfg.weights.smooth_start, cfg.weights.smooth_until = 1000.0, 1.0
 
-    class StopAt:
-        n = 0
-
-        def stage(self, name, total, done=0):
-            self.name = name
-
-        def step(self, terms):
-            self.n += 1
-            if self.name == "stage2" and self.n == cfg.stage1.iters + 4:
-                raise KeyboardInterrupt
-
-        def message(self, text):
-            pass
-
     with pytest.raises(KeyboardInterrupt):
-        fit_job(str(folder), store, cfg, name="t", template="tube", reporter=StopAt(), outputs=("loss",))
+        fit_job(str(folder), store, cfg, name="t", template="tube", reporter=StopAt(cfg.stage1.iters + 4), outputs=("loss",))
     fits = FitStore(store)
     assert fits.get("t")["status"] == "interrupted"
     st = fits.load_state("t")
@@ -255,22 +259,8 @@ def test_a_state_paused_before_girths_existed_resumes_as_it_started(tube_video, 
     cfg.checkpoint_every = 2
     cfg.ablation.girth = False
 
-    class StopAt:
-        n = 0
-
-        def stage(self, name, total, done=0):
-            self.name = name
-
-        def step(self, terms):
-            self.n += 1
-            if self.name == "stage2" and self.n == cfg.stage1.iters + 4:
-                raise KeyboardInterrupt
-
-        def message(self, text):
-            pass
-
     with pytest.raises(KeyboardInterrupt):
-        fit_job(str(folder), store, cfg, name="old", template="tube", reporter=StopAt(), outputs=("loss",))
+        fit_job(str(folder), store, cfg, name="old", template="tube", reporter=StopAt(cfg.stage1.iters + 4), outputs=("loss",))
     fits = FitStore(store)
     st = fits.load_state("old")
     assert st["stage"] == 2 and not any("girth" in k for k in st["scene"])
