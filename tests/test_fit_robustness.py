@@ -158,6 +158,22 @@ class StopAt:
         pass
 
 
+def interrupt_at_stage2_step_4(folder, store, cfg, name: str) -> None:
+    """Fit ``folder`` with the tube template as ``name``, Ctrl-C at stage 2's 4th step."""
+    from zooctl.fit.job import fit_job
+
+    with pytest.raises(KeyboardInterrupt):
+        fit_job(
+            str(folder),
+            store,
+            cfg,
+            name=name,
+            template="tube",
+            reporter=StopAt(cfg.stage1.iters + 4),
+            outputs=("loss",),
+        )
+
+
 def test_interrupt_then_resume(tube_video, store, tmp_path):
     """Ctrl-C mid stage 2 keeps the store intact and --resume finishes the same fit (the
     smoothness weight's decay, too, goes on from where it stopped)."""
@@ -172,8 +188,7 @@ def test_interrupt_then_resume(tube_video, store, tmp_path):
     cfg.checkpoint_every = 2
     cfg.weights.smooth_start, cfg.weights.smooth_until = 1000.0, 1.0
 
-    with pytest.raises(KeyboardInterrupt):
-        fit_job(str(folder), store, cfg, name="t", template="tube", reporter=StopAt(cfg.stage1.iters + 4), outputs=("loss",))
+    interrupt_at_stage2_step_4(folder, store, cfg, "t")
     fits = FitStore(store)
     assert fits.get("t")["status"] == "interrupted"
     st = fits.load_state("t")
@@ -259,8 +274,7 @@ def test_a_state_paused_before_girths_existed_resumes_as_it_started(tube_video, 
     cfg.checkpoint_every = 2
     cfg.ablation.girth = False
 
-    with pytest.raises(KeyboardInterrupt):
-        fit_job(str(folder), store, cfg, name="old", template="tube", reporter=StopAt(cfg.stage1.iters + 4), outputs=("loss",))
+    interrupt_at_stage2_step_4(folder, store, cfg, "old")
     fits = FitStore(store)
     st = fits.load_state("old")
     assert st["stage"] == 2 and not any("girth" in k for k in st["scene"])
