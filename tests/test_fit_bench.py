@@ -70,6 +70,22 @@ def test_bench_make_ground_truth_is_consistent(tmp_path):
         assert not np.allclose(z["gt_view_rotation"][c, t], z["gt_cam_rotation"][t])
 
 
+def test_bench_make_fov_sets_the_focal_and_is_recorded(tmp_path):
+    """A narrower field of view is a longer focal, and the animal fills the frame as before."""
+    import math
+
+    asset = tube_asset(bones=3, name="tube")
+    wide = make_video(asset, tmp_path / "wide", frames=2, size=48, seed=2, fov=60.0)
+    narrow = make_video(asset, tmp_path / "narrow", frames=2, size=48, seed=2, fov=25.0)
+    for folder, fov in ((wide, 60.0), (narrow, 25.0)):
+        z = np.load(folder / "video.npz")
+        assert z["intrinsics"][0] == pytest.approx(24 / math.tan(math.radians(fov / 2)), rel=1e-4)
+        assert json.loads((folder / "meta.json").read_text())["fov"] == fov
+        assert 0.05 < z["masks"][0].mean() < 0.9
+    with pytest.raises(UsageError, match="--fov 200 is not a field of view"):
+        make_video(asset, tmp_path / "bad", frames=2, size=48, fov=200.0)
+
+
 def test_bench_run_table(tmp_path, store):
     from zooctl.store.bank import Bank
 

@@ -22,8 +22,8 @@ frames; the light direction, ambient level and background are random. Saved per 
   ``appearance="textured"`` (`zooctl.benchdata.appearance`: a procedural coat over a natural-looking
   scene instead of flat colours over a gradient) also ``gt_view_frames`` (C, T, H, W, 3) uint8,
   what those cameras see of the animal (black around it);
-- ``meta.json``: asset name, frames, size, fps, seed, motion (and the clip), ``appearance`` for a
-  textured video; ``video.mp4``: the frames as H.264.
+- ``meta.json``: asset name, frames, size, fps, seed, the vertical field of view (``fov``), motion
+  (and the clip), ``appearance`` for a textured video; ``video.mp4``: the frames as H.264.
 """
 
 from __future__ import annotations
@@ -219,8 +219,10 @@ def make_video(
     motion: str = "random",
     clip: str | None = None,
     appearance: str = "flat",
+    fov: float = 40.0,
 ) -> Path:
     """Render one test video of ``asset`` into ``out_dir/<asset.name>/`` (module docstring);
+    ``fov``: the camera's vertical field of view in degrees (the held-out cameras' too);
     ``clip`` names the clip a ``motion="clips"`` video plays (default: one drawn at random);
     ``appearance`` ``textured``: a coat and a scene that a colour bake can be judged on
     (`zooctl.benchdata.appearance`), and the held-out cameras' frames."""
@@ -231,6 +233,8 @@ def make_video(
 
     if frames < 1 or size < 16:
         raise UsageError("--frames must be >= 1 and --size >= 16")
+    if not 5.0 <= fov <= 120.0:
+        raise UsageError(f"--fov {fov:g} is not a field of view between 5 and 120 degrees")
     if motion not in MOTIONS:
         raise UsageError(f"--motion {motion!r} is not one of {', '.join(MOTIONS)}")
     if appearance not in APPEARANCES:
@@ -248,7 +252,6 @@ def make_video(
     az, el = camera_path(frames, rng)
     lo, hi = verts.reshape(-1, 3).min(0), verts.reshape(-1, 3).max(0)
     centre = 0.5 * (lo + hi)
-    fov = 40.0
     ref = fit_camera(
         verts.reshape(-1, 3), size, size, azimuth=float(az[0]), elevation=float(el[0]), fov_y=fov, margin=1.1
     )
@@ -351,6 +354,7 @@ def make_video(
             "size": size,
             "fps": fps,
             "seed": seed,
+            "fov": fov,
             "asset": asset.name,
             "motion": "clips" if clip_name else "random",
             "clip": clip_name,

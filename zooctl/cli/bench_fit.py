@@ -53,6 +53,12 @@ def make(
     frames: int = typer.Option(60, "--frames", help="Frames per video."),
     size: int = typer.Option(320, "--size", help="Image size in pixels (square)."),
     seed: int = typer.Option(0, "--seed", help="Random seed."),
+    fov: float = typer.Option(
+        40.0,
+        "--fov",
+        help="The camera's vertical field of view in degrees: a fit of a video without its "
+        "intrinsics (`bench/user_path.py`) estimates it.",
+    ),
     motion: str = typer.Option(
         "random",
         "--motion",
@@ -72,7 +78,7 @@ def make(
 
     for _name, load in _assets(bank, asset):
         dest = make_video(
-            load(), out, frames=frames, size=size, seed=seed, motion=motion, appearance=appearance
+            load(), out, frames=frames, size=size, seed=seed, motion=motion, appearance=appearance, fov=fov
         )
         console.print(f"made {dest}", highlight=False, markup=False)
 

@@ -112,7 +112,7 @@ def _part(a: Any, start: int, stop: int) -> Any:
     return a.part(start, stop) if hasattr(a, "part") else a[start:stop]
 
 
-_PER_FRAME_GT = {"vertices", "joints", "cam_rotation", "cam_translation"}
+_PER_FRAME_GT = {"vertices", "joints", "cam_rotation", "cam_translation", "input_masks"}
 _PER_VIEW_FRAME_GT = {"view_masks", "view_rotation", "view_translation"}  # (C, T, ...)
 
 

@@ -33,6 +33,21 @@ from .inputs import FitVideo, load_camera_rotations, load_fit_video
 from .run import FitResult, Reporter, fit_video
 
 
+def attach_truth(video: FitVideo, folder: Path) -> None:
+    """Give ``video`` the ground truth of the benchmark video in ``folder`` (`fit_job`'s
+    ``truth``), its true masks as ``gt["input_masks"]``; the two must have the same frames."""
+    if not (folder / "video.npz").is_file():
+        raise UsageError(f"{folder} is not a `zooctl bench make` video folder (no video.npz)")
+    bench = load_fit_video(folder)
+    if bench.masks.shape != video.masks.shape:
+        raise UsageError(
+            f"{video.name} has {video.num_frames} frames of {video.size[1]}x{video.size[0]}, its truth "
+            f"{bench.num_frames} of {bench.size[1]}x{bench.size[0]}",
+            hint="add the benchmark's video.mp4 with all its frames at its own size",
+        )
+    video.gt = dict(bench.gt) | {"input_masks": bench.masks, "intrinsics": bench.intrinsics}
+
+
 def load_source(
     source: str,
     store_root: Path,
@@ -257,6 +272,7 @@ def fit_job(
     cameras: str | None = None,
     fits: FitStore | None = None,
     replace: bool = False,
+    truth: str | Path | None = None,
 ) -> dict[str, Any]:
     """Fit a video and write its outputs and store record; returns the record (``fit.json``).
 
@@ -266,6 +282,11 @@ def fit_job(
 
     ``cameras``: known camera rotations (`zooctl.fit.inputs.load_camera_rotations`: a file, or
     ``gt`` for a benchmark video's own cameras).
+
+    ``truth``: a `zooctl bench make` folder whose ground truth scores the fit of another source
+    with the same frames (its ``video.mp4`` added to the video store as a user adds a video, so
+    the fit sees the store's automatic masks and flow): the 3D metrics, and the input view against
+    the true masks as ``mask_iou_truth``.
 
     Outputs go to ``out``, else ``out_root/<name>`` (the CLI's ``fits/<name>``), else the fit's
     folder in the store. ``fits``: where the record goes instead of ``store_root``'s fits (a batch
@@ -295,6 +316,7 @@ def fit_job(
         out = Path(old["out"]) if old.get("out") else out
         exclude = set(old.get("excluded", [])) or exclude
         cameras = old.get("cameras")
+        truth = old.get("truth")
     cfg = (cfg or preset("fast")).validate()
     if template is not None and not resume:  # a resumed fit's config has the rate it started with
         cfg = cfg.for_named_template()
@@ -305,6 +327,8 @@ def fit_job(
         cfg = dataclasses.replace(cfg, pose_prior=dataclasses.replace(cfg.pose_prior, motion=folder))
     t_start = time.perf_counter()
     video = load_source(source, store_root, masks, cfg.max_frames, box, reporter)
+    if truth is not None:
+        attach_truth(video, Path(truth))
     if cameras is not None and not resume:  # a resumed fit's camera search is done already
         video.camera_rotations = load_camera_rotations(cameras, video)
         if cameras != "gt":
@@ -339,6 +363,7 @@ def fit_job(
             "video": video.name,
             "masks": masks,
             "cameras": cameras,
+            "truth": str(Path(truth).resolve()) if truth is not None else None,
             "box": list(box) if box is not None else None,
             "stored_video": video.source[len("video:") :] if video.source.startswith("video:") else None,
             "mask_source": video.mask_source,
@@ -587,6 +612,8 @@ def write_outputs(
         "mask_iou_model": _nanmean(model_iou),
         "surface_tear": round(tear, 5),
     }
+    if "input_masks" in result.video.gt:  # a fit on other masks, scored against the truth's
+        metrics["mask_iou_truth"] = _nanmean(exported_mask_iou(asset, cam, result.video.gt["input_masks"]))
     weight = result.config.weights.edge_stretch
     note = surface_tear_note(metrics["surface_tear"], weight) if weight < TORN_NOTE_WEIGHT else None
     if note is not None:

@@ -189,7 +189,10 @@ def novel_view_iou(
     from ..render.camera import Camera
     from ..render.raster import rasterize
 
-    gt, K = result.video.gt, result.video.intrinsics
+    gt = result.video.gt
+    # the held-out cameras' intrinsics: the video's own, or its truth's when the fit read another
+    # source (`zooctl.fit.job.attach_truth`) and estimated its focal
+    K = result.video.intrinsics if result.video.intrinsics is not None else gt.get("intrinsics")
     if any(k not in gt for k in ("view_masks", "view_rotation", "view_translation")) or K is None:
         return None
     masks = gt["view_masks"][:, sel]  # (C, S, H, W)

@@ -1,0 +1,86 @@
+"""A fit of another source scored against a benchmark video's truth (`fit_job`'s ``truth``,
+`bench/user_path.py`): the fit reads its own source's masks, the 3D metrics and
+``mask_iou_truth`` come from the benchmark folder."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from fit_helpers import small_quadruped_video, write_davis_folder
+
+from zooctl.errors import UsageError
+from zooctl.fit.config import FitConfig, preset
+from zooctl.fit.inputs import load_fit_video
+from zooctl.fit.job import fit_job
+
+pytestmark = pytest.mark.usefixtures("one_thread")
+
+
+@pytest.fixture(scope="module")
+def bench(tmp_path_factory):
+    root = tmp_path_factory.mktemp("truth")
+    store, folder, cfg = small_quadruped_video(root)
+    video = load_fit_video(folder)
+    # the masks a user's segmenter might give: the true ones with their lower third cut off
+    masks = video.masks.copy()
+    for m in masks:
+        ys = np.nonzero(m.any(1))[0]
+        m[ys[0] + 2 * (ys[-1] - ys[0]) // 3 :] = False
+    davis = write_davis_folder(root / "davis", video.frames, masks)
+    return store, folder, FitConfig.from_dict(json.loads(cfg.read_text()), preset("fast")), davis
+
+
+def test_the_fit_reads_its_own_masks_and_is_scored_against_the_truth(bench):
+    store, folder, cfg, davis = bench
+    rec = fit_job(str(davis), store, cfg, name="cut", template="quadruped", outputs=(), truth=folder)
+    m = rec["metrics"]
+    assert rec["truth"] == str(folder.resolve())
+    assert rec["mask_source"] != "given"  # read from the stored video, not the benchmark's
+    # against the cut masks it read and against the whole animal: not the same figure
+    assert 0 < m["mask_iou_truth"] <= 1 and abs(m["mask_iou_truth"] - m["mask_iou"]) > 0.02
+    for k in ("novel_view_iou", "miou", "joint"):
+        assert m[k] is not None and np.isfinite(m[k]), k
+    plain = fit_job(str(davis), store, cfg, name="plain", template="quadruped", outputs=())
+    assert "mask_iou_truth" not in plain["metrics"] and "miou" not in plain["metrics"]
+    assert plain["truth"] is None
+
+
+def test_a_truth_that_is_not_the_same_video_is_refused(bench, tmp_path):
+    store, folder, cfg, davis = bench
+    video = load_fit_video(folder)
+    short = write_davis_folder(tmp_path / "short", video.frames[:6], video.masks[:6])
+    with pytest.raises(UsageError, match="has 6 frames of 96x96, its truth 10 of 96x96"):
+        fit_job(str(short), store, cfg, name="short", template="quadruped", outputs=(), truth=folder)
+    with pytest.raises(UsageError, match="not a `zooctl bench make` video folder"):
+        fit_job(str(davis), store, cfg, name="none", template="quadruped", outputs=(), truth=tmp_path)
+
+
+def test_bench_user_path_adds_the_mp4_and_scores_the_fit_against_the_truth(bench, tmp_path):
+    """`bench/user_path.py`: `zooctl video add` of the benchmark's mp4 (automatic masks), the fit
+    from the store, its rows scored against the truth."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    store, folder, cfg, _ = bench
+    (tmp_path / "small.json").write_text(json.dumps(cfg.to_dict()))
+    repo = Path(__file__).resolve().parent.parent
+    out = tmp_path / "rows.json"
+    env = dict(os.environ, ZOOCTL_STORE=str(store))
+    args = [sys.executable, str(repo / "bench" / "user_path.py"), str(folder.parent), "--own-template"]
+    args += ["--config", str(tmp_path / "small.json"), "--json", str(out)]
+    subprocess.run(args, check=True, env=env, capture_output=True)
+    (row,) = json.loads(out.read_text())["rows"]
+    assert row["video"] == folder.name and row["template"] == "quadruped"
+    assert 0.3 < row["mask_j"] <= 1  # the store's own masks against the true ones
+    for k in ("mask_iou", "mask_iou_read", "novel_view_iou", "miou", "joint"):
+        assert row[k] is not None and np.isfinite(row[k]), k
+    # the true masks as the user's own, the true focal: the stored masks are the truth's
+    subprocess.run(args + ["--masks", "truth", "--focal", "truth"], check=True, env=env, capture_output=True)
+    (row,) = json.loads(out.read_text())["rows"]
+    assert row["mask_j"] > 0.99
+    fit = json.loads((store / "fits" / f"user-{folder.name}-truth-truth" / "fit.json").read_text())
+    assert fit["config"]["camera"]["focal"] == pytest.approx(float(load_fit_video(folder).intrinsics[0]))
