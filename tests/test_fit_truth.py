@@ -45,6 +45,12 @@ def test_the_fit_reads_its_own_masks_and_is_scored_against_the_truth(bench):
     plain = fit_job(str(davis), store, cfg, name="plain", template="quadruped", outputs=())
     assert "mask_iou_truth" not in plain["metrics"] and "miou" not in plain["metrics"]
     assert plain["truth"] is None
+    # the focal was estimated (a DAVIS folder has no intrinsics): the fit says so, with the fix
+    (note,) = [n for n in rec["notes"] if "focal was estimated" in n]
+    assert f"{rec['camera']['focal_px']:.0f} px" in note and "--focal PX" in note
+    # the benchmark's own folder gives the focal: no such note
+    given = fit_job(str(folder), store, cfg, name="given", template="quadruped", outputs=())
+    assert not any("focal was estimated" in n for n in given["notes"])
 
 
 def test_a_truth_that_is_not_the_same_video_is_refused(bench, tmp_path):

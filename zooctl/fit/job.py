@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 import shlex
 import shutil
@@ -46,6 +47,17 @@ def attach_truth(video: FitVideo, folder: Path) -> None:
             hint="add the benchmark's video.mp4 with all its frames at its own size",
         )
     video.gt = dict(bench.gt) | {"input_masks": bench.masks, "intrinsics": bench.intrinsics}
+
+
+def focal_note(focal: float, height: int) -> str:
+    """What a fit says when it estimated the focal (``focal`` px of frames ``height`` px high)."""
+    fov = math.degrees(2 * math.atan(0.5 * height / max(focal, 1e-6)))
+    return (
+        f"the focal was estimated from the silhouettes ({focal:.0f} px, a vertical field of view of "
+        f"{fov:.0f} degrees); silhouettes tell lenses apart poorly and a wrong focal costs the 3D "
+        'seen from other sides (BENCHMARKS.md, "The user\'s path"): if you know the lens, fit again '
+        "with --focal PX (pixels of the input frames)"
+    )
 
 
 def load_source(
@@ -631,6 +643,8 @@ def write_outputs(
         except InputError as exc:
             notes.append(f"3D metrics skipped: {exc.message}")
     k = result.scene.camera(1).intrinsics[0].detach().cpu().numpy() / result.scale
+    if result.config.camera.focal is None:
+        notes.append(focal_note(float(k[1]), result.video.size[0]))
     return {
         "outputs": files,
         "notes": notes,
