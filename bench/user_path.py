@@ -37,13 +37,7 @@ from zooctl.fit.config import FitConfig, preset
 from zooctl.fit.inputs import load_fit_video
 from zooctl.fit.job import fit_job, load_source
 from zooctl.paths import default_store
-
-
-def jaccard(a: np.ndarray, b: np.ndarray) -> float:
-    """Mean per-frame IoU of two (T, H, W) bool mask stacks (frames empty in both count 1)."""
-    inter = (a & b).sum((1, 2))
-    union = (a | b).sum((1, 2))
-    return float(np.mean(np.where(union > 0, inter / np.maximum(union, 1), 1.0)))
+from zooctl.video.mask_quality import per_frame_j
 
 
 def stored_name(video: Path, true_masks: bool = False) -> str:
@@ -88,9 +82,7 @@ def main() -> None:
         true_masks = args.masks == "truth"
         add_video(v, root, true_masks)
         t_add = time.perf_counter() - t0
-        stored = load_source(stored_name(v, true_masks), root, None, None)
         truth = load_fit_video(v)
-        j = jaccard(stored.masks, truth.masks) if stored.masks.shape == truth.masks.shape else float("nan")
         cfg = preset("fast")
         if args.config:
             cfg = FitConfig.from_dict(json.loads(args.config.read_text()), cfg)
@@ -108,7 +100,9 @@ def main() -> None:
             replace=True,
             truth=v,
         )
-        m = rec["metrics"]
+        m = rec["metrics"]  # the fit has checked that the stored video's frames are the truth's
+        stored = load_source(stored_name(v, true_masks), root, None, None)
+        j = float(per_frame_j(np.asarray(stored.masks), truth.masks).mean())
         row = {
             "video": v.name,
             "template": rec["template"],
