@@ -193,7 +193,9 @@ def _fit_window(
     timings.setdefault("targets", time.perf_counter() - t0)
     focal_given = cfg.camera.focal is not None or video.intrinsics is not None
     if cfg.camera.focal is None and video.intrinsics is not None:
-        cfg.camera.focal = float(video.intrinsics[0])
+        # a copy: the caller's config stays as given (a batch's next video must not inherit it)
+        camera = dataclasses.replace(cfg.camera, focal=float(video.intrinsics[0]))
+        cfg = dataclasses.replace(cfg, camera=camera)
     scene = new_scene(template, cfg, T, h, w, ((W / 2 - x0) * s, (H / 2 - y0) * s))
     if cfg.pose_prior.kind == "clips":
         scene.clip_stats = clip_pose_stats(template, cfg.pose_prior.min_std_deg, dev)
