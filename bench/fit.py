@@ -14,7 +14,8 @@ adds them all to a scratch bank and runs `zooctl bench run` (each video's own as
 does) with their given masks (``given``), with automatic GrabCut masks seeded by the first
 annotation's box (``auto``) and with the default automatic masks of its frames alone, no box, as a
 user's `zooctl fit FRAMES` makes them (``default``), and reports the reprojected mask IoU against
-the DAVIS annotations (the ground truth in every case). The template comes from retrieval over a bank of the 28 shared assets unless
+the DAVIS annotations (the ground truth in every case); the focal is what `zooctl fit` takes
+(`zooctl.fit.focal`: no lens recorded, so ``camera.focal_guess``). The template comes from retrieval over a bank of the 28 shared assets unless
 ``--template VIDEO=ASSET`` says otherwise (then at the named template's joint rate, as `zooctl fit
 --template` fits); ``--config`` is a fit config applied on top of the preset, as `zooctl fit --config`.
 ``length`` renders one long clip (the asset playing its own clips) and fits it whole and its
@@ -145,6 +146,7 @@ def davis(args) -> None:
     import numpy as np
 
     from zooctl.fit.config import load_config
+    from zooctl.fit.focal import resolve_focal
     from zooctl.fit.job import load_source
     from zooctl.fit.run import fit_video, input_mask_iou
     from zooctl.fit.template import select_template
@@ -177,6 +179,7 @@ def davis(args) -> None:
                 args.max_frames,
                 box if kind == "auto" else None,
             )
+            cfg, _ = resolve_focal(cfg, video)  # the focal `zooctl fit` would use (`camera.focal_guess`)
             asset, cands, trial, _ = select_template(bank, fixed.get(name), video, cfg)
             res = fit_video(video, asset, cfg, resume=trial)
             wall = time.perf_counter() - t

@@ -16,8 +16,8 @@ metrics of `zooctl bench run`. ``--json`` writes rows in `zooctl bench run --jso
 
 What the user path loses, one part at a time: ``--masks truth`` adds the video with the
 benchmark's true masks as the user's own (`video add --masks`; the flow is still estimated),
-``--focal truth`` gives the fit the benchmark camera's focal (`camera.focal`) instead of its
-estimate.
+``--focal truth`` gives the fit the benchmark camera's focal (`camera.focal`) instead of what
+a fit does when no lens is known (`zooctl.fit.focal`: ``camera.focal_guess``).
 """
 
 from __future__ import annotations

@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -42,15 +43,25 @@ def test_the_fit_reads_its_own_masks_and_is_scored_against_the_truth(bench):
     assert 0 < m["mask_iou_truth"] <= 1 and abs(m["mask_iou_truth"] - m["mask_iou"]) > 0.02
     for k in ("novel_view_iou", "miou", "joint"):
         assert m[k] is not None and np.isfinite(m[k]), k
-    plain = fit_job(str(davis), store, cfg, name="plain", template="quadruped", outputs=())
+    # no lens known (a DAVIS folder of plain JPEGs): a normal lens's focal, the frame's diagonal,
+    # kept by the fit; the fit says so, with the fix
+    assert rec["focal"] == {"from": "normal", "px": pytest.approx(math.hypot(96, 96))}
+    assert rec["camera"]["focal_px"] == pytest.approx(math.hypot(96, 96), rel=1e-4)
+    (note,) = [n for n in rec["notes"] if "no lens was given or recorded" in n]
+    assert "a normal lens's" in note and "136 px" in note and "--focal PX" in note and "--lens MM" in note
+    # camera.focal_guess search: the camera search's pick, as before
+    cfg_search = FitConfig.from_dict(cfg.to_dict())
+    cfg_search.camera.focal_guess = "search"
+    plain = fit_job(str(davis), store, cfg_search, name="plain", template="quadruped", outputs=())
     assert "mask_iou_truth" not in plain["metrics"] and "miou" not in plain["metrics"]
     assert plain["truth"] is None
-    # the focal was estimated (a DAVIS folder has no intrinsics): the fit says so, with the fix
-    (note,) = [n for n in rec["notes"] if "focal was estimated" in n]
-    assert f"{rec['camera']['focal_px']:.0f} px" in note and "--focal PX" in note
+    assert plain["focal"] == {"from": "estimated", "px": plain["camera"]["focal_px"]}
+    (note,) = [n for n in plain["notes"] if "no lens was given or recorded" in n]
+    assert f"estimated from the silhouettes, {plain['camera']['focal_px']:.0f} px" in note
     # the benchmark's own folder gives the focal: no such note
     given = fit_job(str(folder), store, cfg, name="given", template="quadruped", outputs=())
-    assert not any("focal was estimated" in n for n in given["notes"])
+    assert not any("no lens was given" in n for n in given["notes"])
+    assert given["focal"]["from"] == "video"
 
 
 def test_a_truth_that_is_not_the_same_video_is_refused(bench, tmp_path):
@@ -90,3 +101,43 @@ def test_bench_user_path_adds_the_mp4_and_scores_the_fit_against_the_truth(bench
     assert row["mask_j"] > 0.99
     fit = json.loads((store / "fits" / f"user-{folder.name}-truth-truth" / "fit.json").read_text())
     assert fit["config"]["camera"]["focal"] == pytest.approx(float(load_fit_video(folder).intrinsics[0]))
+
+
+def test_a_lens_the_frames_record_gives_the_focal(bench, tmp_path):
+    """A frame folder whose first image's Exif names the benchmark camera's lens: the fit takes its
+    focal from it (not estimated), says so, and keeps it."""
+    from PIL import Image
+
+    from zooctl.video.lens import focal_pixels
+
+    store, folder, cfg, _ = bench
+    video = load_fit_video(folder)
+    H, W = video.size
+    true_px = float(video.intrinsics[0])
+    f35 = true_px / focal_pixels(1.0, W, H)  # the 35 mm-equivalent focal length of that camera
+    davis = write_davis_folder(tmp_path / "exif", video.frames, video.masks)
+    first = davis / "JPEGImages" / "00000.jpg"
+    with Image.open(first) as im:
+        exif = im.getexif()
+        exif.get_ifd(0x8769)[41989] = round(f35)
+        im.save(first, exif=exif, quality=95)
+    rec = fit_job(str(davis), store, cfg, name="exif", template="quadruped", outputs=(), truth=folder)
+    px = focal_pixels(round(f35), W, H)
+    assert rec["focal"] == {
+        "from": "lens",
+        "lens": {"focal_35mm": float(round(f35)), "lens_model": None, "from": "exif"},
+        "px": pytest.approx(px),
+    }
+    assert rec["config"]["camera"]["focal"] == pytest.approx(px)
+    assert rec["camera"]["focal_px"] == pytest.approx(px, rel=1e-4)  # given focals are not learned
+    assert abs(px / true_px - 1) < 0.02  # the lens rounded to whole millimetres
+    assert (
+        f"focal {px:.0f} px from the lens: {round(f35)} mm 35 mm-equivalent (the first frame's Exif)"
+        in rec["notes"]
+    )
+    assert not any("no lens was given" in n for n in rec["notes"])
+    # --lens overrides it, --focal both; the record says which
+    cfg2 = FitConfig.from_dict(cfg.to_dict())
+    cfg2.camera.lens_35mm = 2.0 * round(f35)
+    rec = fit_job(str(davis), store, cfg2, name="exif2", template="quadruped", outputs=())
+    assert rec["focal"]["lens"]["from"] == "config" and rec["focal"]["px"] == pytest.approx(2 * px)

@@ -107,7 +107,17 @@ def fit(
     renderer: str = RendererOpt,
     articulation: str = ArticulationOpt,
     focal: float = typer.Option(
-        None, "--focal", help="Focal length in pixels of the input frames (default: estimated)."
+        None,
+        "--focal",
+        help="Focal length in pixels of the input frames (default: from --lens, else the lens the video "
+        "records, else a normal lens's: the frame's diagonal).",
+    ),
+    lens: float = typer.Option(
+        None,
+        "--lens",
+        help="The lens as a 35 mm-equivalent focal length in mm (a phone's main camera: about 26); the focal "
+        "follows from the frames' diagonal. Default: the lens the video records (see `zooctl video add "
+        "--lens`), else a normal lens's (43 mm).",
     ),
     cameras: str = typer.Option(
         None,
@@ -161,6 +171,8 @@ def fit(
         cfg.articulation = articulation
     if focal is not None:
         cfg.camera.focal = focal
+    if lens is not None:
+        cfg.camera.lens_35mm = lens
     if seed is not None:
         cfg.seed = seed
     if texture is not None:

@@ -114,6 +114,13 @@ def add(
         help="Refuse frames so large that preprocessing would need more than this many GB (about 32 bytes per "
         "stored pixel, a few frames at a time: the video's length does not count).",
     ),
+    lens: float = typer.Option(
+        None,
+        "--lens",
+        help="The lens as a 35 mm-equivalent focal length in mm (a phone's main camera: about 26), stored "
+        "with the video for its fits. Default: the one the file records (iPhone QuickTime metadata, or a "
+        "frame folder's Exif), else none (its fits then assume a normal lens, 43 mm).",
+    ),
     replace: bool = typer.Option(False, "--replace", help="Overwrite a video of the same name."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars."),
     json_out: bool = JsonOpt,
@@ -146,6 +153,7 @@ def add(
         flow=flow,
         flow_options=flow_opts,
         replace=replace,
+        lens=lens,
     )
 
     def notify(text: str) -> None:
@@ -223,6 +231,7 @@ def show(
     json_out: bool = JsonOpt,
 ) -> None:
     """Show a stored video: frames, fps, size, mask coverage per frame, flow statistics."""
+    from ..video.lens import lens_line
     from ..video.stats import seeding_lines, stored_video_stats
 
     store = _store()
@@ -248,6 +257,8 @@ def show(
     console.print(
         f"source: {src['kind']} {src['path']}  sha256 {src['sha256'][:12]}", highlight=False, markup=False
     )
+    if src.get("lens"):
+        console.print(lens_line(src["lens"]), highlight=False, markup=False)
     console.print(
         f"masks: {info['segmenter']}; flow: {info['flow_estimator']}", highlight=False, markup=False
     )

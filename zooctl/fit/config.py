@@ -22,6 +22,7 @@ from .config_spec import check_fields, spec
 CONFIG_VERSION = 1
 POSE_PRIORS = ("none", "rest", "clips", "motion")
 MIRROR_TRIALS = ("given", "always", "never")
+FOCAL_GUESSES = ("normal", "search")
 PRESET_NAMES = ("fast", "quality")
 _RATE = {"exclusiveMinimum": 0}
 _WEIGHT = {"minimum": 0}
@@ -31,9 +32,29 @@ _WEIGHT = {"minimum": 0}
 class CameraConfig:
     """Supplement I: focal / viewpoint search on the mask loss, then local refinement."""
 
-    focal: float | None = spec(None, help="pixels at the input resolution; null: estimate it", **_RATE)
+    focal: float | None = spec(
+        None,
+        help="pixels at the input resolution; null: from lens_35mm, the video's lens, else focal_guess",
+        **_RATE,
+    )
+    lens_35mm: float | None = spec(
+        None,
+        help="the lens as a 35 mm-equivalent focal length (mm), when focal is null; null: the lens the "
+        "video records (zooctl.video.lens), else focal_guess",
+        minimum=1,
+        maximum=5000,
+    )
+    focal_guess: str = spec(
+        "normal",
+        help="with no focal or lens known (zooctl fit's job): normal (a normal lens, 43 mm 35 mm-equivalent: "
+        "the focal is the frame's diagonal) or search (the camera search picks among fov_candidates by "
+        "silhouette IoU)",
+        enum=FOCAL_GUESSES,
+    )
     fov_candidates: list[float] = spec(
-        factory=lambda: [30.0, 45.0, 60.0], help="vertical fields of view (degrees) to try", minItems=1
+        factory=lambda: [30.0, 45.0, 60.0],
+        help="vertical fields of view (degrees) the camera search tries when the focal is not known",
+        minItems=1,
     )
     azimuths: int = spec(12, help="viewpoints sampled on the sphere: azimuth x elevation", minimum=1)
     elevations: list[float] = spec(factory=lambda: [-15.0, 10.0, 35.0], help="degrees", minItems=1)

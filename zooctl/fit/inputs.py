@@ -36,7 +36,8 @@ class FitVideo:
     pixels of this resolution or None; flow_valid (T-1, H, W) bool; intrinsics (4,) fx, fy, cx, cy
     in pixels of this resolution or None; gt: ground truth arrays (benchmark videos only);
     camera_rotations (T, 3, 3) world-to-camera rotations (OpenCV axes) when the camera's motion is
-    known (``--cameras``, or `zooctl bench run --known-camera`), else None.
+    known (``--cameras``, or `zooctl bench run --known-camera`), else None; lens: the lens a stored
+    video was filmed with (`zooctl.video.lens.read_lens`'s dict), when known.
 
     A stored video's frames, masks, flow and flow_valid are `FrameArray` s: read from its file as
     they are indexed, so a long video's frames, masks and flow never sit in memory whole (what needs
@@ -56,6 +57,7 @@ class FitVideo:
     source: str = ""
     mask_source: str = "given"
     camera_rotations: np.ndarray | None = None
+    lens: dict[str, Any] | None = None
     cache: dict[Any, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -104,6 +106,7 @@ class FitVideo:
             self.source,
             self.mask_source,
             None if self.camera_rotations is None else self.camera_rotations[start:stop],
+            self.lens,
         )
 
 

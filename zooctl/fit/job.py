@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import os
 import shlex
 import shutil
@@ -30,6 +29,7 @@ from ..errors import (
 from ..names import check_name, sanitize_name
 from ..store.fits import FitStore
 from .config import FitConfig, preset
+from .focal import guessed_note, lens_note, resolve_focal
 from .inputs import FitVideo, load_camera_rotations, load_fit_video
 from .run import FitResult, Reporter, fit_video
 
@@ -47,17 +47,6 @@ def attach_truth(video: FitVideo, folder: Path) -> None:
             hint="add the benchmark's video.mp4 with all its frames at its own size",
         )
     video.gt = dict(bench.gt) | {"input_masks": bench.masks, "intrinsics": bench.intrinsics}
-
-
-def focal_note(focal: float, height: int) -> str:
-    """What a fit says when it estimated the focal (``focal`` px of frames ``height`` px high)."""
-    fov = math.degrees(2 * math.atan(0.5 * height / max(focal, 1e-6)))
-    return (
-        f"the focal was estimated from the silhouettes ({focal:.0f} px, a vertical field of view of "
-        f"{fov:.0f} degrees); silhouettes tell lenses apart poorly and a wrong focal costs the 3D "
-        'seen from other sides (BENCHMARKS.md, "The user\'s path"): if you know the lens, fit again '
-        "with --focal PX (pixels of the input frames)"
-    )
 
 
 def load_source(
@@ -112,6 +101,7 @@ def load_source(
         rec.flow_valid.head(max(n - 1, 0)),
         source=f"video:{source}",
         mask_source=str(rec.segmenter.get("name", "stored")) if rec.segmenter else "stored",
+        lens=rec.source.get("lens"),
     )
     return video.truncated(max_frames).check()
 
@@ -341,6 +331,10 @@ def fit_job(
     video = load_source(source, store_root, masks, cfg.max_frames, box, reporter)
     if truth is not None:
         attach_truth(video, Path(truth))
+    if resume and old.get("focal"):
+        focal = old["focal"]  # the saved config holds the focal it started with
+    else:
+        cfg, focal = resolve_focal(cfg, video)
     if cameras is not None and not resume:  # a resumed fit's camera search is done already
         video.camera_rotations = load_camera_rotations(cameras, video)
         if cameras != "gt":
@@ -376,6 +370,7 @@ def fit_job(
             "masks": masks,
             "cameras": cameras,
             "truth": str(Path(truth).resolve()) if truth is not None else None,
+            "focal": focal,
             "box": list(box) if box is not None else None,
             "stored_video": video.source[len("video:") :] if video.source.startswith("video:") else None,
             "mask_source": video.mask_source,
@@ -540,6 +535,11 @@ def _run_and_write(
 
         note = close_trials_note(candidates, asset.name, shlex.quote(str(source)))
         record["notes"] = ([note] if note else []) + record["notes"]
+    if record["focal"]["from"] == "estimated":
+        record["focal"]["px"] = record["camera"]["focal_px"]
+    focal_line = lens_note(record["focal"]) or guessed_note(record["focal"], video.size[0])
+    if focal_line:
+        record["notes"] = [focal_line] + record["notes"]
     record["timings"]["total_wall"] = time.perf_counter() - t_start
     record["status"] = "done"
     from .outputs import write_fit_json
@@ -643,8 +643,6 @@ def write_outputs(
         except InputError as exc:
             notes.append(f"3D metrics skipped: {exc.message}")
     k = result.scene.camera(1).intrinsics[0].detach().cpu().numpy() / result.scale
-    if result.config.camera.focal is None:
-        notes.append(focal_note(float(k[1]), result.video.size[0]))
     return {
         "outputs": files,
         "notes": notes,

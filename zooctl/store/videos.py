@@ -132,6 +132,7 @@ def video_summary(
             "path": str(source.get("path", "")),
             "kind": str(source.get("kind", "")),
             "sha256": str(source.get("sha256", "")),
+            **({"lens": dict(source["lens"])} if source.get("lens") else {}),
         },
     }
 

@@ -35,6 +35,21 @@ class AddOptions:
     flow: str = "dis"
     flow_options: dict[str, Any] = field(default_factory=dict)
     replace: bool = False
+    lens: float | None = None  # 35 mm-equivalent focal length (mm); None: the one the file records
+
+
+def _lens(path: Path, given: float | None) -> dict[str, Any] | None:
+    """The lens stored with the video: the user's (``--lens``), else the one the file records."""
+    from .lens import MAX_FOCAL_35MM, MIN_FOCAL_35MM, read_lens
+
+    if given is None:
+        return read_lens(path)
+    if not MIN_FOCAL_35MM <= given <= MAX_FOCAL_35MM:
+        raise UsageError(
+            f"--lens {given:g} is not a 35 mm-equivalent focal length",
+            hint=f"give millimetres between {MIN_FOCAL_35MM:g} and {MAX_FOCAL_35MM:g}, e.g. --lens 26 for a phone's main camera",
+        )
+    return {"focal_35mm": float(given), "lens_model": None, "from": "user"}
 
 
 def parse_box(text: str) -> tuple[float, float, float, float]:
@@ -206,6 +221,7 @@ def ingest(
         every=plan.every,
     )
     w, h = stream.size
+    lens = _lens(path, opts.lens)
     check_frame_memory(
         w,
         h,
@@ -288,6 +304,7 @@ def ingest(
             "start": plan.start,
             "end": plan.end,
             **({"every": plan.every} if plan.every > 1 else {}),
+            **({"lens": lens} if lens is not None else {}),
         },
         source_indices=stream.source_indices,
         segmenter={
