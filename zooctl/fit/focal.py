@@ -59,13 +59,7 @@ def lens_note(focal: dict[str, Any]) -> str | None:
         return None
     from ..video.lens import lens_line
 
-    lens = focal["lens"]
-    line = (
-        f"lens: {lens['focal_35mm']:g} mm 35 mm-equivalent (--lens)"
-        if lens["from"] == "config"
-        else lens_line(lens)
-    )
-    return f"focal {focal['px']:.0f} px from the {line}"
+    return f"focal {focal['px']:.0f} px from the {lens_line(focal['lens'])}"
 
 
 def guessed_note(focal: dict[str, Any], height: int) -> str | None:

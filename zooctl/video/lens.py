@@ -43,6 +43,7 @@ def focal_pixels(focal_35mm: float, width: int, height: int) -> float:
 
 _FROM = {
     "user": "given with --lens",
+    "config": "--lens",  # zooctl fit --lens (camera.lens_35mm), `zooctl.fit.focal`
     "quicktime": "the file's QuickTime metadata",
     "exif": "the first frame's Exif",
 }
