@@ -80,6 +80,8 @@ def test_a_tracking_error_in_either_direction_is_raised_once_both_have_stopped(
 def test_looks_taken_while_tracking_give_the_masks_taken_after_it(clip):
     """`AnimalNetSegmenter.segment` takes the network's looks beside the tracker: the masks are
     those of looking after tracking, as `decide_near` alone does."""
+    from zooctl.video.colour_snap import snap_video
+
     frames, truth = clip
     box = cues.box_of(truth[0])
     seg = AnimalNetSegmenter(feature_every=3)
@@ -88,6 +90,7 @@ def test_looks_taken_while_tracking_give_the_masks_taken_after_it(clip):
     flow, tracked = track(seg.tracker, frames, box, None, None, 0, "animalnet")
     small, prior = at_working_size(frames, tracked, flow.forward.shape[1:3])
     alone = seg.decide_near(small, prior, flow, seed_frame=seg.tracker.report["seed_frame"])
+    alone = snap_video(small, alone)[0]  # step 7, after the decision, as `segment` runs it
     assert report["crop"] is None  # decided on the whole frames: the looks taken early served
     assert np.array_equal(got, np.asarray(at_frame_size(alone, frames, small, seg.edge_radius), bool))
     assert seg.report["animalnet"] == report

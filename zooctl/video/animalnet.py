@@ -194,7 +194,11 @@ class AnimalNetSegmenter:
     6. A frame whose mask is under ``remnant`` times the video's median mask area and does not touch
        the frame's edge is stored empty: what a tracker leaves behind on the ground once the animal
        has left (an animal leaving or entering is cut by the edge). 0: never.
-    7. The masks, decided at the working size, are brought to the frame's size along its colour
+    7. With ``snap``, each frame is snapped to the animal's colours by a last GrabCut seeded by its
+       mask, kept for the video only where that separates the mask's colours from its surroundings
+       more (`zooctl.video.colour_snap.snap_video`, ``snap_gain`` its threshold): a blob of
+       background the motion took for animal goes.
+    8. The masks, decided at the working size, are brought to the frame's size along its colour
        edges (`zooctl.video.guided.guided_upsample`, a window of ``edge_radius`` times the working
        frame's larger side, regulariser ``edge_eps``); ``edge_radius`` 0: a linear upsample.
 
@@ -205,7 +209,8 @@ class AnimalNetSegmenter:
     ``weights``: the head's ``.npz`` (`weights_file`). Other options go to the tracker.
     ``report``: the tracker's, with ``animalnet`` added (weights, the motion margin measured, whether
     the network's masks replaced the tracker's, whether the identity check kept them out, the frames
-    emptied as remnants, the part of the frame decided on, share of mask pixels changed).
+    emptied as remnants, the part of the frame decided on, share of mask pixels changed) and
+    ``colour_snap`` (`snap_video`'s report) when ``snap``.
     """
 
     name = "animalnet"
@@ -224,6 +229,8 @@ class AnimalNetSegmenter:
         remnant: float = 0.1,
         edge_radius: float = 0.02,
         edge_eps: float = 1e-3,
+        snap: bool = True,
+        snap_gain: float | None = None,
         **tracker_options,
     ) -> None:
         from ..errors import UsageError
@@ -247,6 +254,8 @@ class AnimalNetSegmenter:
         self.remnant = remnant
         self.edge_radius = edge_radius
         self.edge_eps = edge_eps
+        self.snap = snap
+        self.snap_gain = snap_gain
         self._features = None
         self.report: dict = {}
 
@@ -522,7 +531,17 @@ class AnimalNetSegmenter:
             looks=early["looks"],
             moving=early.get("moving"),
         )
+        if self.snap:
+            masks = self._snapped(small, masks)
         return at_frame_size(masks, frames, small, self.edge_radius, self.edge_eps)
+
+    def _snapped(self, small, masks):
+        """Step 7 on the working-size frames and masks (`colour_snap.snap_video`)."""
+        from .colour_snap import MIN_GAIN, snap_video
+
+        gain = MIN_GAIN if self.snap_gain is None else self.snap_gain
+        masks, self.report["colour_snap"] = snap_video(small, masks, gain)
+        return masks
 
 
 def animal_parts(logit: np.ndarray) -> tuple[np.ndarray, int]:

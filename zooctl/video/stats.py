@@ -97,6 +97,7 @@ def _stats(seg, coverage, boxes, mean, p99, top, occluded, per_frame) -> dict[st
         "small_frames",
         "animalnet",
         "self_training",
+        "colour_snap",
     )
     return {
         "seeding": {k: seg[k] for k in keys if k in seg} or None,
@@ -169,6 +170,13 @@ def seeding_lines(seeding: dict[str, Any] | None) -> list[str]:
         out.append(
             f"relabelled by a classifier learned from this video: {seeding['self_training']['changed']:.1%} "
             "of mask pixels changed"
+        )
+    snap = seeding.get("colour_snap")
+    if snap and snap.get("separation_gain") is not None:
+        out.append(
+            f"snapped to the animal's colours (GrabCut seeded by each mask): separation "
+            f"{snap['separation_gain']:+.3f} at the median frame, "
+            + ("kept" if snap.get("snapped") else f"not kept (kept above {snap['min_gain']:+.3f})")
         )
     if seeding.get("empty_frames"):
         out.append(
