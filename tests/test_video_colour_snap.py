@@ -43,14 +43,15 @@ def test_a_blob_of_ground_the_mask_took_in_goes():
 
 
 def test_separation_tells_distinct_colours_from_shared_ones():
-    import cv2
+    from zooctl.video.colour_snap import BINS
+    from zooctl.video.cues import lab_bins
 
     frames, truth, bled = _scene(1, (90, 90, 95), (60, 140, 50))
-    lab = cv2.cvtColor(frames[0], cv2.COLOR_RGB2LAB)
+    lab = lab_bins(frames[0], BINS)
     assert separation(lab, truth[0], 6) > 0.8
     assert separation(lab, bled[0], 6) < separation(lab, truth[0], 6)
     same, t2, _ = _scene(1, (60, 140, 50), (60, 140, 50))
-    assert separation(cv2.cvtColor(same[0], cv2.COLOR_RGB2LAB), t2[0], 6) < 0.3
+    assert separation(lab_bins(same[0], BINS), t2[0], 6) < 0.3
     assert np.isnan(separation(lab, np.zeros_like(truth[0]), 6))
 
 

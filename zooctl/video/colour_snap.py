@@ -22,7 +22,9 @@ from contextlib import nullcontext
 import cv2
 import numpy as np
 
+from . import cues
 from .flow import flow_workers
+from .grabcut import _grabcut
 from .scratch import working
 
 BAND = 0.15  # the ring of probable background, a fraction of the mask's square-root area
@@ -31,10 +33,7 @@ ITERATIONS = 3
 MIN_GAIN = 0.005
 LOOK_EVERY = 3  # the gate looks at every third frame, as the network does (`animalnet`)
 _MIN_PIXELS = 16
-
-
-def _disc(radius: int) -> np.ndarray:
-    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+BINS = 8  # Lab levels a channel of the separation's histograms
 
 
 def ring_width(mask: np.ndarray, band: float = BAND) -> int:
@@ -48,48 +47,28 @@ def snap_frame(
     """(H, W, 3) uint8 RGB frame and (H, W) bool mask -> (H, W) bool mask after GrabCut seeded by it.
 
     Inside the mask: probably the animal; a ring ``band`` x sqrt(area) wide around it: probably
-    background; beyond: background. GrabCut runs on the mask's box grown by three rings (the rest
-    stays background). A mask under 16 pixels, or one whose ring reaches every side of the frame
-    (no sure background to learn from), comes back unchanged."""
+    background; beyond: background. The tracker's cut (`grabcut._grabcut`) runs on the mask's box
+    grown by three rings. A mask under 16 pixels comes back unchanged."""
     m = np.asarray(mask, bool)
     if m.sum() < _MIN_PIXELS:
         return m
-    h, w = m.shape
     r = ring_width(m, band)
-    ys, xs = np.nonzero(m)
-    x0, x1 = max(int(xs.min()) - 3 * r, 0), min(int(xs.max()) + 3 * r + 1, w)
-    y0, y1 = max(int(ys.min()) - 3 * r, 0), min(int(ys.max()) + 3 * r + 1, h)
-    crop = m[y0:y1, x0:x1].astype(np.uint8)
-    near = cv2.dilate(crop, _disc(r)) > 0
-    labels = np.full(crop.shape, cv2.GC_BGD, np.uint8)
-    labels[near] = cv2.GC_PR_BGD
-    labels[crop > 0] = cv2.GC_PR_FGD
-    if not (labels == cv2.GC_BGD).any():
-        return m
-    bgd, fgd = np.zeros((1, 65)), np.zeros((1, 65))
-    cv2.setRNGSeed(0)  # GrabCut's k-means draws from this thread's generator: the same cut on any thread
-    bgr = cv2.cvtColor(np.ascontiguousarray(frame[y0:y1, x0:x1]), cv2.COLOR_RGB2BGR)
-    cv2.grabCut(bgr, labels, None, bgd, fgd, iterations, cv2.GC_INIT_WITH_MASK)
-    out = np.zeros_like(m)
-    out[y0:y1, x0:x1] = (labels == cv2.GC_FGD) | (labels == cv2.GC_PR_FGD)
-    return out
+    trimap = np.full(m.shape, cv2.GC_BGD, np.uint8)
+    trimap[cv2.dilate(m.astype(np.uint8), cues.disk(r)) > 0] = cv2.GC_PR_BGD
+    trimap[m] = cv2.GC_PR_FGD
+    return _grabcut(frame, trimap, iterations, margin=2 * r)  # the ring's box grown by two more
 
 
-def _histogram(lab: np.ndarray, where: np.ndarray) -> np.ndarray:
-    q = lab[where].astype(np.int32) // 32  # 8 levels a channel
-    h = np.bincount((q[:, 0] * 8 + q[:, 1]) * 8 + q[:, 2], minlength=512).astype(np.float64)
-    return h / max(h.sum(), 1.0)
-
-
-def separation(lab: np.ndarray, mask: np.ndarray, ring: int) -> float:
+def separation(bins: np.ndarray, mask: np.ndarray, ring: int) -> float:
     """1 - the Bhattacharyya coefficient of the colours inside ``mask`` and in the ring ``ring``
-    pixels wide outside it, for an (H, W, 3) uint8 Lab frame: 0 the same colours, 1 none shared.
-    NaN for a mask or ring under 16 pixels."""
+    pixels wide outside it, for a frame's (H, W) Lab colour bins (`cues.lab_bins` at ``BINS``):
+    0 the same colours, 1 none shared. NaN for a mask or ring under 16 pixels."""
     m = np.asarray(mask, bool)
-    around = (cv2.dilate(m.astype(np.uint8), _disc(ring)) > 0) & ~m
+    around = (cv2.dilate(m.astype(np.uint8), cues.disk(ring)) > 0) & ~m
     if m.sum() < _MIN_PIXELS or around.sum() < _MIN_PIXELS:
         return float("nan")
-    return 1.0 - float(np.sum(np.sqrt(_histogram(lab, m) * _histogram(lab, around))))
+    p, q = (np.bincount(bins[x], minlength=BINS**3) / x.sum() for x in (m, around))
+    return 1.0 - float(np.sum(np.sqrt(p * q)))
 
 
 def snap_video(frames, masks, min_gain: float = MIN_GAIN, every: int = LOOK_EVERY) -> tuple[object, dict]:
@@ -106,31 +85,34 @@ def snap_video(frames, masks, min_gain: float = MIN_GAIN, every: int = LOOK_EVER
     had a mask), ``snapped`` (whether the masks were replaced), ``min_gain``."""
     t = len(masks)
 
-    def one(i: int) -> tuple[np.ndarray, float | None]:
-        m = np.asarray(masks[i], bool)
-        frame = np.asarray(frames[i])
+    def cut(frame: np.ndarray, m: np.ndarray) -> np.ndarray:
         s = snap_frame(frame, m)
-        if m.sum() < _MIN_PIXELS:
+        return m if m.sum() >= _MIN_PIXELS and s.sum() < _MIN_PIXELS else s  # no animal found: no evidence
+
+    def looked_at(i: int) -> tuple[np.ndarray, float | None]:
+        m, frame = np.asarray(masks[i], bool), np.asarray(frames[i])
+        s = cut(frame, m)
+        if m.sum() < _MIN_PIXELS or s is m:
             return s, None
-        if s.sum() < _MIN_PIXELS:  # a cut that finds no animal has no evidence: the mask stands
-            return m, None
-        lab = cv2.cvtColor(frame, cv2.COLOR_RGB2LAB)
-        ring = ring_width(m)
-        gain = separation(lab, s, ring) - separation(lab, m, ring)
+        bins, ring = cues.lab_bins(frame, BINS), ring_width(m)
+        gain = separation(bins, s, ring) - separation(bins, m, ring)
         return s, (gain if np.isfinite(gain) else None)
+
+    def rest_of(i: int) -> np.ndarray:
+        return cut(np.asarray(frames[i]), np.asarray(masks[i], bool))
 
     looked = sorted(set(range(0, t, max(int(every), 1))) | ({t - 1} if t else set()))
     n = min(flow_workers(), max(t, 1))  # the share of the cores the flow takes
     with ThreadPoolExecutor(n, thread_name_prefix="colour-snap") if n > 1 else nullcontext() as pool:
         run = pool.map if pool else map
-        first = dict(zip(looked, run(one, looked)))
+        first = dict(zip(looked, run(looked_at, looked)))
         gains = [g for _, g in first.values() if g is not None]
         gain = float(np.median(gains)) if gains else None
         use = gain is not None and gain > min_gain
         if use:
             out = working(frames, t, np.asarray(masks[0]).shape, bool)
             rest = [i for i in range(t) if i not in first]
-            for i, (s, _) in zip(rest, run(one, rest)):
+            for i, s in zip(rest, run(rest_of, rest)):
                 out[i] = s  # written here, in order: a scratch array is not shared between threads
             for i, (s, _) in first.items():
                 out[i] = s

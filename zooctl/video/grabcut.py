@@ -642,17 +642,20 @@ def _grabcut(
     trimap: np.ndarray,
     iterations: int,
     models: list | None = None,
+    margin: int | None = None,
 ) -> np.ndarray:
     """GrabCut on the window around the non-definite-background part of ``trimap``; (H, W) bool.
     ``models``: a list, empty or holding the (background, foreground) colour models a cut left
     (the previous frame's, when tracking): the cut starts from them instead of k-means, and leaves
-    its own there."""
+    its own there. ``margin``: the window's margin in pixels (default: half the part's larger side
+    and 8)."""
     h, w = trimap.shape
     box = cues.box_of(trimap != cv2.GC_BGD)
     if box is None:
         return np.zeros((h, w), bool)
     x, y, bw, bh = box
-    m = max(bw, bh) // 2 + 8  # enough definite background around for a fair background model
+    # enough definite background around for a fair background model
+    m = max(bw, bh) // 2 + 8 if margin is None else margin
     x0, y0, x1, y1 = max(x - m, 0), max(y - m, 0), min(x + bw + m, w), min(y + bh + m, h)
     sub = np.ascontiguousarray(trimap[y0:y1, x0:x1])
     fg_labels = (cv2.GC_FGD, cv2.GC_PR_FGD)
