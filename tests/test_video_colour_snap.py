@@ -101,7 +101,7 @@ def test_video_add_snaps_and_video_show_says_so(tmp_path, monkeypatch, capsys, s
     assert ("snapped to the animal's colours" in got.out) == snap
 
 
-def test_a_video_left_as_it_was_is_cut_on_every_third_frame_only(monkeypatch):
+def test_a_video_left_as_it_was_costs_a_fixed_number_of_cuts_whatever_its_length(monkeypatch):
     import zooctl.video.colour_snap as cs
 
     calls = []
@@ -113,11 +113,27 @@ def test_a_video_left_as_it_was_is_cut_on_every_third_frame_only(monkeypatch):
 
     monkeypatch.setattr(cs, "snap_frame", counted)
     same, _, bled = _scene(5, (60, 140, 50), (60, 140, 50), t=7)
-    assert not cs.snap_video(same, bled)[1]["snapped"]
+    assert not cs.snap_video(same, bled, looks=3)[1]["snapped"]
     assert len(calls) == 3  # frames 0, 3 and the last
     calls.clear()
+    same, _, bled = _scene(5, (60, 140, 50), (60, 140, 50), t=30, w=240)
+    assert not cs.snap_video(same, bled)[1]["snapped"]
+    assert len(calls) == cs.LOOKS < 30
+    calls.clear()
     frames, _, bled = _scene(5, (90, 90, 95), (60, 140, 50), t=7)
-    assert cs.snap_video(frames, bled)[1]["snapped"] and len(calls) == 7
+    assert cs.snap_video(frames, bled, looks=3)[1]["snapped"] and len(calls) == 7
+
+
+def test_the_frames_looked_at_span_the_video():
+    from zooctl.video.colour_snap import looked_at_frames
+
+    assert looked_at_frames(0) == []
+    assert looked_at_frames(1) == [0]
+    assert looked_at_frames(5, 8) == [0, 1, 2, 3, 4]
+    assert looked_at_frames(7, 3) == [0, 3, 6]
+    got = looked_at_frames(300, 8)
+    assert len(got) == 8 and got[0] == 0 and got[-1] == 299
+    assert max(np.diff(got)) - min(np.diff(got)) <= 1
 
 
 def test_frames_waiting_in_scratch_files_give_the_same_snapped_masks():

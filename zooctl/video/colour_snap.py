@@ -8,8 +8,8 @@ the mask itself (inside: probably the animal; a ring around it: probably backgro
 background), so each pixel goes to the colour model it fits. On real footage the ground is often
 the animal's colour and the snap then takes in ground or drops blurred legs, so a video is snapped
 only when the snap separates the mask's colours from its ring's more than the masks did: the median
-over every third frame of `separation` after minus before exceeds ``min_gain``
-(`snap_video`). The threshold was chosen on the seven shared DAVIS videos and two 28-video
+over eight frames spread over the video of `separation` after minus before exceeds ``min_gain``
+(`snap_video`), so a video left alone costs eight cuts whatever its length. The threshold was chosen on the seven shared DAVIS videos and two 28-video
 `zooctl bench make` sets, the leave-one-video-out figures beside it (`bench/colour_snap.py`;
 BENCHMARKS.md, "Masks snapped to the animal's colours").
 """
@@ -31,7 +31,7 @@ BAND = 0.15  # the ring of probable background, a fraction of the mask's square-
 ITERATIONS = 3
 # the median separation gain over a video's frames above which its masks are snapped
 MIN_GAIN = 0.005
-LOOK_EVERY = 3  # the gate looks at every third frame, as the network does (`animalnet`)
+LOOKS = 8  # frames the gate looks at, spread over the video from its first to its last
 _MIN_PIXELS = 16
 BINS = 8  # Lab levels a channel of the separation's histograms
 
@@ -71,16 +71,24 @@ def separation(bins: np.ndarray, mask: np.ndarray, ring: int) -> float:
     return 1.0 - float(np.sum(np.sqrt(p * q)))
 
 
-def snap_video(frames, masks, min_gain: float = MIN_GAIN, every: int = LOOK_EVERY) -> tuple[object, dict]:
+def looked_at_frames(t: int, looks: int = LOOKS) -> list[int]:
+    """The indices of the ``looks`` frames, evenly spread from the first to the last, that the
+    gate reads in a video of ``t`` frames (all of them when ``t <= looks``)."""
+    if t <= 0:
+        return []
+    return sorted({int(i) for i in np.round(np.linspace(0, t - 1, min(max(int(looks), 1), t)))})
+
+
+def snap_video(frames, masks, min_gain: float = MIN_GAIN, looks: int = LOOKS) -> tuple[object, dict]:
     """(T, h, w, 3) uint8 RGB frames and (T, h, w) bool masks -> (masks, report).
 
-    Every ``every``-th frame (and the last) is snapped first (`snap_frame`, frames side by side on
+    ``looks`` frames spread over the video (`looked_at_frames`) are snapped first (`snap_frame`, frames side by side on
     `flow.flow_workers` threads) and its separation gain measured: `separation` of the snapped mask
     minus that of the given one, each with the given mask's ring width (a frame the cut leaves empty
     keeps its mask and has no gain). When the median gain exceeds
     ``min_gain`` the other frames are snapped too and the snapped masks replace the given ones, all
     of them, in memory or, for frames that wait in scratch files (a long video), in a scratch array;
-    else the given masks come back (a video left as it was costs a third of the frames' cuts).
+    else the given masks come back (a video left as it was costs ``looks`` cuts, however long).
     ``report``: ``separation_gain`` (the median, None when no frame looked at
     had a mask), ``snapped`` (whether the masks were replaced), ``min_gain``."""
     t = len(masks)
@@ -101,7 +109,7 @@ def snap_video(frames, masks, min_gain: float = MIN_GAIN, every: int = LOOK_EVER
     def rest_of(i: int) -> np.ndarray:
         return cut(np.asarray(frames[i]), np.asarray(masks[i], bool))
 
-    looked = sorted(set(range(0, t, max(int(every), 1))) | ({t - 1} if t else set()))
+    looked = looked_at_frames(t, looks)
     n = min(flow_workers(), max(t, 1))  # the share of the cores the flow takes
     with ThreadPoolExecutor(n, thread_name_prefix="colour-snap") if n > 1 else nullcontext() as pool:
         run = pool.map if pool else map
