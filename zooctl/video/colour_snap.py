@@ -9,9 +9,10 @@ background), so each pixel goes to the colour model it fits. On real footage the
 the animal's colour and the snap then takes in ground or drops blurred legs, so a video is snapped
 only when the snap separates the mask's colours from its ring's more than the masks did: the median
 over eight frames spread over the video of `separation` after minus before exceeds ``min_gain``
-(`snap_video`), so a video left alone costs eight cuts whatever its length. The threshold was chosen on the seven shared DAVIS videos and two 28-video
-`zooctl bench make` sets, the leave-one-video-out figures beside it (`bench/colour_snap.py`;
-BENCHMARKS.md, "Masks snapped to the animal's colours").
+(`snap_video`), so a video left alone costs eight cuts whatever its length. The threshold was
+chosen on the seven shared DAVIS videos and two 28-video `zooctl bench make` sets, the
+leave-one-video-out figures beside it (`bench/colour_snap.py`; BENCHMARKS.md, "Masks snapped to
+the animal's colours").
 """
 
 from __future__ import annotations
@@ -82,15 +83,15 @@ def looked_at_frames(t: int, looks: int = LOOKS) -> list[int]:
 def snap_video(frames, masks, min_gain: float = MIN_GAIN, looks: int = LOOKS) -> tuple[object, dict]:
     """(T, h, w, 3) uint8 RGB frames and (T, h, w) bool masks -> (masks, report).
 
-    ``looks`` frames spread over the video (`looked_at_frames`) are snapped first (`snap_frame`, frames side by side on
-    `flow.flow_workers` threads) and its separation gain measured: `separation` of the snapped mask
-    minus that of the given one, each with the given mask's ring width (a frame the cut leaves empty
-    keeps its mask and has no gain). When the median gain exceeds
-    ``min_gain`` the other frames are snapped too and the snapped masks replace the given ones, all
-    of them, in memory or, for frames that wait in scratch files (a long video), in a scratch array;
-    else the given masks come back (a video left as it was costs ``looks`` cuts, however long).
-    ``report``: ``separation_gain`` (the median, None when no frame looked at
-    had a mask), ``snapped`` (whether the masks were replaced), ``min_gain``."""
+    ``looks`` frames spread over the video (`looked_at_frames`) are snapped first (`snap_frame`,
+    frames side by side on `flow.flow_workers` threads) and each one's separation gain measured:
+    `separation` of the snapped mask minus that of the given one, each with the given mask's ring
+    width (a frame the cut leaves empty keeps its mask and has no gain). When the median gain
+    exceeds ``min_gain`` the other frames are snapped too and the snapped masks replace the given
+    ones, all of them, in memory or, for frames that wait in scratch files (a long video), in a
+    scratch array; else the given masks come back (a video left as it was costs ``looks`` cuts,
+    however long). ``report``: ``separation_gain`` (the median, None when no frame looked at had a
+    mask), ``snapped`` (whether the masks were replaced), ``min_gain``."""
     t = len(masks)
 
     def cut(frame: np.ndarray, m: np.ndarray) -> np.ndarray:
