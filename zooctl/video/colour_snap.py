@@ -95,13 +95,13 @@ def snap_video(frames, masks, min_gain: float = MIN_GAIN, looks: int = LOOKS) ->
     t = len(masks)
 
     def cut(frame: np.ndarray, m: np.ndarray) -> np.ndarray:
-        s = snap_frame(frame, m)
-        return m if m.sum() >= _MIN_PIXELS and s.sum() < _MIN_PIXELS else s  # no animal found: no evidence
+        s = snap_frame(frame, m)  # ``m`` itself when under 16 pixels
+        return m if s.sum() < _MIN_PIXELS else s  # no animal found: no evidence
 
     def looked_at(i: int) -> tuple[np.ndarray, float | None]:
         m, frame = np.asarray(masks[i], bool), np.asarray(frames[i])
         s = cut(frame, m)
-        if m.sum() < _MIN_PIXELS or s is m:
+        if s is m:  # too small a mask, or a cut that found nothing
             return s, None
         bins, ring = cues.lab_bins(frame, BINS), ring_width(m)
         gain = separation(bins, s, ring) - separation(bins, m, ring)
