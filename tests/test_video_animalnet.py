@@ -329,6 +329,21 @@ def test_video_show_says_whether_the_network_replaced_the_tracker():
     kept = {"seeding": ["localiser", "tracked"], "seed_frame": 0, "animalnet": {"motion_margin": None}}
     text = "\n".join(seeding_lines(kept))
     assert "first seed on frame 0" in text and "saw no animal: the tracker's masks kept" in text
+    assert "covers" not in text
+    piece = {
+        "seeding": ["network"] * 3,
+        "animalnet": {
+            "motion_margin": -0.08,
+            "network_replaced_tracker": True,
+            "part_cover": 3.632,
+            "replaced_as_part": True,
+        },
+    }
+    text = "\n".join(seeding_lines(piece))
+    assert "covers 3.63 times its area: the tracker held a piece of the animal" in text
+    piece["animalnet"].update(part_cover=0.9, replaced_as_part=False, network_replaced_tracker=False)
+    text = "\n".join(seeding_lines(piece))
+    assert "covers 0.90 times its area" in text and "held a piece" not in text
 
 
 def test_the_tracker_the_networks_looks_and_the_relabelling_share_each_frames_motion_residual(
@@ -350,3 +365,69 @@ def test_the_tracker_the_networks_looks_and_the_relabelling_share_each_frames_mo
     masks = np.asarray(seg.segment(frames), bool)
     assert masks.shape == truth.shape
     assert len(made) == len(frames)  # was up to three times a frame
+
+
+def test_the_part_that_holds_a_tracked_piece_and_how_much_more_it_covers():
+    """A tracked piece inside the network's animal, or over its outline by less than a cell of the
+    network's grid, is held by it; a region off the animal is not; the cover is the parts' summed
+    area over the tracked masks', and no cover is claimed for masks the parts do not hold."""
+    from zooctl.video.animalnet import animal_parts, follow_part, holding_part, part_cover
+
+    ev = np.full((3, 120, 160), -5.0, np.float32)
+    for i in range(3):
+        ev[i, 40:80, 20 + 4 * i : 100 + 4 * i] = 5.0  # the animal, 40 x 80, moving right
+        ev[i, 5:15, 130:150] = 5.0  # something else, far from it
+    labels = animal_parts(ev[0])[0]
+    piece = np.zeros((3, 120, 160), bool)
+    for i in range(3):
+        piece[i, 50:60, 90 + 4 * i : 104 + 4 * i] = True  # the tail: 4 of its 14 columns over the outline
+    label = holding_part(labels, piece[0])
+    assert label is not None and labels[60, 50] == label
+    off = np.zeros((120, 160), bool)
+    off[90:110, 20:60] = True  # the ground under the animal
+    assert holding_part(labels, off) is None
+    assert holding_part(labels, np.zeros((120, 160), bool)) is None
+    got = part_cover(follow_part(lambda i: ev[i], [0, 1, 2], 0, label), piece)
+    assert got == pytest.approx(3 * 40 * 80 / (3 * 10 * 14))
+    whole = np.zeros((3, 120, 160), bool)
+    for i in range(3):
+        whole[i] = ev[i] > 0
+        whole[i, :20] = False
+    assert part_cover(follow_part(lambda i: ev[i], [0, 1, 2], 0, label), whole) == pytest.approx(1.0)
+    strayed = piece.copy()
+    strayed[1:] = False
+    strayed[1:, 90:110, 20:60] = True  # the tracker slid onto the ground after the first frame
+    assert part_cover(follow_part(lambda i: ev[i], [0, 1, 2], 0, label), strayed) is None
+
+
+def test_a_tracker_holding_a_piece_of_the_animal_gives_way_to_the_network_part_that_holds_it(animals):
+    """With the shipped weights, on synthetic composites: masks held on a small piece of the animal
+    are replaced by the network's part of it (and not decided on a crop around the piece) where the
+    network finds the animal, masks of the whole animal never are, and with the gate shut
+    (``switch_cover`` < 0) the piece stands."""
+    from zooctl.benchdata.composites import composite
+    from zooctl.video.animalnet import AnimalNetSegmenter
+    from zooctl.video.flow import DISFlow, compute_video_flow
+
+    seg = AnimalNetSegmenter(relabel=False, switch_cover=2.0)
+    shut = AnimalNetSegmenter(relabel=False, switch_cover=-1.0)
+    found = []
+    for seed in range(6):
+        s = composite(animals, np.random.default_rng(seed), (320, 240))
+        flow = compute_video_flow(DISFlow("medium"), s.frames)
+        truth = np.stack([s.mask, s.mask])
+        seg.decide_near(s.frames, truth, flow, seed_frame=0)
+        assert not seg.report["animalnet"]["replaced_as_part"], seed
+        ys, xs = np.nonzero(s.mask)
+        y, x = int(np.median(ys)), int(np.median(xs))
+        r = max(int(np.sqrt(len(ys)) / 6), 2)  # a square about a ninth of the animal's area
+        piece = np.zeros_like(truth)
+        piece[:, y - r : y + r, x - r : x + r] = True
+        piece &= truth
+        got = np.asarray(seg.decide_near(s.frames, piece, flow, seed_frame=0), bool)
+        if seg.report["animalnet"]["replaced_as_part"]:
+            assert seg.report["animalnet"]["part_cover"] > 2.0 and seg.report["animalnet"]["crop"] is None
+            found.append(iou(got[0], s.mask) / iou(piece[0], s.mask))
+            kept = np.asarray(shut.decide_near(s.frames, piece, flow, seed_frame=0), bool)
+            assert not shut.report["animalnet"]["replaced_as_part"] and (kept == piece).all()
+    assert len(found) >= 2 and min(found) > 3.0, found  # the animal, not the piece

@@ -41,6 +41,10 @@ HEAD = (
 # at least this much (intersection over union) when they are one animal; a second animal beside the
 # first only touches it (BENCHMARKS.md, Video store)
 SAME_ANIMAL_IOU = 0.1
+# a network part holds the tracked animal when at least this share of the tracked mask lies in it,
+# the part widened by one cell of the network's grid (its outline is no finer)
+HOLDS_TRACKED = 0.5
+GRID_CELLS = FEATURE_WIDTH // 8  # cells across the network's input
 # the relabelling's options where they differ from `selftrain`'s own defaults
 RELABEL_DEFAULTS = {"prior_weight": 1.0, "motion_weight": 0.75}
 
@@ -182,7 +186,12 @@ class AnimalNetSegmenter:
        overlap, `same_part`), that part is followed from frame to frame (`follow_part`) and is the
        network's animal above; when none is, the network's main animal replaces the tracked masks
        only if the tracked region holds still against the camera (a tracker seeded on the
-       background).
+       background). A tracker can also hold only a piece of the animal (a tail fin, one band of a
+       striped coat): when the network's part of the tracked animal (`same_part`, else the part
+       that holds the tracked mask, `holding_part`), followed over the frames looked at, covers more
+       than ``switch_cover`` times the tracked area (`part_cover`; < 0: never), that part replaces
+       the tracker's masks the same way. Whether it does is decided on the whole frames, before
+       any crop (below), which would hide the rest of the animal.
     4. Otherwise the tracked masks stand, or with ``net_weight`` > 0 are decided again from
        ``net_weight`` x the network's log-odds where it sees an animal (everywhere with ``erase``)
        plus ``prior_weight`` inside the tracked mask (minus it outside).
@@ -221,6 +230,7 @@ class AnimalNetSegmenter:
         weights: str | Path | None = None,
         feature_every: int = 3,
         switch_motion: float = 0.5,
+        switch_cover: float = 1.16,
         relabel: bool = True,
         relabel_options: dict | None = None,
         net_weight: float = 0.0,
@@ -246,6 +256,7 @@ class AnimalNetSegmenter:
         self.tracker = GrabCutTracker(**tracker_options)
         self.feature_every = feature_every
         self.switch_motion = switch_motion
+        self.switch_cover = switch_cover
         self.relabel = relabel
         self.relabel_options = {**RELABEL_DEFAULTS, **(relabel_options or {})}
         self.net_weight = net_weight
@@ -334,13 +345,15 @@ class AnimalNetSegmenter:
         seed_frame: int | None = None,
         looks: dict | None = None,
         moving=None,
+        part_switch: bool = True,
     ) -> np.ndarray:
         """Steps 2-6 on (T, h, w, 3) frames and (T, h, w) bool tracked masks at the working size and
         their flow -> (T, h, w) bool masks; sets ``report["animalnet"]``. ``seed_frame``: the frame
         the tracker started from (None: unknown, the switch then checks the main animal's motion
         only). ``looks``: `looks` already taken of these frames (by frame; the others are taken
         here). ``moving``: the relabelling's `selftrain.video_motion_bins` of these frames, when
-        already taken."""
+        already taken. ``part_switch``: False when whether the tracked region is a piece of a
+        larger animal was decided already (`decide_near`, on the whole frames)."""
         from . import cues
         from .scratch import working
         from .selftrain import SelfTrainedSegmenter, carry_between, main_animal
@@ -376,16 +389,27 @@ class AnimalNetSegmenter:
         switched = self.switch_motion >= 0 and margin > self.switch_motion
         if switched and anchor is None and seed_frame is not None:
             switched = still < 0.2 * self.switch_motion  # a tracker that started on the background
+        whole, cover = None, None
+        if seed_frame is not None and 0 <= seed_frame < t:
+            whole, cover = tracked_part(lambda i: ev[i], looked, k0, tracked, flow)  # whole: anchor if any
+        covered = (
+            part_switch
+            and not switched
+            and self.switch_cover >= 0
+            and cover is not None
+            and cover > self.switch_cover
+        )
+        switched = switched or covered
         prior = working(small, t, (h, w), bool)
         if switched:
             for i in range(t):
                 if i not in seen:
                     ev[i] = self.look(small[i], flow.residual(i))[0]
-            if anchor is None:
+            if anchor is None and not covered:
                 for i in range(t):
                     prior[i] = main_animal(ev[i])
             else:
-                for i, part in follow_part(lambda i: ev[i], list(range(t)), k0, anchor, carry_by_flow(flow)):
+                for i, part in follow_part(lambda i: ev[i], list(range(t)), k0, whole, carry_by_flow(flow)):
                     prior[i] = False if part is None else cues.fill_holes(part)
         else:
             if self.net_weight > 0 and len(looked) < t:
@@ -420,6 +444,9 @@ class AnimalNetSegmenter:
             "motion_margin": round(margin, 3) if np.isfinite(margin) else None,
             "switch_motion": self.switch_motion,
             "network_replaced_tracker": bool(switched),
+            "part_cover": None if cover is None else round(cover, 3),
+            "switch_cover": self.switch_cover,
+            "replaced_as_part": bool(covered),
             "identity_kept_tracker": bool(
                 self.switch_motion >= 0 and moved > self.switch_motion and not switched
             ),
@@ -442,8 +469,9 @@ class AnimalNetSegmenter:
     ) -> np.ndarray:
         """`decide_video` on the part of the frame the tracked animal keeps to, enlarged to the working
         size, when that part is at most half the frame's width and height (a small or distant animal,
-        else the network and the relabelling see it on a few cells of their grid); the whole frame
-        otherwise. Same arguments and result (``taken``: `decide_video`'s ``looks`` and ``moving``,
+        else the network and the relabelling see it on a few cells of their grid) and the tracked
+        region is not a piece of a larger animal the network sees on the whole frames (``part_cover``
+        over ``switch_cover``); the whole frame otherwise. Same arguments and result (``taken``: `decide_video`'s ``looks`` and ``moving``,
         of the whole frames, used when it decides on them); ``report["animalnet"]["crop"]``: the
         part (x, y, w, h) at the working size, or None."""
         from .flow import VideoFlow, resize_flow
@@ -451,6 +479,18 @@ class AnimalNetSegmenter:
 
         t, h, w = small.shape[:3]
         box = _kept_to(tracked, w, h)
+        cover = None
+        if box is not None and self.switch_cover >= 0 and seed_frame is not None and 0 <= seed_frame < t:
+            # a small tracked region may be a part of a larger animal, which a crop around it would
+            # hide: whether it is one is decided on the whole frames
+            if not taken.get("looks"):
+                taken["looks"] = self.looks(small, flow)
+            looks = taken["looks"]
+            looked = sorted(looks)
+            k0 = min(looked, key=lambda i: abs(i - seed_frame))
+            cover = tracked_part(lambda i: looks[i][0], looked, k0, tracked, flow)[1]
+            if cover is not None and cover > self.switch_cover:
+                box = None
         if box is None:
             masks = self.decide_video(small, tracked, flow, progress, seed_frame, **taken)
             self.report["animalnet"]["crop"] = None
@@ -479,7 +519,9 @@ class AnimalNetSegmenter:
                 )
             parts.append(out)
         flow_c = VideoFlow(*parts, None, None)
-        got = self.decide_video(frames_c, tracked_c, flow_c, progress, seed_frame)
+        # whether the tracked region is part of a larger animal was decided on the whole frames
+        got = self.decide_video(frames_c, tracked_c, flow_c, progress, seed_frame, part_switch=False)
+        self.report["animalnet"]["part_cover"] = None if cover is None else round(cover, 3)
         masks = working(small, t, (h, w), bool)
         for i in range(t):
             m = np.zeros((h, w), bool)
@@ -563,6 +605,60 @@ def same_part(labels: np.ndarray, held: np.ndarray) -> int | None:
         return None
     part = labels == j
     return j if hits[j] >= SAME_ANIMAL_IOU * float((part | held).sum()) else None
+
+
+def holding_part(labels: np.ndarray, held: np.ndarray) -> int | None:
+    """The label of the part of ``labels`` that holds the (H, W) bool ``held`` mask: the one holding
+    most of it, if that is at least ``HOLDS_TRACKED`` of it (None: no such part)."""
+    held = np.asarray(held, bool)
+    if not held.any() or not labels.any():
+        return None
+    reach = _cell_disk(labels.shape[1])
+    near = cv2.dilate(labels.astype(np.float32), reach).astype(np.int32)  # of two, the larger label
+    grown = np.where(labels > 0, labels, near)
+    hits = np.bincount(grown[held], minlength=int(labels.max()) + 1)
+    hits[0] = 0
+    j = int(np.argmax(hits))
+    return j if hits[j] > 0 and hits[j] >= HOLDS_TRACKED * float(held.sum()) else None
+
+
+def _cell_disk(width: int) -> np.ndarray:
+    """A disk one cell of the network's grid across, for a frame ``width`` pixels wide."""
+    r = max(int(round(width / GRID_CELLS)), 1)
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1,) * 2)
+
+
+def tracked_part(logit_of, looked: list[int], k0: int, tracked, flow):
+    """The network's part of the tracked animal on frame ``k0`` and how many times the tracked area it
+    covers over the ``looked`` frames -> (label or None, `part_cover` or None). The part is the one
+    that is the tracked animal (`same_part`), else the one that holds the tracked mask
+    (`holding_part`); it is followed along ``flow`` (`follow_part`); ``logit_of(i)``: frame i's
+    (H, W) log-odds."""
+    labels = animal_parts(logit_of(k0))[0]
+    held = np.asarray(tracked[k0], bool)
+    label = same_part(labels, held)
+    label = holding_part(labels, held) if label is None else label
+    if label is None:
+        return None, None
+    return label, part_cover(follow_part(logit_of, looked, k0, label, carry_by_flow(flow)), tracked)
+
+
+def part_cover(followed, tracked) -> float | None:
+    """How many times the tracked animal's area the network's part of it covers: over the (frame,
+    part or None) pairs of `follow_part`, the parts' summed area over the (T, H, W) bool ``tracked``
+    masks' on those frames, or None when the tracked masks do not lie in the parts (under
+    ``HOLDS_TRACKED`` of their summed area) or no part was followed."""
+    part_area = held_area = inside = 0
+    for i, part in followed:
+        if part is None:
+            continue
+        held = np.asarray(tracked[i], bool)
+        part_area += int(part.sum())
+        held_area += int(held.sum())
+        inside += int((cv2.dilate(part.astype(np.uint8), _cell_disk(part.shape[1])) > 0)[held].sum())
+    if part_area == 0 or held_area == 0 or inside < HOLDS_TRACKED * held_area:
+        return None
+    return part_area / held_area
 
 
 def follow_part(logit_of, frames: list[int], start: int, label: int, carry=None):

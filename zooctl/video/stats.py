@@ -156,6 +156,16 @@ def seeding_lines(seeding: dict[str, Any] | None) -> list[str]:
         if net.get("identity_kept_tracker"):
             verdict += " (the animal moving most was not the tracked one)"
         out.append(f"animalnet: {moved}: {verdict}")
+        cover = net.get("part_cover")
+        if cover is not None:
+            out.append(
+                f"the network's part holding the tracked region covers {cover:.2f} times its area"
+                + (
+                    ": the tracker held a piece of the animal, the part replaced it"
+                    if net.get("replaced_as_part")
+                    else ""
+                )
+            )
         if net.get("crop"):
             x, y, w, h = net["crop"]
             out.append(
