@@ -344,6 +344,9 @@ def test_video_show_says_whether_the_network_replaced_the_tracker():
     piece["animalnet"].update(part_cover=0.9, replaced_as_part=False, network_replaced_tracker=False)
     text = "\n".join(seeding_lines(piece))
     assert "covers 0.90 times its area" in text and "held a piece" not in text
+    piece.update(seeds_tried={"10": 0.2065, "0": 0.2668}, seed_frame=0)
+    text = "\n".join(seeding_lines(piece))
+    assert "seed frames tried (agreement with the network): 10 (0.21), 0 (0.27); kept 0" in text
 
 
 def test_the_tracker_the_networks_looks_and_the_relabelling_share_each_frames_motion_residual(
@@ -431,3 +434,43 @@ def test_a_tracker_holding_a_piece_of_the_animal_gives_way_to_the_network_part_t
             kept = np.asarray(shut.decide_near(s.frames, piece, flow, seed_frame=0), bool)
             assert not shut.report["animalnet"]["replaced_as_part"] and (kept == piece).all()
     assert len(found) >= 2 and min(found) > 3.0, found  # the animal, not the piece
+
+
+def test_network_agreement_is_the_mean_iou_with_the_network_animal_over_the_looked_frames():
+    from zooctl.video.animalnet import network_agreement
+
+    logit = np.full((2, 10, 10), -3.0, np.float32)
+    logit[0, :5] = 3.0  # 50 cells
+    masks = np.zeros((3, 10, 10), bool)
+    masks[0, :5, :5] = True  # 25 of them
+    looks = {0: (logit[0], None, None), 2: (logit[1], None, None)}  # frame 2: nothing either way
+    assert network_agreement(masks, looks) == pytest.approx((0.5 + 1.0) / 2)
+    assert network_agreement(masks, {}) == 0.0
+
+
+def test_other_seed_frames_are_tried_and_the_masks_the_network_agrees_with_most_kept():
+    """``seeds``: the tracker is started again from its next-ranked keyframes (``start_at``) and the
+    segmentation whose masks agree most with the network's animal is kept; it is exactly the
+    segmentation started from that frame. One seed: the tracker's own choice, nothing tried."""
+    from zooctl.video.animalnet import AnimalNetSegmenter
+
+    frames, truth = moving_object_video(t=21, h=96, w=128)
+    one = AnimalNetSegmenter(snap=False)
+    first = np.asarray(one.segment(frames), bool)
+    ranking = one.report["seed_ranking"]
+    assert "seeds_tried" not in one.report and ranking and ranking[0] == one.report["seed_frame"]
+
+    seg = AnimalNetSegmenter(snap=False, seeds=3)
+    got = np.asarray(seg.segment(frames), bool)
+    tried = seg.report["seeds_tried"]
+    assert list(tried) == ranking[: len(tried)] and len(tried) == min(3, len(ranking)) >= 2
+    chosen = seg.report["seed_frame"]
+    assert tried[chosen] == max(tried.values())
+    assert chosen == next(k for k in tried if tried[k] == max(tried.values()))  # the first on a tie
+    again = AnimalNetSegmenter(snap=False)
+    again.tracker.start_at = chosen
+    assert (np.asarray(again.segment(frames), bool) == got).all()
+    assert again.report["seed_frame"] == chosen
+    if chosen == ranking[0]:
+        assert (got == first).all()
+    assert np.mean([iou(m, t) for m, t in zip(got, truth)]) > 0.5

@@ -203,6 +203,9 @@ class AnimalNetSegmenter:
     6. A frame whose mask is under ``remnant`` times the video's median mask area and does not touch
        the frame's edge is stored empty: what a tracker leaves behind on the ground once the animal
        has left (an animal leaving or entering is cut by the edge). 0: never.
+    With ``seeds`` > 1 (and no box), steps 1-6 run again from the keyframes the tracker ranks
+    next, ``seeds`` in all, and the masks that agree most with the network's animal are kept
+    (`_best_seed`): the seed frame, a near tie on many videos, can decide the whole video.
     7. With ``snap``, each frame is snapped to the animal's colours by a last GrabCut seeded by its
        mask, kept for the video only where that separates the mask's colours from its surroundings
        more (`zooctl.video.colour_snap.snap_video`, ``snap_gain`` its threshold): a blob of
@@ -241,13 +244,14 @@ class AnimalNetSegmenter:
         edge_eps: float = 1e-3,
         snap: bool = True,
         snap_gain: float | None = None,
+        seeds: int = 1,
         **tracker_options,
     ) -> None:
         from ..errors import UsageError
         from .grabcut import GrabCutTracker
 
-        if feature_every < 1:
-            raise UsageError(f"feature_every must be at least 1, got {feature_every}")
+        if feature_every < 1 or seeds < 1:
+            raise UsageError(f"feature_every and seeds must be at least 1, got {feature_every} and {seeds}")
         if not 0 <= edge_radius < 0.5 or edge_eps <= 0:
             raise UsageError(
                 f"edge_radius must be in [0, 0.5) and edge_eps over 0, got {edge_radius} and {edge_eps}"
@@ -267,6 +271,7 @@ class AnimalNetSegmenter:
         self.edge_eps = edge_eps
         self.snap = snap
         self.snap_gain = snap_gain
+        self.seeds = seeds
         self._features = None
         self.report: dict = {}
 
@@ -573,9 +578,40 @@ class AnimalNetSegmenter:
             looks=early["looks"],
             moving=early.get("moving"),
         )
+        if self.seeds > 1 and box is None:
+            masks = self._best_seed(frames, small, flow, masks, early)
         if self.snap:
             masks = self._snapped(small, masks)
         return at_frame_size(masks, frames, small, self.edge_radius, self.edge_eps)
+
+    def _best_seed(self, frames, small, flow, masks, early):
+        """Steps 1-6 again from the keyframes the tracker ranks next as seeds, ``seeds`` in all
+        (`GrabCutTracker.start_at`); kept: the masks that agree most with the network's animal
+        (`network_agreement`), the first seed's on a tie. ``report["seeds_tried"]``: {seed frame:
+        agreement}."""
+        from .selftrain import at_working_size, track
+
+        looks = early["looks"]
+        best = (network_agreement(masks, looks), masks, self.report)
+        tried = {int(self.report.get("seed_frame", -1)): round(best[0], 4)}
+        for k in self.report.get("seed_ranking", [])[1 : self.seeds]:
+            self.tracker.start_at = k
+            try:
+                _, tracked = track(
+                    self.tracker, frames, None, None, flow, 0, "animalnet", working_frames=small
+                )
+            finally:
+                self.tracker.start_at = None
+            self.report = dict(self.tracker.report)
+            prior = at_working_size(small, tracked, flow.forward.shape[1:3])[1]
+            got = self.decide_near(small, prior, flow, seed_frame=k, looks=looks, moving=early.get("moving"))
+            agreement = network_agreement(got, looks)
+            tried[int(k)] = round(agreement, 4)
+            if agreement > best[0]:
+                best = (agreement, got, self.report)
+        self.report = best[2]
+        self.report["seeds_tried"] = tried
+        return best[1]
 
     def _snapped(self, small, masks):
         """Step 7 on the working-size frames and masks (`colour_snap.snap_video`)."""
@@ -605,6 +641,18 @@ def same_part(labels: np.ndarray, held: np.ndarray) -> int | None:
         return None
     part = labels == j
     return j if hits[j] >= SAME_ANIMAL_IOU * float((part | held).sum()) else None
+
+
+def network_agreement(masks, looks: dict) -> float:
+    """How much (T, h, w) bool masks agree with the network's animal: over the frames of ``looks``
+    (`AnimalNetSegmenter.looks`), the mean intersection over union of each mask with the cells of
+    log-odds over 0 (both empty: 1)."""
+    ious = []
+    for i, (logit, _, _) in looks.items():
+        m, net = np.asarray(masks[i], bool), logit > 0
+        union = int((m | net).sum())
+        ious.append(float((m & net).sum()) / union if union else 1.0)
+    return float(np.mean(ious)) if ious else 0.0
 
 
 def holding_part(labels: np.ndarray, held: np.ndarray) -> int | None:

@@ -122,6 +122,8 @@ class GrabCutTracker:
         if key_every < 1:
             raise UsageError(f"key_every must be at least 1, got {key_every}")
         self.localise = localise
+        # a segmenter that tries other seed frames sets the one to start from (no box) here
+        self.start_at: int | None = None
         self.key_every = key_every
         self.min_confidence = min_confidence
         self.min_agreement = min_agreement
@@ -241,6 +243,7 @@ class GrabCutTracker:
     def _segment(self, frames, bins, box, box_frame, progress, flow, box_seed: bool = False) -> np.ndarray:
         t, h, w = frames.shape[:3]
         self._animals_seen = 0
+        self._seed_ranking: list[int] = []
         self._within: np.ndarray | None = None  # (T, H, W) bool: where the box's animal is
         how = ["tracked"] * t
         if box is not None:
@@ -417,13 +420,16 @@ class GrabCutTracker:
         ``extra``) and its mask."""
         t = len(frames)
         keys = sorted(set(range(0, t, self.key_every)) | {t - 1} | ({extra} - {None}))
-        best, best_score = keys[0], -1.0
+        scores = {}
         for k in keys:
             ev = self._seen(frames, k)
             region, _ = main_region(self._fused(frames, flow, k)[0])
-            score = ev.confidence * float(region.any()) + 1e-3 * float(region.mean())
-            if score > best_score:
-                best, best_score = k, score
+            scores[k] = ev.confidence * float(region.any()) + 1e-3 * float(region.mean())
+        # the keyframes that see an animal, best first (the first key of a tie, as before)
+        self._seed_ranking = sorted((k for k in keys if scores[k] > 0), key=lambda k: -scores[k])
+        best = max(keys, key=lambda k: (scores[k], -k))
+        if self.start_at is not None and extra is None:
+            best = self.start_at
         return best, self._seed(frames, bins, flow, best)
 
     def _start_from_box(self, frames, bins, flow, box: Box, b: int, box_seed: bool):
@@ -538,6 +544,7 @@ class GrabCutTracker:
         return {
             "seeding": how,
             "seed_frame": s,
+            "seed_ranking": [int(k) for k in self._seed_ranking],
             "localised_frames": sorted(seen),
             "animal_classes": [
                 {"index": c, "name": class_name(c), "probability": round(p, 3)} for c, p in top

@@ -89,6 +89,7 @@ def _stats(seg, coverage, boxes, mean, p99, top, occluded, per_frame) -> dict[st
     keys = (
         "seeding",
         "seed_frame",
+        "seeds_tried",
         "box_frame",
         "box_use",
         "animal_classes",
@@ -134,6 +135,12 @@ def seeding_lines(seeding: dict[str, Any] | None) -> list[str]:
         )
     elif seeding.get("box_use") == "seeded":
         out.append(f"the box on frame {seeding.get('box_frame')} seeded the masks")
+    tried = seeding.get("seeds_tried")
+    if tried:
+        each = ", ".join(f"{k} ({v:.2f})" for k, v in tried.items())
+        out.append(
+            f"seed frames tried (agreement with the network): {each}; kept {seeding.get('seed_frame')}"
+        )
     classes = seeding.get("animal_classes") or []
     if classes:
         seen = ", ".join(f"{c['name']} {c['probability']:.0%}" for c in classes)
