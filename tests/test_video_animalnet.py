@@ -460,13 +460,17 @@ def test_other_seed_frames_are_tried_and_the_masks_the_network_agrees_with_most_
     ranking = one.report["seed_ranking"]
     assert "seeds_tried" not in one.report and ranking and ranking[0] == one.report["seed_frame"]
 
-    seg = AnimalNetSegmenter(snap=False, seeds=3)
+    seg = AnimalNetSegmenter(snap=False, seeds=3, seeds_margin=-1.0)  # any other seed's lead counts
     got = np.asarray(seg.segment(frames), bool)
     tried = seg.report["seeds_tried"]
     assert list(tried) == ranking[: len(tried)] and len(tried) == min(3, len(ranking)) >= 2
     chosen = seg.report["seed_frame"]
     assert tried[chosen] == max(tried.values())
     assert chosen == next(k for k in tried if tried[k] == max(tried.values()))  # the first on a tie
+    # another seed leaves the first only by a clear lead: past any possible lead, the first stays
+    sure = AnimalNetSegmenter(snap=False, seeds=3, seeds_margin=1.0)
+    assert (np.asarray(sure.segment(frames), bool) == first).all()
+    assert sure.report["seed_frame"] == ranking[0] and sure.report["seeds_tried"] == tried
     again = AnimalNetSegmenter(snap=False)
     again.tracker.start_at = chosen
     assert (np.asarray(again.segment(frames), bool) == got).all()

@@ -204,8 +204,9 @@ class AnimalNetSegmenter:
        the frame's edge is stored empty: what a tracker leaves behind on the ground once the animal
        has left (an animal leaving or entering is cut by the edge). 0: never.
     With ``seeds`` > 1 (and no box), steps 1-6 run again from the keyframes the tracker ranks
-    next, ``seeds`` in all, and the masks that agree most with the network's animal are kept
-    (`_best_seed`): the seed frame, a near tie on many videos, can decide the whole video.
+    next, ``seeds`` in all, and the masks that agree most with the network's animal are kept when
+    they agree clearly more than the first seed's (by over ``seeds_margin``; `_best_seed`): the
+    seed frame, a near tie on many videos, can decide the whole video.
     7. With ``snap``, each frame is snapped to the animal's colours by a last GrabCut seeded by its
        mask, kept for the video only where that separates the mask's colours from its surroundings
        more (`zooctl.video.colour_snap.snap_video`, ``snap_gain`` its threshold): a blob of
@@ -245,6 +246,7 @@ class AnimalNetSegmenter:
         snap: bool = True,
         snap_gain: float | None = None,
         seeds: int = 1,
+        seeds_margin: float = 0.03,
         **tracker_options,
     ) -> None:
         from ..errors import UsageError
@@ -272,6 +274,7 @@ class AnimalNetSegmenter:
         self.snap = snap
         self.snap_gain = snap_gain
         self.seeds = seeds
+        self.seeds_margin = seeds_margin
         self._features = None
         self.report: dict = {}
 
@@ -587,13 +590,15 @@ class AnimalNetSegmenter:
     def _best_seed(self, frames, small, flow, masks, early):
         """Steps 1-6 again from the keyframes the tracker ranks next as seeds, ``seeds`` in all
         (`GrabCutTracker.start_at`); kept: the masks that agree most with the network's animal
-        (`network_agreement`), the first seed's on a tie. ``report["seeds_tried"]``: {seed frame:
-        agreement}."""
+        (`network_agreement`) if they agree more than the first seed's by over ``seeds_margin``,
+        else the first seed's. ``report["seeds_tried"]``: {seed frame: agreement}."""
         from .selftrain import at_working_size, track
 
         looks = early["looks"]
-        best = (network_agreement(masks, looks), masks, self.report)
-        tried = {int(self.report.get("seed_frame", -1)): round(best[0], 4)}
+        first = network_agreement(masks, looks)
+        first_report = self.report
+        best = (first, masks, first_report)
+        tried = {int(self.report.get("seed_frame", -1)): round(first, 4)}
         for k in self.report.get("seed_ranking", [])[1 : self.seeds]:
             self.tracker.start_at = k
             try:
@@ -609,6 +614,8 @@ class AnimalNetSegmenter:
             tried[int(k)] = round(agreement, 4)
             if agreement > best[0]:
                 best = (agreement, got, self.report)
+        if best[0] - first <= self.seeds_margin:
+            best = (first, masks, first_report)
         self.report = best[2]
         self.report["seeds_tried"] = tried
         return best[1]
