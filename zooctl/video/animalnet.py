@@ -479,9 +479,9 @@ class AnimalNetSegmenter:
         size, when that part is at most half the frame's width and height (a small or distant animal,
         else the network and the relabelling see it on a few cells of their grid) and the tracked
         region is not a piece of a larger animal the network sees on the whole frames (``part_cover``
-        over ``switch_cover``); the whole frame otherwise. Same arguments and result (``taken``: `decide_video`'s ``looks`` and ``moving``,
-        of the whole frames, used when it decides on them); ``report["animalnet"]["crop"]``: the
-        part (x, y, w, h) at the working size, or None."""
+        over ``switch_cover``); the whole frame otherwise. Same arguments and result (``taken``:
+        `decide_video`'s ``looks`` and ``moving``, of the whole frames, used when it decides on
+        them); ``report["animalnet"]["crop"]``: the part (x, y, w, h) at the working size, or None."""
         from .flow import VideoFlow, resize_flow
         from .scratch import working
 
