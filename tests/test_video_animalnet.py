@@ -478,3 +478,23 @@ def test_other_seed_frames_are_tried_and_the_masks_the_network_agrees_with_most_
     if chosen == ranking[0]:
         assert (got == first).all()
     assert np.mean([iou(m, t) for m, t in zip(got, truth)]) > 0.5
+
+
+def test_a_segmenter_option_of_the_wrong_kind_is_one_clear_line(store, tmp_path, capsys):
+    """A number or true/false option given something else fails at once with what it takes, for the
+    segmenter's own options and those it forwards to its tracker; nothing is stored."""
+    from video_helpers import write_pngs
+
+    frames, _ = moving_object_video(t=4, h=48, w=64)
+    folder = write_pngs(tmp_path / "clip", frames)
+    for option, said in (
+        ("seeds=abc", "seeds='abc' is not a whole number"),
+        ("seeds=2.5", "seeds=2.5 is not a whole number"),
+        ("switch_cover=x", "switch_cover='x' is not a number"),
+        ("snap=maybe", "snap='maybe' is not true or false"),
+        ("key_every=often", "key_every='often' is not a whole number"),  # the tracker's
+    ):
+        r = run_inprocess(capsys, "video", "add", str(folder), "--seg-option", option, "-q")
+        assert r.code == 2 and said in r.err and "Traceback" not in r.err, (option, r.err)
+    r = run_inprocess(capsys, "video", "list")
+    assert r.code == 0 and "clip" not in r.out

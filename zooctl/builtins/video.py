@@ -10,6 +10,34 @@ from ..components import ComponentSpec
 from ..plugins import hookimpl
 
 
+def _typed(options: dict, *classes) -> dict:
+    """``options`` unchanged, once each that a class's ``__init__`` has a number or true/false default
+    for is one too (a segmenter forwards the rest to its tracker, so several classes); else one
+    clear UsageError, not a TypeError deep inside the segmentation."""
+    import inspect
+
+    from ..errors import UsageError
+
+    for cls in classes:
+        for name, p in inspect.signature(cls.__init__).parameters.items():
+            if name not in options or p.default is inspect.Parameter.empty or p.default is None:
+                continue
+            v, d = options[name], p.default
+            if isinstance(d, bool):
+                if not isinstance(v, bool):
+                    raise UsageError(
+                        f"segmenter option {name}={v!r} is not true or false",
+                        hint=f"e.g. {name}={str(d).lower()}",
+                    )
+            elif isinstance(d, int) and (isinstance(v, bool) or not isinstance(v, int)):
+                raise UsageError(
+                    f"segmenter option {name}={v!r} is not a whole number", hint=f"e.g. {name}={d}"
+                )
+            elif isinstance(d, float) and (isinstance(v, bool) or not isinstance(v, (int, float))):
+                raise UsageError(f"segmenter option {name}={v!r} is not a number", hint=f"e.g. {name}={d}")
+    return options
+
+
 def _masks(**options):
     from ..video.segment import MaskSegmenter
 
@@ -19,19 +47,21 @@ def _masks(**options):
 def _grabcut(**options):
     from ..video.grabcut import GrabCutTracker
 
-    return GrabCutTracker(**options)
+    return GrabCutTracker(**_typed(options, GrabCutTracker))
 
 
 def _selftrain(**options):
+    from ..video.grabcut import GrabCutTracker
     from ..video.selftrain import SelfTrainedSegmenter
 
-    return SelfTrainedSegmenter(**options)
+    return SelfTrainedSegmenter(**_typed(options, SelfTrainedSegmenter, GrabCutTracker))
 
 
 def _animalnet(**options):
     from ..video.animalnet import AnimalNetSegmenter
+    from ..video.grabcut import GrabCutTracker
 
-    return AnimalNetSegmenter(**options)
+    return AnimalNetSegmenter(**_typed(options, AnimalNetSegmenter, GrabCutTracker))
 
 
 def _onnx(**options):
