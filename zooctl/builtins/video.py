@@ -11,9 +11,10 @@ from ..plugins import hookimpl
 
 
 def _typed(options: dict, *classes) -> dict:
-    """``options`` unchanged, once each that a class's ``__init__`` has a number or true/false default
-    for is one too (a segmenter forwards the rest to its tracker, so several classes); else one
-    clear UsageError, not a TypeError deep inside the segmentation."""
+    """``options`` as given, once every option that one of ``classes`` takes with a number or
+    true/false default holds a value of that kind (a segmenter forwards the options it does not
+    take to its tracker: both classes are given); else one clear UsageError, not a TypeError deep
+    inside the segmentation."""
     import inspect
 
     from ..errors import UsageError

@@ -260,6 +260,7 @@ class AnimalNetSegmenter:
             )
         self.net = AnimalNet(weights)  # before the slow part: missing weights are refused at once
         self.tracker = GrabCutTracker(**tracker_options)
+        self.tracker.keep_looks = seeds > 1  # the other seeds' passes reuse the first's looks
         self.feature_every = feature_every
         self.switch_motion = switch_motion
         self.switch_cover = switch_cover
@@ -583,15 +584,19 @@ class AnimalNetSegmenter:
         )
         if self.seeds > 1 and box is None:
             masks = self._best_seed(frames, small, flow, masks, early)
+        self.tracker.forget()
         if self.snap:
             masks = self._snapped(small, masks)
         return at_frame_size(masks, frames, small, self.edge_radius, self.edge_eps)
 
     def _best_seed(self, frames, small, flow, masks, early):
         """Steps 1-6 again from the keyframes the tracker ranks next as seeds, ``seeds`` in all
-        (`GrabCutTracker.start_at`); kept: the masks that agree most with the network's animal
-        (`network_agreement`) if they agree more than the first seed's by over ``seeds_margin``,
-        else the first seed's. ``report["seeds_tried"]``: {seed frame: agreement}."""
+        (`GrabCutTracker.start_at`: the first pass's looks and colour bins serve again); kept: the
+        masks that agree most with the network's animal (`network_agreement`) if they agree more
+        than the first seed's by over ``seeds_margin``, else the first seed's. The final masks are
+        judged, not the tracked ones: whether the network's masks replace the tracker's (step 3)
+        can differ by seed, and decides the video. ``report["seeds_tried"]``: {seed frame:
+        agreement}."""
         from .selftrain import at_working_size, track
 
         looks = early["looks"]

@@ -122,8 +122,11 @@ class GrabCutTracker:
         if key_every < 1:
             raise UsageError(f"key_every must be at least 1, got {key_every}")
         self.localise = localise
-        # a segmenter that tries other seed frames sets the one to start from (no box) here
+        # a segmenter that tries other seed frames sets the one to start from (no box) here: the
+        # frames are then those of the last call, whose looks and colour bins it asked to keep
         self.start_at: int | None = None
+        self.keep_looks = False
+        self._kept: tuple | None = None
         self.key_every = key_every
         self.min_confidence = min_confidence
         self.min_agreement = min_agreement
@@ -195,6 +198,11 @@ class GrabCutTracker:
             )
         return Resized(masks, w, h)
 
+    def forget(self) -> None:
+        """Drop the last call's looks and colour bins, kept (``keep_looks``) for calls with
+        ``start_at``."""
+        self._kept = None
+
     def flow_size(self, w: int, h: int) -> tuple[int, int]:
         """(w, h) GrabCut works at for frames of (w, h): the flow it reads, at that size."""
         scale = self._scale(w, h)
@@ -210,6 +218,10 @@ class GrabCutTracker:
         The keyframes' looks are taken on a second thread from the last one back, while the first
         pass takes them from the first one on."""
         t = len(frames)
+        kept = self._kept
+        if self.start_at is not None and kept is not None and kept[0] == frames.shape:
+            self._evidence, bins = kept[1], kept[2]  # the same frames again, from another seed
+            return self._segment(frames, bins, None, box_frame, progress, flow)
         self._evidence = _Seen(frames)
         ahead = None
         if self.localise:
@@ -220,6 +232,8 @@ class GrabCutTracker:
             ahead.start()
         try:
             bins = _Bins(frames)
+            if self.keep_looks:
+                self._kept = (frames.shape, self._evidence, bins)
             masks = self._segment(frames, bins, box, box_frame, progress, flow)
             if box is None or self.report["box_use"] == "seeded" or hint.agrees(masks[box_frame], box):
                 return masks
