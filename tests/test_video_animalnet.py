@@ -448,14 +448,18 @@ def test_network_agreement_is_the_mean_iou_with_the_network_animal_over_the_look
     assert network_agreement(masks, {}) == 0.0
 
 
-def test_other_seed_frames_are_tried_and_the_masks_the_network_agrees_with_most_kept():
+def test_other_seed_frames_are_tried_and_the_masks_the_network_agrees_with_most_kept(monkeypatch):
     """``seeds``: the tracker is started again from its next-ranked keyframes (``start_at``) and the
-    segmentation whose masks agree most with the network's animal is kept; it is exactly the
-    segmentation started from that frame. One seed: the tracker's own choice, nothing tried."""
+    segmentation whose masks agree most with the network's animal is kept; never joining the first
+    pass, it is exactly the segmentation started from that frame. One seed: the tracker's own
+    choice, nothing tried."""
+    from zooctl.video import grabcut
     from zooctl.video.animalnet import AnimalNetSegmenter
 
+    monkeypatch.setattr(grabcut, "JOIN_IOU", 2.0)
+
     frames, truth = moving_object_video(t=21, h=96, w=128)
-    one = AnimalNetSegmenter(snap=False)
+    one = AnimalNetSegmenter(snap=False, seeds=1)
     first = np.asarray(one.segment(frames), bool)
     ranking = one.report["seed_ranking"]
     assert "seeds_tried" not in one.report and ranking and ranking[0] == one.report["seed_frame"]
@@ -471,13 +475,36 @@ def test_other_seed_frames_are_tried_and_the_masks_the_network_agrees_with_most_
     sure = AnimalNetSegmenter(snap=False, seeds=3, seeds_margin=1.0)
     assert (np.asarray(sure.segment(frames), bool) == first).all()
     assert sure.report["seed_frame"] == ranking[0] and sure.report["seeds_tried"] == tried
-    again = AnimalNetSegmenter(snap=False)
+    again = AnimalNetSegmenter(snap=False, seeds=1)
     again.tracker.start_at = chosen
     assert (np.asarray(again.segment(frames), bool) == got).all()
     assert again.report["seed_frame"] == chosen
     if chosen == ranking[0]:
         assert (got == first).all()
     assert np.mean([iou(m, t) for m, t in zip(got, truth)]) > 0.5
+
+
+def test_another_seeds_pass_joins_the_first_where_it_finds_the_same_animal(monkeypatch):
+    """A pass from another seed whose mask on a frame overlaps the first pass's by `JOIN_IOU` takes
+    the first pass's masks for the rest of that direction: fewer frames tracked, the masks as
+    without joining but for what the copied frames would have drifted."""
+    from zooctl.video import grabcut
+    from zooctl.video.animalnet import AnimalNetSegmenter
+
+    frames, _ = moving_object_video(t=21, h=120, w=160, seed=1)  # every seed finds the ellipse
+    cuts: list[int] = []
+    track = grabcut.GrabCutTracker._track
+    monkeypatch.setattr(grabcut.GrabCutTracker, "_track", lambda self, *a: cuts.append(1) or track(self, *a))
+    runs = {}
+    for join in (2.0, grabcut.JOIN_IOU):
+        monkeypatch.setattr(grabcut, "JOIN_IOU", join)
+        cuts.clear()
+        seg = AnimalNetSegmenter(snap=False, relabel=False, seeds=3, seeds_margin=-1.0)
+        runs[join] = (np.asarray(seg.segment(frames), bool), len(cuts), seg.report["seeds_tried"])
+    (never, n_never, tried_never), (joined, n_joined, tried_joined) = runs.values()
+    assert list(tried_never) == list(tried_joined) and len(tried_joined) >= 2
+    assert n_joined < n_never
+    assert np.mean([iou(a, b) for a, b in zip(joined, never)]) > 0.9
 
 
 def test_other_seeds_reuse_the_first_passs_looks(monkeypatch):
@@ -490,7 +517,7 @@ def test_other_seeds_reuse_the_first_passs_looks(monkeypatch):
     looked: list[int] = []
     evidence = Localiser.evidence
     monkeypatch.setattr(Localiser, "evidence", lambda self, frame: looked.append(1) or evidence(self, frame))
-    AnimalNetSegmenter(snap=False).segment(frames)
+    AnimalNetSegmenter(snap=False, seeds=1).segment(frames)
     one = len(looked)
     seg = AnimalNetSegmenter(snap=False, seeds=3, seeds_margin=-1.0)
     seg.segment(frames)

@@ -206,7 +206,8 @@ class AnimalNetSegmenter:
     With ``seeds`` > 1 (and no box), steps 1-6 run again from the keyframes the tracker ranks
     next, ``seeds`` in all, and the masks that agree most with the network's animal are kept when
     they agree clearly more than the first seed's (by over ``seeds_margin``; `_best_seed`): the
-    seed frame, a near tie on many videos, can decide the whole video.
+    seed frame, a near tie on many videos, can decide the whole video. A pass from another seed
+    that meets the first pass's masks (`zooctl.video.grabcut.JOIN_IOU`) takes them from there on.
     7. With ``snap``, each frame is snapped to the animal's colours by a last GrabCut seeded by its
        mask, kept for the video only where that separates the mask's colours from its surroundings
        more (`zooctl.video.colour_snap.snap_video`, ``snap_gain`` its threshold): a blob of
@@ -245,8 +246,8 @@ class AnimalNetSegmenter:
         edge_eps: float = 1e-3,
         snap: bool = True,
         snap_gain: float | None = None,
-        seeds: int = 1,
-        seeds_margin: float = 0.03,
+        seeds: int = 2,
+        seeds_margin: float = 0.005,
         **tracker_options,
     ) -> None:
         from ..errors import UsageError

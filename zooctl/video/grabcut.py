@@ -35,6 +35,10 @@ from .flow import DISFlow, VideoFlow, compute_video_flow, fb_inconsistent, resiz
 from .localise import Evidence, Localiser, class_name, fuse, main_region
 from .scratch import Resized, ScratchArray, working
 
+# A pass from another seed frame whose mask on a frame overlaps the first pass's this much has found
+# the same animal: the rest of that direction would repeat the first pass, which it takes instead.
+JOIN_IOU = 0.95
+
 Box = tuple[int, int, int, int]  # x, y, w, h in pixels of the frames given to segment()
 
 
@@ -123,10 +127,11 @@ class GrabCutTracker:
             raise UsageError(f"key_every must be at least 1, got {key_every}")
         self.localise = localise
         # a segmenter that tries other seed frames sets the one to start from (no box) here: the
-        # frames are then those of the last call, whose looks and colour bins it asked to keep
+        # frames are then those of the last call, whose looks, colour bins and masks it asked to keep
         self.start_at: int | None = None
         self.keep_looks = False
         self._kept: tuple | None = None
+        self._join: tuple | None = None  # (masks, how) of the first pass, while another seed's runs
         self.key_every = key_every
         self.min_confidence = min_confidence
         self.min_agreement = min_agreement
@@ -199,8 +204,7 @@ class GrabCutTracker:
         return Resized(masks, w, h)
 
     def forget(self) -> None:
-        """Drop the last call's looks and colour bins, kept (``keep_looks``) for calls with
-        ``start_at``."""
+        """Drop what the last call kept (``keep_looks``) for calls with ``start_at``."""
         self._kept = None
 
     def flow_size(self, w: int, h: int) -> tuple[int, int]:
@@ -221,7 +225,11 @@ class GrabCutTracker:
         kept = self._kept
         if self.start_at is not None and kept is not None and kept[0] == frames.shape:
             self._evidence, bins = kept[1], kept[2]  # the same frames again, from another seed
-            return self._segment(frames, bins, None, box_frame, progress, flow)
+            self._join = kept[3:]
+            try:
+                return self._segment(frames, bins, None, box_frame, progress, flow)
+            finally:
+                self._join = None
         self._evidence = _Seen(frames)
         ahead = None
         if self.localise:
@@ -232,9 +240,9 @@ class GrabCutTracker:
             ahead.start()
         try:
             bins = _Bins(frames)
-            if self.keep_looks:
-                self._kept = (frames.shape, self._evidence, bins)
             masks = self._segment(frames, bins, box, box_frame, progress, flow)
+            if self.keep_looks:
+                self._kept = (frames.shape, self._evidence, bins, masks, list(self.report["seeding"]))
             if box is None or self.report["box_use"] == "seeded" or hint.agrees(masks[box_frame], box):
                 return masks
             return self._segment(frames, bins, box, box_frame, progress, flow, box_seed=True)
@@ -376,6 +384,12 @@ class GrabCutTracker:
                     if new is not None:
                         m, how[i] = new, "re-seeded"
                 masks[i] = m
+                if self._join is not None and _iou(m, self._join[0][i]) >= JOIN_IOU:
+                    # the first seed's animal again: from here on its pass (`JOIN_IOU`)
+                    for k in order[j:]:
+                        masks[k], how[k] = self._join[0][k], self._join[1][k]
+                        step()
+                    return
                 if not m.any():
                     how[i] = "empty"
                 elif (~m).any():
@@ -703,6 +717,11 @@ def _grabcut(
     out = np.zeros((h, w), bool)
     out[y0:y1, x0:x1] = np.isin(sub, fg_labels)
     return out
+
+
+def _iou(a: np.ndarray, b: np.ndarray) -> float:
+    union = int(np.count_nonzero(a | b))
+    return 1.0 if union == 0 else int(np.count_nonzero(a & b)) / union
 
 
 def _clean(mask: np.ndarray, reference: np.ndarray) -> np.ndarray:
