@@ -33,12 +33,6 @@ from video_variants import VARIANTS, variant_source
 GRID = [round(float(x), 3) for x in np.arange(0.0, 0.2001, 0.005)]
 
 
-def _j(masks: np.ndarray, truth: np.ndarray) -> float:
-    inter = (masks & truth).sum((1, 2))
-    union = (masks | truth).sum((1, 2))
-    return float(np.mean(np.where(union > 0, inter / np.maximum(union, 1), 1.0)))
-
-
 def _at(truth: np.ndarray, h: int, w: int) -> np.ndarray:
     return np.stack(
         [cv2.resize(t.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA) > 0.5 for t in truth]
@@ -51,6 +45,7 @@ def collect(out: Path, davis: list[str], benches: list[Path]) -> None:
     from zooctl.paths import default_store
     from zooctl.store.videos import VideoStore
     from zooctl.video import animalnet
+    from zooctl.video.mask_quality import per_frame_j
 
     seen: list[tuple] = []
     decide = animalnet.AnimalNetSegmenter.decide_near
@@ -107,7 +102,7 @@ def collect(out: Path, davis: list[str], benches: list[Path]) -> None:
             {
                 "frame": int(k if k is not None else -1),
                 "agreement": animalnet.network_agreement(m, looks),
-                "j": _j(m, small_truth),
+                "j": float(np.mean(per_frame_j(m, small_truth))),
             }
             for k, m, _ in seen
         ]

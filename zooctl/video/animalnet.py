@@ -660,11 +660,9 @@ def network_agreement(masks, looks: dict) -> float:
     """How much (T, h, w) bool masks agree with the network's animal: over the frames of ``looks``
     (`AnimalNetSegmenter.looks`), the mean intersection over union of each mask with the cells of
     log-odds over 0 (both empty: 1)."""
-    ious = []
-    for i, (logit, _, _) in looks.items():
-        m, net = np.asarray(masks[i], bool), logit > 0
-        union = int((m | net).sum())
-        ious.append(float((m & net).sum()) / union if union else 1.0)
+    from .mask_quality import frame_j
+
+    ious = [frame_j(masks[i], logit > 0) for i, (logit, _, _) in looks.items()]
     return float(np.mean(ious)) if ious else 0.0
 
 

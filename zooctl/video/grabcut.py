@@ -33,6 +33,7 @@ from ..errors import InputError, UsageError
 from . import cues, hint
 from .flow import DISFlow, VideoFlow, compute_video_flow, fb_inconsistent, resize_flow, warp
 from .localise import Evidence, Localiser, class_name, fuse, main_region
+from .mask_quality import frame_j
 from .scratch import Resized, ScratchArray, working
 
 # A pass from another seed frame whose mask on a frame overlaps the first pass's this much has found
@@ -384,7 +385,7 @@ class GrabCutTracker:
                     if new is not None:
                         m, how[i] = new, "re-seeded"
                 masks[i] = m
-                if self._join is not None and _iou(m, self._join[0][i]) >= JOIN_IOU:
+                if self._join is not None and frame_j(m, self._join[0][i]) >= JOIN_IOU:
                     # the first seed's animal again: from here on its pass (`JOIN_IOU`)
                     for k in order[j:]:
                         masks[k], how[k] = self._join[0][k], self._join[1][k]
@@ -717,11 +718,6 @@ def _grabcut(
     out = np.zeros((h, w), bool)
     out[y0:y1, x0:x1] = np.isin(sub, fg_labels)
     return out
-
-
-def _iou(a: np.ndarray, b: np.ndarray) -> float:
-    union = int(np.count_nonzero(a | b))
-    return 1.0 if union == 0 else int(np.count_nonzero(a & b)) / union
 
 
 def _clean(mask: np.ndarray, reference: np.ndarray) -> np.ndarray:
