@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 from fit_helpers import tiny_overrides
+from PIL import Image
 
 from zooctl.benchdata.make import make_video
 from zooctl.benchdata.run import ABLATIONS, markdown_table, run_benchmark
@@ -101,6 +102,10 @@ def test_bench_run_table(tmp_path, store):
     row = res["rows"][0]
     assert row["template"] == "tube2" and 0 <= row["mask_iou"] <= 1 and row["miou"] is not None
     assert 0 <= row["novel_view_iou"] <= 1
+    from zooctl.store.fits import FitStore
+
+    record = FitStore(store).get("bench-tube-full")
+    assert Image.open(record["outputs"]["novel_view_png"]).size[0] == 3 * 34  # input + 2 held-out
     table = markdown_table(res)
     assert "novel-view IoU" in table
     assert "| full | 1 |" in table and "no-flow" in table
@@ -160,6 +165,40 @@ def test_novel_view_iou_scores_the_truth_high_and_a_mirror_low(tmp_path):
     mirrored = cam_frame.copy()
     mirrored[..., 2:] = 2 * z0 - cam_frame[..., 2:]
     assert max(novel_view_iou(res, sel, mirrored, np.ones(2))) < min(truth) - 0.05
+
+
+def test_the_novel_view_sheet_shows_what_the_metric_compared(tmp_path):
+    """The picture of `novel_view.png`: a row per frame, the input camera then each held-out one;
+    the true shape leaves almost nothing orange (fit only) or blue (truth only), the mirrored one
+    leaves both, in the held-out columns and not in the input one."""
+    from zooctl.fit.metrics import held_out_silhouettes
+    from zooctl.fit.outputs import _FIT_ONLY, _TRUTH_ONLY, novel_view_sheet
+
+    res = _fit_tiny(tmp_path)
+    gt = res.video.gt
+    res.template = tube_asset(bones=3, name="tube")
+    sel = np.array([0, 3])
+    R, t = gt["cam_rotation"][sel], gt["cam_translation"][sel]
+    cam_frame = np.einsum("sva,sba->svb", gt["vertices"][sel], R) + t[:, None]
+    z0 = cam_frame[..., 2:].mean(1, keepdims=True)
+    mirrored = cam_frame.copy()
+    mirrored[..., 2:] = 2 * z0 - cam_frame[..., 2:]
+
+    def wrong(views, col):  # pixels the fit and the truth disagree on in column ``col``
+        return sum(int((f ^ g).sum()) for f, g in zip(views[col][1], views[col][2], strict=True))
+
+    views = held_out_silhouettes(res, sel, cam_frame, np.ones(2), input_view=True)
+    assert [v[0] for v in views] == ["input", "held-out 1 (90 deg off)", "held-out 2 (35 deg off)"]
+    assert all(v[1].shape == v[2].shape == (2, 32, 32) for v in views)
+    seen = held_out_silhouettes(res, sel, mirrored, np.ones(2), input_view=True)
+    assert [wrong(views, c) for c in range(3)] == [0, 0, 0]
+    # the input view barely tells a mirror in depth (perspective only); the held-out ones do
+    assert min(wrong(seen, 1), wrong(seen, 2)) > 2 * wrong(seen, 0)
+    sheet = novel_view_sheet(seen, [0, 3])
+    assert sheet.shape == (36 + 2 * 34, 3 * 34, 3)
+    held_out = sheet[36:, 34:]
+    for colour in (_FIT_ONLY, _TRUTH_ONLY):
+        assert (held_out == colour).all(-1).sum() > 5
 
 
 def test_bench_folders_without_novel_views_say_n_a(tmp_path, store):

@@ -633,15 +633,21 @@ def write_outputs(
     if result.video.gt:
         from .metrics import evaluate_fit
 
+        views: list = []
         try:
             metrics.update(
                 {
                     k: (None if isinstance(v, float) and not np.isfinite(v) else v)
-                    for k, v in evaluate_fit(result).items()
+                    for k, v in evaluate_fit(result, views=views).items()
                 }
             )
         except InputError as exc:
             notes.append(f"3D metrics skipped: {exc.message}")
+        if views:
+            from .outputs import write_novel_view_png
+
+            path = out_dir / "novel_view.png"
+            files["novel_view_png"] = str(write_novel_view_png(views, metrics["frames_evaluated"], path))
     k = result.scene.camera(1).intrinsics[0].detach().cpu().numpy() / result.scale
     return {
         "outputs": files,

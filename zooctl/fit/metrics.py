@@ -131,11 +131,17 @@ def _camera_frame_pred(result, frames: np.ndarray) -> tuple[np.ndarray, np.ndarr
 
 
 def evaluate_fit(
-    result, frames: int = 4, reanimate_iters: int = 40, within: int | None = None
+    result,
+    frames: int = 4,
+    reanimate_iters: int = 40,
+    within: int | None = None,
+    views: list[tuple[str, np.ndarray, np.ndarray]] | None = None,
 ) -> dict[str, Any]:
     """The 3D metrics of a `zooctl.fit.run.FitResult` whose video has ground truth, on ``frames``
     frames spread over the video (over its first ``within`` frames when given: to compare a fit
-    of a long clip with a fit of its start)."""
+    of a long clip with a fit of its start). ``views``, when given, receives what the novel-view
+    IoU compared, for a picture (`zooctl.fit.outputs.write_novel_view_png`): (camera name, the fit's
+    silhouettes (S, H, W), the truth's (S, H, W)) for the input camera and each held-out one."""
     gt = result.video.gt
     need = ("vertices", "faces", "joints", "skin_joints", "skin_weights", "cam_rotation", "cam_translation")
     if any(k not in gt for k in need):
@@ -165,7 +171,12 @@ def evaluate_fit(
         out["joint"].append(chamfer(pj_all[i][p_skinning] * s, gj[g_skinning]) / norm)
         out["skinning"].append(skinning_iou(gv, gdense, pv_all[i] * s, pdense))
     res = {k: float(np.mean(v)) for k, v in out.items() if k != "scale"}
-    per_view = novel_view_iou(result, sel, pv_all, np.asarray(out["scale"]))
+    seen = held_out_silhouettes(result, sel, pv_all, np.asarray(out["scale"]), input_view=views is not None)
+    per_view = (
+        None if seen is None else [_finite_mean(silhouette_iou(f, g)) for n, f, g in seen if n != "input"]
+    )
+    if views is not None and seen is not None:
+        views.extend(seen)
     res["novel_view_iou"] = None if per_view is None else _finite_mean(per_view)
     res["novel_view_iou_per_view"] = per_view
     # The last frame's own scale (``sel`` always ends with it): re-animation starts from that
@@ -181,11 +192,14 @@ def _finite_mean(v: list[float]) -> float | None:
 
 
 @torch.no_grad()
-def novel_view_iou(
-    result, sel: np.ndarray, pred_cam: np.ndarray, scales: np.ndarray
-) -> list[float | None] | None:
-    """Per held-out camera, the mean mask IoU over frames ``sel`` (module docstring); None without
-    held-out views. pred_cam (len(sel), V, 3): the fit's vertices in its camera frame; scales (len(sel),)."""
+def held_out_silhouettes(
+    result, sel: np.ndarray, pred_cam: np.ndarray, scales: np.ndarray, input_view: bool = False
+) -> list[tuple[str, np.ndarray, np.ndarray]] | None:
+    """(camera name, the fit's silhouettes (S, H, W) bool, the truth's masks (S, H, W) bool) per
+    held-out camera (named by its angle from the input camera), on frames ``sel``, as the
+    novel-view IoU compares them (module docstring); None without held-out views. ``input_view``:
+    first the input camera's, the fit placed the same way against the truth's mesh rendered by
+    it. pred_cam (S, V, 3): the fit's vertices in its camera frame; scales (S,)."""
     from ..render.camera import Camera
     from ..render.raster import rasterize
 
@@ -200,18 +214,45 @@ def novel_view_iou(
     R, t = gt["cam_rotation"][sel], gt["cam_translation"][sel]  # input cameras (S, 3, 3), (S, 3)
     world = np.einsum("svb,sba->sva", pred_cam * scales[:, None, None] - t[:, None], R)  # R^T (p - t)
     faces = torch.as_tensor(np.asarray(result.template.faces), dtype=torch.long)
-    out: list[float | None] = []
-    for c in range(C):
+    intrinsics = torch.as_tensor(np.tile(np.asarray(K, np.float64), (S, 1)), dtype=torch.float32)
+    world_t = torch.as_tensor(world, dtype=torch.float32)
+
+    def seen_by(rot: np.ndarray, tr: np.ndarray, verts: torch.Tensor, tris: torch.Tensor) -> np.ndarray:
         cam = Camera(
-            torch.as_tensor(np.tile(np.asarray(K, np.float64), (S, 1)), dtype=torch.float32),
-            torch.as_tensor(gt["view_rotation"][c, sel], dtype=torch.float32),
-            torch.as_tensor(gt["view_translation"][c, sel], dtype=torch.float32),
+            intrinsics,
+            torch.as_tensor(rot, dtype=torch.float32),
+            torch.as_tensor(tr, dtype=torch.float32),
             H,
             W,
         )
-        sil = rasterize(torch.as_tensor(world, dtype=torch.float32), faces, cam).mask.numpy()
-        out.append(_finite_mean(silhouette_iou(sil, masks[c])))
+        return rasterize(verts, tris, cam).mask.numpy()
+
+    out: list[tuple[str, np.ndarray, np.ndarray]] = []
+    if input_view:
+        truth = torch.as_tensor(np.asarray(gt["vertices"][sel]), dtype=torch.float32)
+        gfaces = torch.as_tensor(np.asarray(gt["faces"]), dtype=torch.long)
+        out.append(("input", seen_by(R, t, world_t, faces), seen_by(R, t, truth, gfaces)))
+    for c in range(C):
+        turn = gt["view_rotation"][c, sel[0]] @ np.asarray(R[0]).T  # from the input camera
+        deg = np.degrees(np.arccos(np.clip((np.trace(turn) - 1) / 2, -1.0, 1.0)))
+        name = f"held-out {c + 1} ({deg:.0f} deg off)"
+        out.append(
+            (
+                name,
+                seen_by(gt["view_rotation"][c, sel], gt["view_translation"][c, sel], world_t, faces),
+                masks[c],
+            )
+        )
     return out
+
+
+def novel_view_iou(
+    result, sel: np.ndarray, pred_cam: np.ndarray, scales: np.ndarray
+) -> list[float | None] | None:
+    """Per held-out camera, the mean mask IoU over frames ``sel`` (module docstring); None without
+    held-out views. pred_cam (len(sel), V, 3): the fit's vertices in its camera frame; scales (len(sel),)."""
+    seen = held_out_silhouettes(result, sel, pred_cam, scales)
+    return None if seen is None else [_finite_mean(silhouette_iou(f, g)) for _, f, g in seen]
 
 
 def reanimation(result, scale: float, iters: int = 60) -> float:

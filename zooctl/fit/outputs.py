@@ -1,4 +1,5 @@
-"""What a fit leaves behind: ``<name>.usd``, ``<name>.glb``, ``overlay.mp4``, ``loss.png``, ``fit.json``.
+"""What a fit leaves behind: ``<name>.usd``, ``<name>.glb``, ``overlay.mp4``, ``loss.png``, ``fit.json``
+(and ``novel_view.png`` for a video with held-out views).
 
 USD camera convention: the fit camera is static at the world origin looking down world -Z with
 +Y up, so ``/World/Camera`` has an identity transform; its focal length and apertures follow
@@ -323,6 +324,57 @@ def write_loss_png(history: dict[str, list[dict[str, float]]], path: Path) -> Pa
 
     buf = io.BytesIO()
     Image.fromarray(loss_plot(history)).save(buf, format="PNG")
+    write_bytes_atomic(Path(path), buf.getvalue())
+    return Path(path)
+
+
+# -- the fit against the truth from the cameras it never saw ---------------------------------------
+
+_FIT_ONLY, _TRUTH_ONLY, _BOTH, _NEITHER = (255, 140, 0), (50, 110, 255), (235, 235, 235), (40, 40, 40)
+
+
+def novel_view_sheet(views: list[tuple[str, np.ndarray, np.ndarray]], frames: list[int]) -> np.ndarray:
+    """(H, W, 3) uint8: a row per evaluated frame, a column per camera (`metrics.held_out_silhouettes`:
+    name, the fit's silhouettes (S, h, w), the truth's); fit only orange, truth only blue, both
+    light grey, each cell labelled with its IoU, under a line that says what is compared."""
+    from PIL import Image, ImageDraw
+
+    from ..geometry import silhouette_iou
+
+    rows = []
+    for s, t in enumerate(frames):
+        cells = []
+        for name, fit, truth in views:
+            f, g = np.asarray(fit[s], bool), np.asarray(truth[s], bool)
+            img = np.empty((*f.shape, 3), np.uint8)
+            img[:] = _NEITHER
+            img[f & ~g], img[g & ~f], img[f & g] = _FIT_ONLY, _TRUTH_ONLY, _BOTH
+            iou = float(silhouette_iou(f[None], g[None])[0])
+            cells.append(
+                _label(img, f"frame {t}, {name}: IoU {iou:.2f}" if np.isfinite(iou) else f"frame {t}, {name}")
+            )
+        rows.append(
+            np.concatenate([np.pad(c, ((1, 1), (1, 1), (0, 0)), constant_values=255) for c in cells], 1)
+        )
+    body = np.concatenate(rows, 0)
+    head = Image.new("RGB", (body.shape[1], 36), (255, 255, 255))
+    d = ImageDraw.Draw(head)
+    d.text(
+        (6, 4),
+        "the fit (orange) against the benchmark's truth (blue), both light grey, placed by mIoU's alignment;",
+        fill=(0, 0, 0),
+    )
+    d.text((6, 19), "novel-view IoU: the held-out columns' mean (cameras the fit never saw)", fill=(0, 0, 0))
+    return np.concatenate([np.asarray(head), body], 0)
+
+
+def write_novel_view_png(
+    views: list[tuple[str, np.ndarray, np.ndarray]], frames: list[int], path: Path
+) -> Path:
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(novel_view_sheet(views, frames)).save(buf, format="PNG")
     write_bytes_atomic(Path(path), buf.getvalue())
     return Path(path)
 
