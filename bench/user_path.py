@@ -109,7 +109,10 @@ def main() -> None:
             "mask_j": j,
             "mask_iou": m.get("mask_iou_truth"),
             "mask_iou_read": m.get("mask_iou"),
-            **{k: m.get(k) for k in ("novel_view_iou", "miou", "mcham", "joint", "surface_tear")},
+            **{
+                k: m.get(k)
+                for k in ("novel_view_iou", "miou", "mcham", "joint", "surface_tear", "tilt_error")
+            },
             "add_s": t_add,
             "wall_s": time.perf_counter() - t0,
         }

@@ -381,3 +381,25 @@ def test_keep_shape_fits_only_the_pose_and_keeps_the_templates_shape_and_skinnin
     assert np.abs(q[1:, 1:] - q[:1, 1:]).max() > 1e-3  # the joints still move from frame to frame
     bench = FitConfig.from_dict(json.loads(json.dumps(ABLATIONS["shape-kept"])))
     assert bench.ablation == FitConfig().keep_shape().ablation
+
+
+def test_axis_tilt_reads_how_far_the_longest_axis_leaves_the_image_plane():
+    from zooctl.fit.metrics import axis_tilt
+
+    rng = np.random.default_rng(0)
+    body = rng.normal(size=(500, 3)) * [1.0, 0.2, 0.1]  # long along x
+    turn = np.radians(40)
+    rot = np.array([[np.cos(turn), 0, np.sin(turn)], [0, 1, 0], [-np.sin(turn), 0, np.cos(turn)]])
+    assert axis_tilt(body) < 2
+    assert abs(axis_tilt(body @ rot.T) - 40) < 2
+    assert axis_tilt(body[:, [1, 2, 0]]) > 88  # pointing at the camera
+
+
+def test_a_fit_records_its_tilt_against_the_truths(tmp_path):
+    from zooctl.fit.metrics import evaluate_fit
+
+    res = _fit_tiny(tmp_path)
+    m = evaluate_fit(res, frames=2, reanimate_iters=1)
+    assert len(m["axis_tilt"]["fit"]) == len(m["axis_tilt"]["truth"]) == 2
+    want = np.mean(np.subtract(m["axis_tilt"]["fit"], m["axis_tilt"]["truth"]))
+    assert abs(m["tilt_error"] - want) < 0.1 and -90 <= m["tilt_error"] <= 90

@@ -15,6 +15,9 @@ Lengths are divided by the longest side of the ground truth's bounding box.
 - ``reanimation``: joint rotations (and root) of the fitted model, from its last frame, optimised
   by Chamfer distance to match the held-out novel ground-truth pose (``gt_novel_vertices``, seen by
   the last frame's camera); the final ``mcham`` to it, at the last frame's line-search scale;
+- ``tilt_error``: the mean over the evaluated frames of how far the fit's longest axis leaves the
+  image plane (`axis_tilt`, degrees) less the truth's: negative when the fit lies flatter across
+  the view than the animal, which the input silhouettes barely show (``axis_tilt``: both per frame);
 - ``novel_view_iou``: 2D mask IoU seen from the cameras the fit never sees (``gt_view_*`` of
   `zooctl.benchdata.make`: +90 degrees azimuth, +35 degrees elevation), on the same evaluated
   frames: the fit in its camera's frame, scaled about the camera centre by that frame's mIoU
@@ -158,7 +161,7 @@ def evaluate_fit(
     pdense = result.scene.model.skin.dense(result.scene.num_joints).detach().cpu().numpy()
     g_skinning = gdense.sum(0) > 0
     p_skinning = pdense.sum(0) > 0
-    out = {"miou": [], "mcham": [], "joint": [], "skinning": [], "scale": []}
+    out = {"miou": [], "mcham": [], "joint": [], "skinning": [], "scale": [], "tilt": [], "tilt_truth": []}
     for i, t in enumerate(sel):
         gv, gj = _camera_frame_gt(result, int(t))
         norm = float((gv.max(0) - gv.min(0)).max())
@@ -170,7 +173,13 @@ def evaluate_fit(
         out["mcham"].append(chamfer(ps * s, gs) / norm)
         out["joint"].append(chamfer(pj_all[i][p_skinning] * s, gj[g_skinning]) / norm)
         out["skinning"].append(skinning_iou(gv, gdense, pv_all[i] * s, pdense))
-    res = {k: float(np.mean(v)) for k, v in out.items() if k != "scale"}
+        out["tilt"].append(axis_tilt(ps))
+        out["tilt_truth"].append(axis_tilt(gs))
+    res = {k: float(np.mean(v)) for k, v in out.items() if k not in ("scale", "tilt", "tilt_truth")}
+    res["axis_tilt"] = {
+        k: [round(x, 1) for x in out[n]] for k, n in (("fit", "tilt"), ("truth", "tilt_truth"))
+    }
+    res["tilt_error"] = float(np.mean(np.subtract(out["tilt"], out["tilt_truth"])))
     seen = held_out_silhouettes(result, sel, pv_all, np.asarray(out["scale"]), input_view=views is not None)
     per_view = (
         None if seen is None else [_finite_mean(silhouette_iou(f, g)) for n, f, g in seen if n != "input"]
@@ -184,6 +193,15 @@ def evaluate_fit(
     res["reanimation"] = reanimation(result, float(out["scale"][-1]), reanimate_iters)
     res["frames_evaluated"] = [int(t) for t in sel]
     return res
+
+
+def axis_tilt(points: np.ndarray) -> float:
+    """Degrees (0..90) out of the image plane of the longest axis (first principal component) of
+    points (N, 3) in a camera's frame (z along the view): 0 when the body lies across the view, 90
+    when it points at the camera."""
+    c = points - points.mean(0)
+    axis = np.linalg.eigh(c.T @ c)[1][:, -1]
+    return float(np.degrees(np.arcsin(min(abs(float(axis[2])), 1.0))))
 
 
 def _finite_mean(v: list[float]) -> float | None:
