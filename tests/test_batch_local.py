@@ -348,3 +348,58 @@ def _alive(pid: int) -> bool:
     except ProcessLookupError:
         return False
     return Path(f"/proc/{pid}/stat").exists() and Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
+
+
+def test_gpu_places_fill_every_gpu_in_turn():
+    from zooctl.errors import UsageError
+    from zooctl.executors.local import gpu_places
+
+    assert gpu_places(0.25, ["0"]) == ["0"] * 4
+    assert gpu_places(0.3, ["0"]) == ["0"] * 3
+    assert gpu_places(0.5, ["0", "1"]) == ["0", "1", "0", "1"]
+    assert gpu_places(1, ["3", "5"]) == ["3", "5"]
+    assert gpu_places(2, ["0", "1", "2", "3", "4"]) == ["0,1", "2,3"]
+    assert gpu_places(1, ["0", "1"], jobs=3) == ["0", "1", "0"]
+    assert gpu_places(1, []) == [] and gpu_places(0, ["0"]) == []
+    with pytest.raises(UsageError, match="more GPUs than the 1 this machine has"):
+        gpu_places(2, ["0"])
+
+
+def seen_gpus(item, report):
+    return os.environ.get("CUDA_VISIBLE_DEVICES")
+
+
+def test_each_local_worker_sees_the_gpu_it_is_placed_on(monkeypatch):
+    import multiprocessing
+    import signal
+
+    from zooctl.executors import local
+
+    monkeypatch.setattr(local, "visible_gpus", lambda: ["0", "1"])
+    monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "0,1")
+    ex = get_executor("local", gpus_per_task=0.5)
+    assert ex.slots == 4 and ex.places == ["0", "1", "0", "1"]
+    assert get_executor("local", gpus_per_task=1).slots == 2  # one task per GPU
+    assert get_executor("local", gpus_per_task=0).slots == 1  # nothing asked: one after another
+    from zooctl.cli.batch_opts import BatchOptions
+
+    assert BatchOptions().make_executor("cuda").slots == 2  # --device cuda: a fit on each GPU
+    assert BatchOptions().make_executor("cuda:1").places == []  # one GPU named: all on it
+    assert BatchOptions(jobs=3).make_executor("cuda").places == ["0", "1", "0"]
+    # the workers, one after another, as the pool starts them
+    taken = multiprocessing.get_context("spawn").Value("i", 0)
+    handler = signal.getsignal(signal.SIGTERM)
+    seen = []
+    try:
+        for _ in range(5):
+            local._init_worker(None, None, ex.places, taken)
+            seen.append(os.environ["CUDA_VISIBLE_DEVICES"])
+    finally:
+        signal.signal(signal.SIGTERM, handler)
+    assert seen == ["0", "1", "0", "1", "0"]
+    # and through a real pool: every task runs on a worker placed on one of the two
+    try:
+        got = [o.value for o in ex.map(seen_gpus, list(range(4)))]
+    finally:
+        ex.close()
+    assert len(got) == 4 and set(got) <= {"0", "1"}

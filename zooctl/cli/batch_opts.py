@@ -35,7 +35,8 @@ CpusOpt = typer.Option(1.0, "--cpus-per-task", help="CPUs each task asks for (an
 GpusOpt = typer.Option(
     None,
     "--gpus-per-task",
-    help="GPUs each task asks for (default: 1 with --device cuda; 0.25 runs four tasks on one GPU).",
+    help="GPUs each task asks for (default: 1 with --device cuda; 0.25 runs four tasks on one GPU). "
+    "Locally, without --jobs, as many tasks at once as the machine's GPUs hold.",
 )
 
 
@@ -56,6 +57,8 @@ class BatchOptions:
         gpus = self.gpus
         if gpus is None:
             gpus = 1.0 if (device or "cpu").startswith("cuda") else 0.0
+            if (self.executor or "local") == "local" and ":" in (device or ""):
+                gpus = 0.0  # `cuda:N` names the GPU: every task on it, none placed elsewhere
         return get_executor(
             self.executor or "local",
             jobs=self.jobs,

@@ -1,6 +1,12 @@
 """The built-in ``local`` executor: tasks in this process one after another, or in ``--jobs N``
 worker processes on this machine.
 
+Tasks that ask for GPUs (``--gpus-per-task``, 1 by default with ``--device cuda``) are placed on
+the machine's GPUs: each worker sees its own through ``CUDA_VISIBLE_DEVICES``, set before its
+first task imports torch. A fraction 1/k runs k workers on every GPU (small fits leave a GPU
+waiting on Python and kernel launches, so several at once use it better), a whole number n gives
+each worker n GPUs of its own; without ``--jobs`` there are as many workers as that fills.
+
 Worker processes are started with ``spawn`` (a fresh interpreter: forking a process that has
 torch's thread pools running is unsafe). A worker that dies (killed, out of memory) breaks
 Python's pool; the pool is then rebuilt and the tasks that were running are retried, each such
@@ -9,6 +15,7 @@ event counting as an attempt of every task that was in flight.
 
 from __future__ import annotations
 
+import math
 import multiprocessing
 import os
 import signal
@@ -49,10 +56,51 @@ def _end_with_driver(driver: int) -> None:
         os._exit(128 + signal.SIGTERM)
 
 
-def _init_worker(stages: Any, driver: int | None = None) -> None:
+def visible_gpus() -> list[str]:
+    """The CUDA devices this process sees, named as a worker's ``CUDA_VISIBLE_DEVICES`` names them
+    (the driver's own list when it set one, else their indices); [] without CUDA."""
+    try:
+        import torch
+
+        count = torch.cuda.device_count()
+    except Exception:  # a torch without CUDA, or no driver
+        return []
+    named = [d.strip() for d in os.environ.get("CUDA_VISIBLE_DEVICES", "").split(",") if d.strip()]
+    return named[:count] if len(named) >= count else [str(i) for i in range(count)]
+
+
+def gpu_places(gpus_per_task: float, devices: list[str], jobs: int | None = None) -> list[str]:
+    """Each worker's ``CUDA_VISIBLE_DEVICES`` for tasks asking ``gpus_per_task`` GPUs each of
+    ``devices``: a fraction 1/k (rounded down to it) puts k workers on every GPU, a whole number n
+    (rounded up to it) gives each worker n GPUs of its own; ``jobs``, when given, is the number of
+    workers, taking the GPUs in turn. [] when no GPU is asked for or none is there: the tasks then
+    see what the driver sees, and a fit on ``cuda`` says that there is none."""
+    if gpus_per_task <= 0 or not devices:
+        return []
+    if gpus_per_task < 1:
+        groups, each = [[d] for d in devices], max(1, math.floor(1 / gpus_per_task + 1e-9))
+    else:
+        n = math.ceil(gpus_per_task - 1e-9)
+        if n > len(devices):
+            raise UsageError(
+                f"--gpus-per-task {gpus_per_task:g} asks for more GPUs than the {len(devices)} this machine has",
+                hint=f"give at most {len(devices)}, or a fraction such as 0.25 to run several tasks on one GPU",
+            )
+        groups, each = [devices[i : i + n] for i in range(0, len(devices) - n + 1, n)], 1
+    order = [g for _ in range(each) for g in groups]  # the GPUs in turn: every one busy before any doubles up
+    return [",".join(order[w % len(order)]) for w in range(jobs or len(order))]
+
+
+def _init_worker(
+    stages: Any, driver: int | None = None, places: list[str] | None = None, taken: Any = None
+) -> None:
     global _STAGES, _DRIVER
     _STAGES, _DRIVER = stages, driver
     signal.signal(signal.SIGTERM, _on_sigterm)
+    if places:  # before anything imports torch: CUDA reads it once
+        with taken.get_lock():
+            w, taken.value = taken.value, taken.value + 1
+        os.environ["CUDA_VISIBLE_DEVICES"] = places[w % len(places)]
     if driver is not None:
         _end_with_driver(driver)
 
@@ -88,7 +136,9 @@ class LocalExecutor(ExecutorBase):
         super().__init__(**options)
         if self.address:
             raise UsageError("--address is for a cluster executor", hint="use --executor ray --address ...")
-        self.slots = self.jobs or 1
+        # each worker's GPUs; one worker on one GPU runs in this process, which sees it already
+        self.places = gpu_places(self.gpus, visible_gpus(), self.jobs) if self.gpus > 0 else []
+        self.slots = len(self.places) or self.jobs or 1
         self._pool: ProcessPoolExecutor | None = None
 
     # -- sequential ----------------------------------------------------------------------
@@ -114,8 +164,12 @@ class LocalExecutor(ExecutorBase):
     # -- process pool ----------------------------------------------------------------------
     def _new_pool(self, stages: Any) -> ProcessPoolExecutor:
         ctx = multiprocessing.get_context("spawn")
+        taken = ctx.Value("i", 0)  # workers started so far: the next one takes the next place
         return ProcessPoolExecutor(
-            self.slots, mp_context=ctx, initializer=_init_worker, initargs=(stages, os.getpid())
+            self.slots,
+            mp_context=ctx,
+            initializer=_init_worker,
+            initargs=(stages, os.getpid(), self.places, taken),
         )
 
     def _map_pool(self, fn: Task, items: list[Any], on_stage: StageCallback | None):
