@@ -643,7 +643,7 @@ def write_outputs(
             )
         except InputError as exc:
             notes.append(f"3D metrics skipped: {exc.message}")
-        if views:
+        if views and "frames_evaluated" in metrics:  # the metrics finished
             from .outputs import write_novel_view_png
 
             path = out_dir / "novel_view.png"

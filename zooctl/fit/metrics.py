@@ -18,6 +18,8 @@ Lengths are divided by the longest side of the ground truth's bounding box.
 - ``tilt_error``: the mean over the evaluated frames of how far the fit's longest axis leaves the
   image plane (`axis_tilt`, degrees) less the truth's: negative when the fit lies flatter across
   the view than the animal, which the input silhouettes barely show (``axis_tilt``: both per frame);
+  it reads the turn only where the template has the animal's body plan (a biped's longest axis is
+  its height, a dog's its length);
 - ``novel_view_iou``: 2D mask IoU seen from the cameras the fit never sees (``gt_view_*`` of
   `zooctl.benchdata.make`: +90 degrees azimuth, +35 degrees elevation), on the same evaluated
   frames: the fit in its camera's frame, scaled about the camera centre by that frame's mIoU
