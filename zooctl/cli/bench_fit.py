@@ -123,7 +123,8 @@ def run(
     ),
 ) -> None:
     """Fit every benchmark video (its own asset excluded from retrieval) and report CASA's metrics and
-    how many templates have the video's body plan."""
+    how many templates have the video's body plan. Each fit's folder in the store (`zooctl fits
+    show NAME`) gets novel_view.png: the fit against the truth from the cameras it never saw."""
     from ..benchdata.run import markdown_table, run_benchmark
     from ..store.fs import write_bytes_atomic
 
