@@ -183,9 +183,7 @@ def evaluate_fit(
     }
     res["tilt_error"] = float(np.mean(np.subtract(out["tilt"], out["tilt_truth"])))
     seen = held_out_silhouettes(result, sel, pv_all, np.asarray(out["scale"]), input_view=views is not None)
-    per_view = (
-        None if seen is None else [_finite_mean(silhouette_iou(f, g)) for n, f, g in seen if n != "input"]
-    )
+    per_view = None if seen is None else _view_ious(seen[1:] if views is not None else seen)
     if views is not None and seen is not None:
         views.extend(seen)
     res["novel_view_iou"] = None if per_view is None else _finite_mean(per_view)
@@ -272,7 +270,12 @@ def novel_view_iou(
     """Per held-out camera, the mean mask IoU over frames ``sel`` (module docstring); None without
     held-out views. pred_cam (len(sel), V, 3): the fit's vertices in its camera frame; scales (len(sel),)."""
     seen = held_out_silhouettes(result, sel, pred_cam, scales)
-    return None if seen is None else [_finite_mean(silhouette_iou(f, g)) for _, f, g in seen]
+    return None if seen is None else _view_ious(seen)
+
+
+def _view_ious(seen: list[tuple[str, np.ndarray, np.ndarray]]) -> list[float | None]:
+    """Per camera of `held_out_silhouettes`, the mean IoU over its frames."""
+    return [_finite_mean(silhouette_iou(f, g)) for _, f, g in seen]
 
 
 def reanimation(result, scale: float, iters: int = 60) -> float:
