@@ -403,3 +403,15 @@ def test_a_fit_records_its_tilt_against_the_truths(tmp_path):
     assert len(m["axis_tilt"]["fit"]) == len(m["axis_tilt"]["truth"]) == 2
     want = np.mean(np.subtract(m["axis_tilt"]["fit"], m["axis_tilt"]["truth"]))
     assert abs(m["tilt_error"] - want) < 0.1 and -90 <= m["tilt_error"] <= 90
+
+
+def test_a_figure_label_is_white_text_outlined_where_it_is_written():
+    """Every figure's cell label (`novel_view.png`, the overlay): the dark outline ends where the
+    white text ends (a thicker outline stroke once ran a glyph past it: '0.88' read '0.883')."""
+    from zooctl.fit.outputs import _label
+
+    img = _label(np.full((320, 320, 3), 128, np.uint8), "frame 0, input: IoU 0.88")
+    white = np.nonzero((img > 200).all(-1).any(0))[0]
+    dark = np.nonzero((img < 40).all(-1).any(0))[0]
+    assert len(white) > 50 and len(dark) > 50
+    assert dark.max() <= white.max() + 2 and dark.min() >= white.min() - 2

@@ -240,12 +240,12 @@ def _label(img: np.ndarray, text: str) -> np.ndarray:
 
     img = np.ascontiguousarray(img)
     scale = max(img.shape[0] / 640.0, 0.35)
-    cv2.putText(
-        img, text, (6, int(18 * scale) + 4), cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0), 3, cv2.LINE_AA
-    )
-    cv2.putText(
-        img, text, (6, int(18 * scale) + 4), cv2.FONT_HERSHEY_SIMPLEX, scale, (255, 255, 255), 1, cv2.LINE_AA
-    )
+    x, y = 6, int(18 * scale) + 4
+    # The outline is the thin text shifted round, not a thicker stroke: OpenCV widens each glyph's
+    # advance with the thickness, so a thick outline ran past the white text's end.
+    for dx, dy in ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)):
+        cv2.putText(img, text, (x + dx, y + dy), cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0), 1, cv2.LINE_AA)
+    cv2.putText(img, text, (x, y), cv2.FONT_HERSHEY_SIMPLEX, scale, (255, 255, 255), 1, cv2.LINE_AA)
     return img
 
 
