@@ -311,3 +311,29 @@ def test_a_template_that_bulges_to_fit_loses_a_near_tie():
     # a swan: the long-legged bird the classifier is sure of bulges more than an anglerfish, and stays
     assert pick_trial([trial_score(0.913, 0.875, 0.082), trial_score(0.888, 0.001, 0.026)]) == 0
     assert abs(trial_score(0.8, 0.5, 0.01) - (0.8 + 0.05 - 0.015)) < 1e-12
+
+
+def test_the_winner_is_tried_longer_and_kept_longer_only_where_that_fits_better(tmp_path, store):
+    """``trials.longer``: a template shorter than the animal fits its video better made longer, and
+    the fit goes on from that trial, its bones as long as the trial left them; the animal's own
+    template made longer fits worse and stays as it is."""
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.run import fit_video
+    from zooctl.fit.template import try_candidates
+
+    bank, thin = _bank_with_views(store)
+    cfg = FitConfig.from_dict(
+        {**json.loads(json.dumps(TINY)), "trials": {"candidates": 2, "iters": 2, "longer": 1.5}}
+    )
+    long = tube_asset(bones=3, bone_length=1.5, name="long")
+    for animal, kept in ((long, True), (thin, False)):
+        video = load_fit_video(make_video(animal, tmp_path / animal.name, frames=3, size=32, seed=0))
+        cands = [{"name": "thin", "score": -1.0}, {"name": "fat", "score": -2.0}]
+        asset, out, state = try_candidates(bank, video, cands, cfg)
+        assert asset.name == "thin" and 0 <= out[0]["longer_trial_iou"] <= 1
+        assert ("length" in out[0]) is kept, (animal.name, out[0])
+        assert "longer_trial_iou" not in out[1]  # only the winner is tried longer
+        assert (out[0]["longer_trial_iou"] > out[0]["trial_iou"]) is kept
+        res = fit_video(video, asset, cfg, resume=state)
+        along = float(res.scene.model.bone_scales().detach()[0])
+        assert (along > 1.3) is kept and along > 0.8

@@ -284,3 +284,44 @@ def test_a_state_saved_before_girths_loads_with_every_girth_at_one():
     assert float(new.log_bone_girth.abs().max()) == 0.0
     torch.testing.assert_close(new().vertices, old().vertices)
     assert not any("girth_radial" in k for k in new.state_dict())
+
+
+def test_lengthen_makes_the_body_longer_along_its_axis_and_the_prior_holds_it_there():
+    """`lengthen` (the template trials' longer body): a tube along x, every bone along its axis,
+    comes out that much longer and no thicker; the bone-length prior is zero there, not at the
+    template's lengths, and a state saved before the prior's centre existed loads at the template."""
+    asset = tube_asset(bones=3)
+    model = ArticulatedModel(asset, dtype=torch.float64, displacement=False)
+    before = model().vertices.detach()
+    model.lengthen(1.3)
+    after = model().vertices.detach()
+    ext0, ext1 = before.amax(0) - before.amin(0), after.amax(0) - after.amin(0)
+    assert float(ext1[0] / ext0[0]) == pytest.approx(1.3, rel=1e-6)
+    torch.testing.assert_close(ext1[1:], ext0[1:])
+    assert float(model.bone_length_loss().detach()) == pytest.approx(0.0, abs=1e-12)
+    with torch.no_grad():
+        model.log_bone_scales.zero_()  # the template's own lengths are now off the prior's centre
+    assert float(model.bone_length_loss().detach()) > 0.01
+    state = {k: v for k, v in model.state_dict().items() if k != "bone_centre"}
+    old = ArticulatedModel(asset, dtype=torch.float64, displacement=False)
+    old.load_state_dict(state)  # strict
+    assert float(old.bone_centre.abs().max()) == 0.0
+    kept = ArticulatedModel(asset, dtype=torch.float64, displacement=False)
+    kept.load_state_dict(model.state_dict())  # a paused longer trial resumes with its centre
+    torch.testing.assert_close(kept.bone_centre, model.bone_centre)
+
+
+def test_lengthen_leaves_a_bone_across_the_body_as_it_is():
+    """Only bones along the body's longest axis grow, by ``factor ** cos^2`` of their angle to it:
+    a bone at right angles (a leg) keeps its length. The tube's bones are turned in the model's
+    buffers alone, so the axis (its vertices') stays along x."""
+    tube = tube_asset(bones=3)
+    model = ArticulatedModel(tube, dtype=torch.float64, displacement=False)
+    with torch.no_grad():
+        model.tails[1] = model.heads[1] + torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64)
+        model.tails[2] = model.heads[2] + torch.tensor([1.0, 1.0, 0.0], dtype=torch.float64)
+    model.lengthen(2.0)
+    scales = model.bone_scales().detach()
+    assert float(scales[1]) == pytest.approx(1.0, abs=1e-9)  # across
+    assert float(scales[2]) == pytest.approx(2.0**0.5, rel=1e-6)  # 45 degrees: cos^2 = 1/2
+    assert float(scales[0]) == pytest.approx(2.0, rel=1e-6)  # along

@@ -232,6 +232,16 @@ class TemplateTrials:
         minimum=0,
         exclusiveMaximum=1,
     )
+    longer: float = spec(
+        1.0,
+        help="the winning template is tried once more with its body this many times longer along its "
+        "longest axis (the bones along it stretched, the bone-length prior held there), and the longer "
+        "body kept where its trial scores better: a template shorter than the animal otherwise lies "
+        "across the view where the animal points away. 1: not tried",
+        required=False,
+        minimum=1,
+        maximum=3,
+    )
     # Successive halving: the trials all stop at a checkpoint, and those clearly behind there
     # (their pick score, as the winner's, more than the margin below the best) go no further.
     prune_at: int | None = spec(

@@ -111,6 +111,7 @@ def fit_video(
     resume: dict[str, Any] | None = None,
     pause_at: int | None = None,
     start: str = "search",
+    length: float = 1.0,
 ) -> FitResult:
     """Fit ``template`` to ``video`` (see the module docstring). Deterministic for a given seed.
 
@@ -124,7 +125,8 @@ def fit_video(
     from it with ``resume=result.paused`` gives what one uninterrupted fit gives. ``start``:
     ``search`` (the camera search's start), ``mirror`` (its depth mirror, `zooctl.fit.view_trial`)
     or ``turned`` (the search's best view at least 90 degrees of azimuth from its start).
-    All concern the first window."""
+    ``length``: the template's body made that much longer first (its model's ``lengthen``; the
+    template trials' longer body). All concern the first window."""
     rep = reporter or _Silent()
     if start not in ("search", "mirror", "turned"):
         raise ValueError(f"start must be search, mirror or turned, not {start!r}")
@@ -134,14 +136,14 @@ def fit_video(
     video = video.truncated(cfg.max_frames).check()
     spans = cfg.windows(video.num_frames)
     if len(spans) == 1:
-        return _fit_window(video, template, cfg, rep, checkpoint, resume, pause_at, start)
+        return _fit_window(video, template, cfg, rep, checkpoint, resume, pause_at, start, length)
     if resume is not None and resume.get("window", 0) > 0:
         _check_version(resume)
         result, next_window = _resumed_whole(resume, video, template, cfg), int(resume["window"])
     else:
         # One first window per video, so the template trials' fits share its cache (its flow targets).
         head = video.cache.setdefault(("window", spans[0]), video.part(*spans[0]))
-        first = _fit_window(head, template, cfg, rep, checkpoint, resume, pause_at, start)
+        first = _fit_window(head, template, cfg, rep, checkpoint, resume, pause_at, start, length)
         if first.paused is not None:
             return first
         result, next_window = _whole(first, video), 1
@@ -164,6 +166,7 @@ def _fit_window(
     resume: dict[str, Any] | None,
     pause_at: int | None,
     start: str,
+    length: float = 1.0,
     held: _Held | None = None,
 ) -> FitResult:
     """One window's fit: a whole clip's, or (``held``) a later window's of a long clip."""
@@ -197,6 +200,12 @@ def _fit_window(
         camera = dataclasses.replace(cfg.camera, focal=float(video.intrinsics[0]))
         cfg = dataclasses.replace(cfg, camera=camera)
     scene = new_scene(template, cfg, T, h, w, ((W / 2 - x0) * s, (H / 2 - y0) * s))
+    if length != 1.0 and held is None and resume is None:  # a resumed state holds its lengths
+        lengthen = getattr(scene.model, "lengthen", None)  # optional (`zooctl.rig.base`)
+        if lengthen is None:
+            rep.message(f"the {cfg.articulation} articulation model cannot lengthen a body: fitted as it is")
+        else:
+            lengthen(length)
     if cfg.pose_prior.kind == "clips":
         scene.clip_stats = clip_pose_stats(template, cfg.pose_prior.min_std_deg, dev)
     elif cfg.pose_prior.kind == "motion":

@@ -197,11 +197,44 @@ def try_candidates(
             results[i] = res
     win = on[pick_trial([score(i) for i in on], cfg.trials.margin)]
     best, best_state = assets[win], results[win].state
+    if cfg.trials.longer != 1.0:
+        best_state = (
+            _try_longer(video, tried[win], best, semantic[win], score(win), mirror, cfg, reporter)
+            or best_state
+        )
     if reporter is not None:
         reporter.message(f"template {best.name}: trial mask IoU {results[win].iou:.3f}")
     if best_state is not None:
         best_state["timings"] = {}  # the trials are timed as a whole by the caller
     return best, candidates, best_state
+
+
+def _try_longer(
+    video: FitVideo,
+    cand: dict[str, Any],
+    asset: RiggedAsset,
+    semantic: float,
+    score: float,
+    mirror: bool,
+    cfg: FitConfig,
+    reporter: Reporter | None,
+) -> dict[str, Any] | None:
+    """The winner's trial again with its body ``cfg.trials.longer`` times longer (`fit_video`'s
+    ``length``): its paused state where its `trial_score` beats the winner's ``score`` (a tie keeps
+    the template's own proportions), else None. ``cand`` gets ``longer_trial_iou``,
+    ``longer_trial_displacement`` and, when kept, ``length``."""
+    from .trial_pool import Trial, run_trials
+
+    factor = cfg.trials.longer
+    if reporter is not None:
+        reporter.message(f"trial fit of {asset.name} {factor:g} times longer")
+    (res,) = run_trials(video, [Trial(asset, cfg.trials.iters, mirror, length=factor)], cfg, reporter)
+    cand["longer_trial_iou"] = round(res.iou, 4)
+    cand["longer_trial_displacement"] = round(res.displacement, 4)
+    if trial_score(res.iou, semantic, res.displacement) <= score:
+        return None
+    cand["length"] = factor
+    return res.state
 
 
 # Trial IoU a candidate's semantic score is worth in `trial_score`: chosen on the shared real videos,

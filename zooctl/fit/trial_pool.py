@@ -39,13 +39,14 @@ if TYPE_CHECKING:
 @dataclass
 class Trial:
     """One trial to run: ``asset``'s fit paused after ``pause_at`` stage-2 iterations, from the
-    start (``state`` None; ``mirror``: with `trial_with_mirror`'s depth-mirror check) or on from a
-    paused ``state``."""
+    start (``state`` None; ``mirror``: with `trial_with_mirror`'s depth-mirror check; ``length``:
+    the template's body made that much longer first) or on from a paused ``state``."""
 
     asset: RiggedAsset
     pause_at: int
     mirror: bool = False
     state: dict[str, Any] | None = None
+    length: float = 1.0
 
 
 def trial_threads(cfg: FitConfig, n: int, threads: int | None = None) -> list[int]:
@@ -115,7 +116,13 @@ def _run(video: FitVideo, trial: Trial, cfg: FitConfig, reporter: Reporter | Non
 
     if trial.state is None:
         return trial_with_mirror(
-            video, trial.asset, cfg, reporter, mirror=trial.mirror, pause_at=trial.pause_at
+            video,
+            trial.asset,
+            cfg,
+            reporter,
+            mirror=trial.mirror,
+            pause_at=trial.pause_at,
+            length=trial.length,
         )
     return continue_trial(video, trial.asset, cfg, trial.state, trial.pause_at, reporter)
 

@@ -75,6 +75,7 @@ def trial_with_mirror(
     checkpoint: Callable[[dict[str, Any]], None] | None = None,
     mirror: bool = True,
     pause_at: int | None = None,
+    length: float = 1.0,
 ) -> TrialResult:
     """The template's trial (`fit_video` paused after ``pause_at`` stage-2 iterations, by default
     ``cfg.trials.iters``) and, when ``mirror`` and its start sees the animal from below, its depth
@@ -82,10 +83,11 @@ def trial_with_mirror(
 
     Returns the kept trial: its IoU, displacement, paused state to continue from, and what was
     tried (``view``: also stored in the state's ``camera_init["view_trial"]`` for fit.json).
-    ``checkpoint``: as `fit_video`'s, for both trials (each is a fit that a resume can finish)."""
+    ``checkpoint``: as `fit_video`'s, for both trials (each is a fit that a resume can finish).
+    ``length``: `fit_video`'s (the template's body made that much longer first)."""
     pause_at = cfg.trials.iters if pause_at is None else pause_at
     t = time.perf_counter()
-    search = fit_video(video, template, cfg, reporter, checkpoint, pause_at=pause_at)
+    search = fit_video(video, template, cfg, reporter, checkpoint, pause_at=pause_at, length=length)
     search_s = time.perf_counter() - t
     iou = trial_iou(search)
     elevation = float(search.camera_init["elevation_deg"])
@@ -97,7 +99,9 @@ def trial_with_mirror(
                 f"the start sees {template.name} from below ({elevation:.0f} deg): trying its depth mirror"
             )
         t = time.perf_counter()
-        mirrored = fit_video(video, template, cfg, reporter, checkpoint, pause_at=pause_at, start="mirror")
+        mirrored = fit_video(
+            video, template, cfg, reporter, checkpoint, pause_at=pause_at, start="mirror", length=length
+        )
         mirror_s = time.perf_counter() - t
         m_iou = trial_iou(mirrored)
         info["trial_iou"] = {"search": round(iou, 4), "mirror": round(m_iou, 4)}

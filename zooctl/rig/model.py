@@ -20,6 +20,7 @@ Pipeline for frame t (see `zooctl.rig.skinning` for the stretch rule):
 from __future__ import annotations
 
 import contextlib
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -147,6 +148,9 @@ class ArticulatedModel(nn.Module):
         groups = torch.as_tensor(seam_groups(points, bones)) if share_seams else None
         self.skin = SkinWeights(bones_t, torch.as_tensor(init, dtype=dtype), groups=groups)
         self.log_bone_scales = nn.Parameter(torch.zeros(asset.num_joints, dtype=dtype))
+        # Where the bone-length prior holds the scales: the template's lengths, or `lengthen`'s.
+        self.register_buffer("bone_centre", torch.zeros(asset.num_joints, dtype=dtype))
+        self._register_load_state_dict_pre_hook(self._centre_at_template)
         self.log_bone_girth: nn.Parameter | None = None
         if girth:
             nearest = head_k + e[..., None] * (tail_k - head_k)  # (V, K, 3)
@@ -264,6 +268,25 @@ class ArticulatedModel(nn.Module):
                 return tuple(t.shape[:-tail])
         return ()
 
+    def _centre_at_template(self, state, prefix, *args) -> None:
+        """A state saved before `lengthen` existed loads with the template's own lengths."""
+        key = prefix + "bone_centre"
+        if key not in state:
+            state[key] = torch.zeros_like(self.bone_centre)
+
+    @torch.no_grad()
+    def lengthen(self, factor: float) -> None:
+        """Make the body ``factor`` times longer along the template's longest axis: each
+        stretchable bone's length scale starts at ``factor ** cos^2`` of its angle to that axis (a
+        spine or a tail in full, an upright leg hardly), and the bone-length prior holds it there."""
+        pts = self.points - self.points.mean(0)
+        axis = torch.linalg.svd(pts.double(), full_matrices=False)[2][0].to(pts.dtype)
+        d = self.tails - self.heads
+        n = d.norm(dim=-1)
+        cos2 = torch.where(n > 1e-9, (d @ axis / n.clamp_min(1e-9)) ** 2, torch.zeros_like(n))
+        self.bone_centre.copy_(cos2 * math.log(factor) * self.stretchable)
+        self.log_bone_scales.copy_(self.bone_centre)
+
     def _girth_at_one(self, state, prefix, *args) -> None:
         """A state saved without girths (before they existed, or with ``girth`` off) loads with
         every girth at 1: the shape it was saved with."""
@@ -347,7 +370,7 @@ class ArticulatedModel(nn.Module):
     def bone_length_loss(self) -> Tensor:
         """Bone scales (and girths) near 1 and equal between mirrored joints."""
         self.symmetry_plane()
-        loss = bone_length_prior(self.log_bone_scales, self._pairs)
+        loss = bone_length_prior(self.log_bone_scales - self.bone_centre, self._pairs)
         if self.log_bone_girth is not None:
             loss = loss + bone_length_prior(self.log_bone_girth, self._pairs)
         return loss
