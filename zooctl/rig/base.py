@@ -23,7 +23,7 @@ that names its options and takes no ``**options`` gets only those it names. The 
   it and is skipped for a model without it);
 - optionally ``lengthen(factor)``: start the bones along the body's longest axis ``factor`` times
   longer and hold them there (the template trials' longer body, ``trials.longer``; a model without
-  it is not tried longer);
+  it is fitted as it is, and the fit says so);
 - optionally ``shared_displacement()``, a context manager within which the displacement field is
   evaluated once (the fit enters it around each loss evaluation, which poses the model and takes
   the symmetry and displacement terms with the same parameters).
