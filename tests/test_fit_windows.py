@@ -152,3 +152,19 @@ def test_the_term_log_reads_steps_back_in_batches_and_keeps_each_once():
         log.flush()
     log.flush()  # what a checkpoint after Ctrl-C does: nothing is added twice
     assert [r["total"] for r in history] == [0, 1, 2, 3, 4, 5]
+
+
+def test_a_longer_body_fitted_in_windows_is_lengthened_once_and_held_after(long_fit):
+    """``length`` (the template trials' longer body) lengthens the first window's model; later
+    windows hold that body, prior centre included, and move only their own frames."""
+    from zooctl.fit.run import fit_video
+
+    video, asset, cfg, _, _ = long_fit
+    longer = fit_video(video, asset, cfg, length=1.3)
+    first = fit_video(video.truncated(6), asset, tiny_fit_config(iters=3), length=1.3)
+    assert longer.scene.num_frames == 12 and np.isfinite(longer.iou).all()
+    centre = longer.scene.model.bone_centre
+    assert centre.max() > 0.1  # a spine's bones started 1.3 times longer
+    fitted, alone = longer.scene.state_dict(), first.scene.state_dict()
+    for k, v in alone.items():
+        assert torch.equal(fitted[k][:6] if k in PER_FRAME else fitted[k], v), k

@@ -136,14 +136,14 @@ def fit_video(
     video = video.truncated(cfg.max_frames).check()
     spans = cfg.windows(video.num_frames)
     if len(spans) == 1:
-        return _fit_window(video, template, cfg, rep, checkpoint, resume, pause_at, start, length)
+        return _fit_window(video, template, cfg, rep, checkpoint, resume, pause_at, start, length=length)
     if resume is not None and resume.get("window", 0) > 0:
         _check_version(resume)
         result, next_window = _resumed_whole(resume, video, template, cfg), int(resume["window"])
     else:
         # One first window per video, so the template trials' fits share its cache (its flow targets).
         head = video.cache.setdefault(("window", spans[0]), video.part(*spans[0]))
-        first = _fit_window(head, template, cfg, rep, checkpoint, resume, pause_at, start, length)
+        first = _fit_window(head, template, cfg, rep, checkpoint, resume, pause_at, start, length=length)
         if first.paused is not None:
             return first
         result, next_window = _whole(first, video), 1
@@ -166,6 +166,7 @@ def _fit_window(
     resume: dict[str, Any] | None,
     pause_at: int | None,
     start: str,
+    *,
     length: float = 1.0,
     held: _Held | None = None,
 ) -> FitResult:
@@ -450,7 +451,15 @@ def _fit_later_window(
         keep(None)
     held = _Held(result, (lo, hi), a)
     part = _fit_window(
-        result.video.part(lo - a, hi), result.template, result.config, rep, keep, None, None, "search", held
+        result.video.part(lo - a, hi),
+        result.template,
+        result.config,
+        rep,
+        keep,
+        None,
+        None,
+        "search",
+        held=held,
     )
     with torch.no_grad():
         for k in _PER_FRAME:
