@@ -542,3 +542,19 @@ def test_a_segmenter_option_of_the_wrong_kind_is_one_clear_line(store, tmp_path,
         assert r.code == 2 and said in r.err and "Traceback" not in r.err, (option, r.err)
     r = run_inprocess(capsys, "video", "list")
     assert r.code == 0 and "clip" not in r.out
+
+
+def test_with_flip_the_networks_look_at_a_mirrored_frame_is_its_look_mirrored(animals):
+    from zooctl.benchdata.composites import composite
+
+    s = composite(animals, np.random.default_rng(4), (128, 96))
+    frame, residual = s.frames[0], np.abs(np.random.default_rng(0).normal(size=(96, 128))).astype(np.float32)
+    mirror, mirrored_residual = (np.ascontiguousarray(a[:, ::-1]) for a in (frame, residual))
+    seg = get_registry().get("segmenter", "animalnet").create(flip=True)
+    assert seg.tracker.flip  # the tracker's localiser looks both ways too
+    a, b = seg.look(frame, residual)[0], seg.look(mirror, mirrored_residual)[0]
+    assert np.abs(a - b[:, ::-1]).max() < 1e-4 * max(1.0, float(np.abs(a).max()))
+    plain = get_registry().get("segmenter", "animalnet").create()
+    p, q = plain.look(frame, residual)[0], plain.look(mirror, mirrored_residual)[0]
+    assert np.abs(p - q[:, ::-1]).max() > 1e-2  # one look alone differs (what the option is for)
+    assert np.abs(a - p).max() > 1e-3

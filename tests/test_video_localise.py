@@ -255,3 +255,21 @@ def test_a_mask_agrees_with_the_box_it_was_drawn_around():
     assert not hint.agrees(mask, (0, 0, 20, 15))  # another place
     assert not hint.agrees(mask, (0, 0, 80, 60))  # the box is the whole frame, the mask a corner of it
     assert not hint.agrees(mask & False, (28, 18, 24, 24))
+
+
+def test_with_flip_a_frame_and_its_mirror_image_give_mirrored_evidence():
+    """``flip`` averages a frame's look with its mirror image's: the evidence of a mirrored frame is
+    the frame's mirrored, its numbers the same, so which way the animal faces decides nothing."""
+    from zooctl.benchdata.composites import composite
+    from zooctl.procedural.random import random_assets
+
+    frame = composite(random_assets(1, seed=2), np.random.default_rng(5), (160, 120)).frames[0]
+    mirror = np.ascontiguousarray(frame[:, ::-1])
+    loc = Localiser(width=160, flip=True)
+    a, b = loc.evidence(frame), loc.evidence(mirror)
+    assert a.confidence == b.confidence and a.animal_prob == b.animal_prob and a.classes == b.classes
+    assert np.abs(a.animal - b.animal[:, ::-1]).max() < 1e-4
+    # one look alone is not mirror-symmetric (what the option is for), nor is flip a no-op
+    single = Localiser(width=160)
+    assert single.evidence(frame).confidence != single.evidence(mirror).confidence
+    assert single.evidence(frame).confidence != a.confidence

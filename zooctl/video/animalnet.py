@@ -220,6 +220,10 @@ class AnimalNetSegmenter:
     when that part is at most half the frame's width and height (`decide_near`): a small or distant
     animal would otherwise cover a few cells of the network's and the relabelling's grid.
 
+    ``flip``: the network (and the tracker's localiser) looks at each frame and its mirror image
+    and averages the two, the mirror's log-odds mirrored back: a video and its mirror image get
+    mirrored looks.
+
     ``weights``: the head's ``.npz`` (`weights_file`). Other options go to the tracker.
     ``report``: the tracker's, with ``animalnet`` added (weights, the motion margin measured, whether
     the network's masks replaced the tracker's, whether the identity check kept them out, the frames
@@ -248,6 +252,7 @@ class AnimalNetSegmenter:
         snap_gain: float | None = None,
         seeds: int = 2,
         seeds_margin: float = 0.005,
+        flip: bool = False,
         **tracker_options,
     ) -> None:
         from ..errors import UsageError
@@ -260,7 +265,8 @@ class AnimalNetSegmenter:
                 f"edge_radius must be in [0, 0.5) and edge_eps over 0, got {edge_radius} and {edge_eps}"
             )
         self.net = AnimalNet(weights)  # before the slow part: missing weights are refused at once
-        self.tracker = GrabCutTracker(**tracker_options)
+        self.tracker = GrabCutTracker(flip=flip, **tracker_options)
+        self.flip = flip
         self.tracker.keep_looks = seeds > 1  # the other seeds' passes reuse the first's looks
         self.feature_every = feature_every
         self.switch_motion = switch_motion
@@ -299,10 +305,19 @@ class AnimalNetSegmenter:
 
         h, w = frame.shape[:2]
         fnet = self._feature_net()
-        feats, cam = fnet.features(frame)
-        inputs = np.concatenate([feats, cam[..., None], residual_grid(residual, cam.shape)[..., None]], -1)
-        grid = self.net.logits(inputs)
-        return grid_to_pixels(grid, w, h, fnet.input_size(w, h)), (feats, cam), residual
+
+        def logits(frame, residual):
+            feats, cam = fnet.features(frame)
+            inputs = np.concatenate(
+                [feats, cam[..., None], residual_grid(residual, cam.shape)[..., None]], -1
+            )
+            return grid_to_pixels(self.net.logits(inputs), w, h, fnet.input_size(w, h)), (feats, cam)
+
+        out, features = logits(frame, residual)
+        if self.flip:  # the features stay the frame's own: the relabelling learns on them
+            mirror = (np.ascontiguousarray(a[:, ::-1]) for a in (frame, residual))
+            out = (out + logits(*mirror)[0][:, ::-1]) / 2
+        return out, features, residual
 
     def looks(self, small, flow) -> dict:
         """`look` at each frame `decide_video` looks at, of (T, h, w, 3) frames at the working size

@@ -75,7 +75,8 @@ class GrabCutTracker:
     peak, inside the seed's box) as probably the animal, not only the box's moving, box-coloured
     pixels (the animal's parts in the ground's colours). ``warm_models``: a tracked frame's GrabCut
     starts from the colour models the previous frame's cut ended with (then learns this frame's)
-    instead of a fresh k-means: the same colours a frame later, in less time.
+    instead of a fresh k-means: the same colours a frame later, in less time. ``flip``: the
+    localiser looks at each frame and its mirror image (`zooctl.video.localise.Localiser`).
     """
 
     name = "grabcut"
@@ -108,6 +109,7 @@ class GrabCutTracker:
         hold_still: bool = True,
         seed_from_map: bool = True,
         warm_models: bool = True,
+        flip: bool = False,
     ) -> None:
         if iterations < 1 or first_iterations < 1:
             raise UsageError("GrabCut needs at least one iteration")
@@ -148,6 +150,7 @@ class GrabCutTracker:
         self.hold_still = hold_still
         self.seed_from_map = seed_from_map
         self.warm_models = warm_models
+        self.flip = flip
         self._loc: Localiser | None = None
         self.report: dict = {}
 
@@ -425,7 +428,7 @@ class GrabCutTracker:
 
     def _localiser(self) -> Localiser:
         if self._loc is None:
-            self._loc = Localiser(width=self.localiser_width)
+            self._loc = Localiser(width=self.localiser_width, flip=self.flip)
         return self._loc
 
     def _seen(self, frames, i: int) -> Evidence:

@@ -159,15 +159,19 @@ class Evidence:
 
 class Localiser:
     """Animal maps of RGB frames. ``width``: network input width (the height follows the frame's
-    aspect; both multiples of 32). ``top``: animal classes whose maps are mixed."""
+    aspect; both multiples of 32). ``top``: animal classes whose maps are mixed. ``flip``: look at
+    each frame and its mirror image and average the two (the classifier's probabilities, its surest
+    cell's, and the maps, the mirror's mirrored back): a video and its mirror image get mirrored
+    evidence, so no choice turns on which way the animal faces."""
 
-    def __init__(self, width: int = 448, top: int = 5) -> None:
+    def __init__(self, width: int = 448, top: int = 5, flip: bool = False) -> None:
         from ..embed.effnet_arch import weights_path
         from ..embed.effnet_numpy import load_numpy_model
 
         self.model = load_numpy_model(weights_path())
         self.width = width
         self.top = top
+        self.flip = flip
 
     def _head(self, x: np.ndarray) -> np.ndarray:
         """(N, h, w, 3) normalised input -> (N, h/32, w/32, 1280) unpooled head activations."""
@@ -180,27 +184,42 @@ class Localiser:
         fh, fw = frame.shape[:2]
         w = max(32, round(self.width / 32) * 32)
         h = max(32, round(self.width * fh / fw / 32) * 32)
-        x = cv2.resize(frame, (w, h), interpolation=cv2.INTER_AREA if w < fw else cv2.INTER_LINEAR)
-        x = (x.astype(np.float32)[None] - INPUT_MEAN) / INPUT_STD
-        head = self._head(x)[0]
         m = self.model
-        cells = head @ m.fc_weight + m.fc_bias  # (h/32, w/32, 1000): the classifier on every cell
-        cells = np.exp(cells - cells.max(-1, keepdims=True))
-        confidence = float((cells[..., :ANIMAL_CLASSES].sum(-1) / cells.sum(-1)).max())
-        logits = head.mean((0, 1)) @ m.fc_weight + m.fc_bias
-        p = np.exp(logits - logits.max())
-        p /= p.sum()
-        animal_p = p[:ANIMAL_CLASSES]
+        views = (frame, frame[:, ::-1]) if self.flip else (frame,)
+        heads, confidences, probs = [], [], []
+        for view in views:
+            x = cv2.resize(
+                np.ascontiguousarray(view),
+                (w, h),
+                interpolation=cv2.INTER_AREA if w < fw else cv2.INTER_LINEAR,
+            )
+            x = (x.astype(np.float32)[None] - INPUT_MEAN) / INPUT_STD
+            head = self._head(x)[0]
+            cells = head @ m.fc_weight + m.fc_bias  # (h/32, w/32, 1000): the classifier on every cell
+            cells = np.exp(cells - cells.max(-1, keepdims=True))
+            confidences.append(float((cells[..., :ANIMAL_CLASSES].sum(-1) / cells.sum(-1)).max()))
+            logits = head.mean((0, 1)) @ m.fc_weight + m.fc_bias
+            p = np.exp(logits - logits.max())
+            probs.append(p / p.sum())
+            heads.append(head)
+        # a sum of two in either order: a frame and its mirror image give the same numbers
+        confidence = sum(confidences) / len(views)
+        animal_p = (sum(probs) / len(views))[:ANIMAL_CLASSES]
         top = np.argsort(animal_p)[::-1][: self.top]
         weights = animal_p[top] / max(float(animal_p[top].sum()), 1e-12)
-        cam = head @ (m.fc_weight[:, top] @ weights)  # (h/32, w/32); the bias is the same in every cell
-        # cell (i, j) of the symmetric-padded network is centred on input pixel (32 i, 32 j), not on
-        # the middle of its 32-pixel block as a plain resize assumes: shift by half a block
-        cam = cv2.resize(cam.astype(np.float32), (fw, fh), interpolation=cv2.INTER_CUBIC)
-        sx, sy = 15.5 * fw / w, 15.5 * fh / h
-        cam = cv2.warpAffine(
-            cam, np.float32([[1, 0, -sx], [0, 1, -sy]]), (fw, fh), borderMode=cv2.BORDER_REPLICATE
-        )
+        cams = []
+        for head in heads:
+            cam = head @ (m.fc_weight[:, top] @ weights)  # (h/32, w/32); the bias is the same in every cell
+            # cell (i, j) of the symmetric-padded network is centred on input pixel (32 i, 32 j), not
+            # on the middle of its 32-pixel block as a plain resize assumes: shift by half a block
+            cam = cv2.resize(cam.astype(np.float32), (fw, fh), interpolation=cv2.INTER_CUBIC)
+            sx, sy = 15.5 * fw / w, 15.5 * fh / h
+            cams.append(
+                cv2.warpAffine(
+                    cam, np.float32([[1, 0, -sx], [0, 1, -sy]]), (fw, fh), borderMode=cv2.BORDER_REPLICATE
+                )
+            )
+        cam = cams[0] if len(cams) == 1 else (cams[0] + cams[1][:, ::-1]) / 2
         cam -= np.median(cam)  # what is typical of the frame is background
         peak = float(cam.max())
         animal = np.clip(cam / peak, 0.0, 1.0) if peak > 1e-6 else np.zeros_like(cam)
