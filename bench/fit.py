@@ -1,6 +1,6 @@
 """CASA fit benchmark: speed (60 frames, 320 px, ~4,000-vertex template) and quality (bench run).
 
-    python bench/fit.py speed [--preset fast|quality] [--device cpu|cuda] [--repeat N] [--threads N]
+    python bench/fit.py speed [--preset fast|quality] [--device cpu|cuda] [--repeat N] [--threads N] [--config FIT.json]
     python bench/fit.py quality [--assets N] [--frames 60] [--size 320] [--ablation ...]
     python bench/fit.py davis [--store DIR] [--videos dog cows blackswan] [--masks given auto]
         [--template VIDEO=ASSET ...] [--config FIT.json]
@@ -97,6 +97,7 @@ def speed(args) -> None:
                 "--name",
                 f"s{i}",
                 "--json",
+                *(["--config", args.config] if args.config else []),
                 store=store,
                 threads=args.threads,
             )
@@ -108,10 +109,13 @@ def speed(args) -> None:
             stage2.append(rec["timings"].get("stage2", float("nan")))
         med = lambda xs: sorted(xs)[len(xs) // 2]  # noqa: E731
         threads = os.environ.get("OMP_NUM_THREADS", "default") if args.threads is None else args.threads
+        config = f", --config {Path(args.config).name}" if args.config else ""
+        peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024  # KiB on Linux
         print(
-            f"| {machine()} | zooctl fit (Fox video {args.frames}x{args.size}px, template Wolf 3,994 vertices, --preset {args.preset}, {args.device}, threads {threads}) | "
+            f"| {machine()} | zooctl fit (Fox video {args.frames}x{args.size}px, template Wolf 3,994 vertices, --preset {args.preset}{config}, {args.device}, threads {threads}) | "
             f"median {med(times):.1f} s of {args.repeat} ({', '.join(f'{x:.1f}' for x in times)}), "
-            f"CPU {med(cpu):.1f} s, stage 2 {med(stage2):.1f} s ({', '.join(f'{x:.1f}' for x in stage2)}) | "
+            f"CPU {med(cpu):.1f} s, stage 2 {med(stage2):.1f} s ({', '.join(f'{x:.1f}' for x in stage2)}), "
+            f"peak RSS of a process {peak:.0f} MB | "
             f"mask IoU {rec['metrics']['mask_iou']:.3f}, mIoU {rec['metrics'].get('miou')} |"
         )
         print(json.dumps(rec["timings"]))
@@ -292,6 +296,9 @@ if __name__ == "__main__":
     s.add_argument("--size", type=int, default=320)
     s.add_argument("--repeat", type=int, default=1)
     s.add_argument("--threads", type=int, default=None, help="torch threads of each fit (OMP_NUM_THREADS)")
+    s.add_argument(
+        "--config", default=None, help="a fit config (JSON) on top of the preset, as `zooctl fit --config`"
+    )
     q = sub.add_parser("quality")
     q.add_argument("--assets", type=int, default=28)
     q.add_argument("--frames", type=int, default=60)
