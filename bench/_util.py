@@ -13,7 +13,9 @@ from collections.abc import Callable
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared" / "data"
+# The shared test data beside the checkout; ZOOCTL_BENCH_SHARED names another copy (a device
+# machine receives the repository alone: `bench/gpu_check.sh` carries the files it needs).
+SHARED = Path(os.environ.get("ZOOCTL_BENCH_SHARED") or REPO.parent / "shared" / "data")
 
 
 def machine() -> str:

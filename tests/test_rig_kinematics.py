@@ -98,3 +98,70 @@ def test_lbs_skins_many_poses_a_few_at_a_time_with_the_same_result(monkeypatch):
     monkeypatch.setattr(asset_mod, "LBS_CHUNK_BYTES", 1)  # one pose at a time
     assert whole.shape == (2, 7, V, 3) and np.array_equal(asset_mod.lbs(v, sj, sw, mats), whole)
     assert np.array_equal(asset_mod.lbs(v, sj, sw, mats[1, 3]), whole[1, 3])
+
+
+def _fk_level_by_level(local, parents):
+    out = [None] * len(parents)
+    for j, p in enumerate(parents):
+        out[j] = local[..., j, :, :] if p < 0 else out[p] @ local[..., j, :, :]
+    return torch.stack(out, -3)
+
+
+def test_pointer_jumping_fk_takes_log_depth_rounds_and_agrees():
+    """A 40-deep chain, random trees and lone roots: the rounds are ceil(log2(depth + 1)) and the
+    transforms those of the parent-by-parent products, values and gradients."""
+    rng = np.random.default_rng(5)
+    cases = [
+        [-1] + list(range(39)),  # a chain: depth 39
+        [-1] + [int(rng.integers(0, j)) for j in range(1, 60)],
+        [-1, -1, -1],
+        [-1],
+    ]
+    for parents in cases:
+        tree = KinematicTree(parents)
+        depth = np.zeros(len(parents), int)
+        for j, p in enumerate(parents):
+            depth[j] = 0 if p < 0 else depth[p] + 1
+        assert len(tree.jumps) == int(np.ceil(np.log2(depth.max() + 1)))
+        t, q, s = _random_local(2, len(parents), seed=len(parents))
+        local = compose_trs(t, q, 0.9 + 0.2 * s).requires_grad_(True)
+        got = forward_kinematics(local, tree)
+        want = _fk_level_by_level(local, parents)
+        torch.testing.assert_close(got, want, rtol=1e-10, atol=1e-10)
+        w = torch.randn(got.shape, dtype=got.dtype, generator=torch.Generator().manual_seed(0))
+        (g_got,) = torch.autograd.grad((got * w).sum(), local)
+        (g_want,) = torch.autograd.grad((want * w).sum(), local)
+        torch.testing.assert_close(g_got, g_want, rtol=1e-9, atol=1e-9)
+
+
+def test_fk_operators_grow_with_the_log_of_the_depth():
+    """What a GPU pays for in launches: a 63-deep chain's forward kinematics runs a handful of
+    operators (6 rounds of two, and the identity past the roots), not one set per level."""
+    from torch.utils._python_dispatch import TorchDispatchMode
+
+    views = {
+        "view",
+        "_unsafe_view",
+        "reshape",
+        "expand",
+        "slice",
+        "select",
+        "unsqueeze",
+        "as_strided",
+        "alias",
+        "detach",
+    }
+    ops = []
+
+    class Count(TorchDispatchMode):
+        def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+            if func.overloadpacket.__name__ not in views:
+                ops.append(func.overloadpacket.__name__)
+            return func(*args, **(kwargs or {}))
+
+    tree = KinematicTree([-1] + list(range(63)))
+    local = torch.randn(4, 64, 4, 4)
+    with Count():
+        forward_kinematics(local, tree)
+    assert len(tree.jumps) == 6
+    assert len(ops) <= 2 * 6 + 2, ops

@@ -79,3 +79,17 @@ def test_asset_plane_and_mirrored_leg_bones():
 def test_bad_input_is_one_clear_error():
     with pytest.raises(InputError):
         find_symmetry_plane(np.zeros((2, 3)))
+
+
+def test_smoothness_equals_the_hamilton_product_form():
+    """Eq. 6 through w(q_t * conj(q_t+1)), the product taken in full, as the dot product it is."""
+    from zooctl.rig.rotations import quat_conjugate, quat_mul
+
+    gen = torch.Generator().manual_seed(2)
+    q = torch.nn.functional.normalize(torch.randn(2, 7, 5, 4, generator=gen, dtype=torch.float64), dim=-1)
+    q.requires_grad_(True)
+    rel = quat_mul(q[..., :-1, :, :], quat_conjugate(q[..., 1:, :, :]))
+    want = (1.0 - rel[..., 0] ** 2).mean()
+    got = smoothness_loss(q)
+    torch.testing.assert_close(got, want, rtol=1e-12, atol=1e-14)
+    torch.testing.assert_close(torch.autograd.grad(got, q)[0], torch.autograd.grad(want, q)[0])

@@ -61,3 +61,35 @@ def test_gradcheck_conversions():
     assert torch.autograd.gradcheck(rot.rot6d_to_matrix, (d6,))
     aa = torch.randn(4, 3, dtype=torch.float64, requires_grad=True)
     assert torch.autograd.gradcheck(rot.axis_angle_to_quat, (aa,))
+
+
+def _matrix_entrywise(q: torch.Tensor) -> torch.Tensor:
+    """The textbook entries, one expression each: the reference for the table form."""
+    w, x, y, z = rot.quat_normalize(q).unbind(-1)
+    m = torch.stack(
+        (
+            1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+            2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+            2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+        ),
+        -1,
+    )  # fmt: skip
+    return m.reshape(q.shape[:-1] + (3, 3))
+
+
+def test_matrix_table_form_equals_the_entrywise_formula():
+    """Any batch shape, unnormalised input, float32 and float64: the same values and gradients."""
+    g = torch.Generator().manual_seed(4)
+    for shape, dtype in (((4,), torch.float64), ((3, 5, 4), torch.float64), ((2, 7, 4), torch.float32)):
+        q = (3 * torch.randn(shape, generator=g, dtype=dtype)).requires_grad_(True)
+        got, want = rot.quat_to_matrix(q), _matrix_entrywise(q)
+        assert got.shape == shape[:-1] + (3, 3)
+        tol = 1e-12 if dtype == torch.float64 else 1e-6
+        torch.testing.assert_close(got, want, rtol=tol, atol=tol)
+        w = torch.randn(got.shape, generator=g, dtype=dtype)
+        torch.testing.assert_close(
+            torch.autograd.grad((got * w).sum(), q)[0],
+            torch.autograd.grad((want * w).sum(), q)[0],
+            rtol=10 * tol,
+            atol=10 * tol,
+        )

@@ -111,6 +111,19 @@ class FitScene(nn.Module):
         sel = slice(None) if frames is None else frames
         return self.model(self.rotations[sel], self.root_rotation[sel], self.root_translation[sel])
 
+    def pose_with_rest(self, frames: Tensor) -> tuple[Pose, Tensor]:
+        """`pose` of ``frames`` (B,), and (V, 3) the rest shape as it is now (``model()``'s
+        vertices, no gradient), posed in the same call as one more pose (the rest rotations, no
+        root transform): one pass through the model a step instead of two."""
+        rest_q = self.model.rest_rotation.detach()
+        root_q = self.root_rotation.new_tensor([1.0, 0.0, 0.0, 0.0])
+        p = self.model(
+            torch.cat((self.rotations[frames], rest_q[None])),
+            torch.cat((self.root_rotation[frames], root_q[None])),
+            torch.cat((self.root_translation[frames], self.root_translation.new_zeros(1, 3))),
+        )
+        return Pose(p.vertices[:-1], p.joints[:-1], p.transforms[:-1]), p.vertices[-1].detach()
+
     def pose_rigid(self, frames: Tensor) -> Tensor:
         """(B, V, 3) world vertices of the *rest* pose under each frame's root transform and the
         global scale: stage 1's cheap pose (no skinning; exact while joints are at rest)."""

@@ -88,7 +88,7 @@ def make_optimizer(
     if stage == 2:
         groups.append({"params": [scene.rotations], "lr": st.lr if st.lr_joints is None else st.lr_joints})
     if not shared:
-        return torch.optim.Adam(groups, betas=(0.9, 0.999))
+        return torch.optim.Adam(groups, betas=(0.9, 0.999), foreach=True)
     if stage == 1:
         groups.append({"params": [scene.model.log_scale], "lr": st.lr_shape})
         if learn_focal:
@@ -97,7 +97,7 @@ def make_optimizer(
         if cfg.ablation.learn_skinning:
             groups.append({"params": [scene.model.skin.logits], "lr": st.lr * 5})
         groups.append({"params": scene.shape_parameters(), "lr": st.lr_shape})
-    return torch.optim.Adam(groups, betas=(0.9, 0.999))
+    return torch.optim.Adam(groups, betas=(0.9, 0.999), foreach=True)
 
 
 def smooth_weight(w: LossWeights, it: int, iters: int) -> float:
@@ -219,7 +219,13 @@ class StageRunner:
     def _loss(self, frames: Tensor, it: int) -> tuple[Tensor, dict[str, Tensor]]:
         scene, w, ab = self.scene, self.cfg.weights, self.cfg.ablation
         tg = self.targets
-        posed = None if self.stage == 1 else scene.pose(frames)
+        rest = None  # the rest shape as it is now: the edge-stretch term's reference
+        if self.stage == 1:
+            posed = None
+        elif w.edge_stretch > 0:
+            posed, rest = scene.pose_with_rest(frames)
+        else:
+            posed = scene.pose(frames)
         verts = scene.pose_rigid(frames) if posed is None else posed.vertices
         cam = scene.camera(len(frames))
         weight = tg.masks.present[frames].to(verts.dtype)
@@ -297,8 +303,7 @@ class StageRunner:
             if w.edge_stretch > 0:
                 if self.edges is None:
                     self.edges = mesh_edges(scene.faces)
-                with torch.no_grad():  # the reference: the rest shape as it is now (stretch, field)
-                    rest = scene.model().vertices
+                assert rest is not None
                 terms["edge_stretch"] = w.edge_stretch * edge_stretch_loss(verts, rest, self.edges)
             if self.colours is not None:
                 valid = (tg.masks.coverage[frames] > 0.5).to(verts.dtype) * weight[:, None, None]
@@ -310,7 +315,7 @@ class StageRunner:
                 terms["limits"] = w.joint_limits * joint_limit_loss(
                     q, scene.model.rest_rotation, scene.joint_limits
                 )
-        total = sum(terms.values())
+        total = torch.stack(list(terms.values())).sum()  # one operator, not one addition per term
         return total, terms
 
     def step(self, opt: torch.optim.Optimizer, it: int) -> dict[str, Tensor]:

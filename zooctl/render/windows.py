@@ -108,11 +108,10 @@ def face_windows(sf: ScreenFaces, height: int, width: int, margin: float) -> Ten
     tri = sf.tri.detach()
     lo = tri.min(1).values - margin - 0.5  # centre of pixel j is j + 0.5
     hi = tri.max(1).values + margin - 0.5
-    x0 = lo[:, 0].ceil().clamp(0, width).long()
-    y0 = lo[:, 1].ceil().clamp(0, height).long()
-    x1 = hi[:, 0].floor().clamp(-1, width - 1).long()
-    y1 = hi[:, 1].floor().clamp(-1, height - 1).long()
-    win = torch.stack((x0, y0, x1, y1), -1)
+    size = torch.tensor([width, height], dtype=tri.dtype, device=tri.device)  # x and y at once
+    first = lo.ceil().clamp(torch.zeros_like(size), size).long()  # x0, y0
+    last = hi.floor().clamp(torch.full_like(size, -1.0), size - 1).long()  # x1, y1
+    win = torch.cat((first, last), -1)
     # Invalid faces may have NaN corners (garbage after .long()): give them a fixed empty window.
     empty = torch.tensor([0, 0, -1, -1], dtype=win.dtype, device=win.device)
     return torch.where(sf.valid[:, None], win, empty)

@@ -12,7 +12,6 @@ import torch
 from scipy.spatial import cKDTree
 
 from ..errors import InputError
-from .rotations import quat_conjugate, quat_mul
 
 Tensor = torch.Tensor
 
@@ -26,8 +25,9 @@ def smoothness_loss(rotations: Tensor) -> Tensor:
     """
     if rotations.shape[-3] < 2:
         return rotations.sum() * 0.0
-    rel = quat_mul(rotations[..., :-1, :, :], quat_conjugate(rotations[..., 1:, :, :]))
-    return (1.0 - rel[..., 0] ** 2).mean()
+    # the w of q_t * conj(q_t+1) is their dot product: the whole Hamilton product is not needed
+    w = (rotations[..., :-1, :, :] * rotations[..., 1:, :, :]).sum(-1)
+    return (1.0 - w**2).mean()
 
 
 def reflect(points: Tensor, normal: Tensor, offset: Tensor | float) -> Tensor:
