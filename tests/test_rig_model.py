@@ -325,3 +325,27 @@ def test_lengthen_leaves_a_bone_across_the_body_as_it_is():
     assert float(scales[1]) == pytest.approx(1.0, abs=1e-9)  # across
     assert float(scales[2]) == pytest.approx(2.0**0.5, rel=1e-6)  # 45 degrees: cos^2 = 1/2
     assert float(scales[0]) == pytest.approx(2.0, rel=1e-6)  # along
+
+
+def test_the_field_runs_once_per_bind_position_with_the_same_offsets_and_gradients():
+    """Copies of a vertex at one bind position (an unwelded, flat-shaded surface) read the field
+    once: the offsets of every vertex and the MLP's gradients are those of the field run on all of
+    them, and nothing new is saved (earlier fit states load)."""
+    asset = unweld(tube_asset(bones=3, rings_per_bone=2, segments=8, bone_length=0.3, radius=0.05))
+    torch.manual_seed(0)
+    model = ArticulatedModel(asset, hidden=16)
+    assert len(model.field_index) < model.num_vertices  # the unwelded copies share positions
+    for p in model.displacement.parameters():
+        p.data.normal_(0.0, 0.3)
+    got = model.displacement_offsets()
+    want = model.displacement(model.global_scale() * model.points)
+    torch.testing.assert_close(got, want, rtol=0, atol=0)
+    w = torch.randn_like(want)
+    params = list(model.displacement.parameters())
+    for a, b in zip(
+        torch.autograd.grad((got * w).sum(), params),
+        torch.autograd.grad((want * w).sum(), params),
+        strict=True,
+    ):
+        torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-6)
+    assert not any(k.startswith("field_") for k in model.state_dict())

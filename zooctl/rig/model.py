@@ -128,6 +128,11 @@ class ArticulatedModel(nn.Module):
             self.register_buffer(name, torch.as_tensor(np.ascontiguousarray(arr), dtype=dt))
 
         buf("points", points)
+        # The displacement field reads the bind position alone, which a seam's copies share: it
+        # runs once per position (a quarter of the vertices of a flat-shaded animal) and is gathered.
+        _, first, inverse = np.unique(points, axis=0, return_index=True, return_inverse=True)
+        self.register_buffer("field_index", torch.as_tensor(first), persistent=False)
+        self.register_buffer("field_inverse", torch.as_tensor(inverse.reshape(-1)), persistent=False)
         buf("faces", asset.faces.astype(np.int64), torch.long)
         buf("parents", parents, torch.long)
         buf("inverse_bind", asset.inverse_bind)
@@ -316,7 +321,7 @@ class ArticulatedModel(nn.Module):
         cache = getattr(self, "_shared_disp", None)  # [tensor or None] inside the block
         if cache is not None and cache[0] is not None:
             return cache[0]
-        out = self.displacement(self.global_scale() * self.points)
+        out = self.displacement(self.global_scale() * self.points[self.field_index])[self.field_inverse]
         if cache is not None:
             cache[0] = out
         return out
