@@ -104,13 +104,13 @@ def main() -> None:
     orig = stages.StageRunner.step
     seen = {"n": 0}
     times: list[float] = []
+    sync = torch.cuda.synchronize if args.device.startswith("cuda") else (lambda: None)
 
     def step(self, opt, it):
         if self.stage != 2:
             return orig(self, opt, it)
         seen["n"] += 1
         if seen["n"] != 20:
-            sync = (lambda: torch.cuda.synchronize()) if args.device.startswith("cuda") else (lambda: None)
             sync()
             t = time.perf_counter()
             out = orig(self, opt, it)

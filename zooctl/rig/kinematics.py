@@ -18,32 +18,18 @@ Tensor = torch.Tensor
 
 
 class KinematicTree:
-    """The level schedule of a ``parents`` array (``parents[j] < j``, roots ``-1``).
+    """The pointer-jumping schedule of a ``parents`` array (``parents[j] < j``, roots ``-1``).
 
-    ``levels[d]`` holds the joints of depth ``d``; ``parent_slot[d]`` the position of each one's
-    parent inside ``levels[d - 1]``; ``order`` maps the concatenated levels back to joint order.
-    ``jumps[r]`` (J + 1,) is the ancestor each joint multiplies by in pointer-jumping round ``r``
-    (index J: an identity past the roots, which it maps to itself).
+    ``jumps[r]`` (J + 1,) is the ancestor each joint multiplies by in round ``r`` (index J: an
+    identity past the roots, which it maps to itself).
     """
 
     def __init__(self, parents: np.ndarray | list[int], device: torch.device | str | None = None):
         parents = np.asarray(parents, dtype=np.int64)
-        depth = np.zeros(len(parents), dtype=np.int64)
-        for j, p in enumerate(parents):
-            if p >= j:
-                raise ValueError("parents must be topologically sorted (parents[j] < j)")
-            depth[j] = 0 if p < 0 else depth[p] + 1
+        if (parents >= np.arange(len(parents))).any():
+            raise ValueError("parents must be topologically sorted (parents[j] < j)")
         self.parents = parents
-        self.num_joints = len(parents)
-        levels = [np.nonzero(depth == d)[0] for d in range(int(depth.max()) + 1 if len(depth) else 0)]
-        slot = np.empty(len(parents), dtype=np.int64)
-        for lv in levels:
-            slot[lv] = np.arange(len(lv))
-        self.levels = [torch.as_tensor(lv, device=device) for lv in levels]
-        self.parent_slot = [None] + [torch.as_tensor(slot[parents[lv]], device=device) for lv in levels[1:]]
-        cat = np.concatenate(levels) if levels else np.zeros(0, dtype=np.int64)
-        self.order = torch.as_tensor(np.argsort(cat), device=device)
-        J = len(parents)
+        self.num_joints = J = len(parents)
         reach = np.append(np.where(parents < 0, J, parents), J)  # (J + 1,): J is past the roots
         jumps = []
         while (reach[:J] != J).any():
@@ -53,9 +39,6 @@ class KinematicTree:
 
     def to(self, device: torch.device | str) -> KinematicTree:
         self.jumps = [r.to(device) for r in self.jumps]
-        self.levels = [lv.to(device) for lv in self.levels]
-        self.parent_slot = [None] + [s.to(device) for s in self.parent_slot[1:]]
-        self.order = self.order.to(device)
         return self
 
 
