@@ -349,3 +349,75 @@ def test_the_field_runs_once_per_bind_position_with_the_same_offsets_and_gradien
     ):
         torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-6)
     assert not any(k.startswith("field_") for k in model.state_dict())
+
+
+def _posed_every_vertex(model: ArticulatedModel) -> ArticulatedModel:
+    """The same model posing each vertex itself (as before the surface rows existed)."""
+    import copy
+
+    ref = copy.deepcopy(model)
+    ref.surface_index = None
+    return ref
+
+
+@pytest.mark.parametrize("skinning", ["casa", "dqs"])
+def test_the_surface_is_posed_once_per_seam_copy_group_with_the_same_vertices_and_gradients(skinning):
+    """Copies of a vertex with the same position, bones, weights and girth directions are posed
+    once and gathered: every posed vertex and every parameter's gradient are those of posing
+    each vertex, through both skinnings, with the root and the field on; nothing new is saved."""
+    from zooctl.rig.dqs import DualQuaternionModel
+
+    cls = ArticulatedModel if skinning == "casa" else DualQuaternionModel
+    asset = unweld(tube_asset(bones=3, rings_per_bone=2, segments=8, bone_length=0.3, radius=0.05))
+    torch.manual_seed(0)
+    model = cls(asset, hidden=16, dtype=torch.float64, share_seams=True, girth=True)
+    assert model.surface_index is not None and len(model.surface_index) < model.num_vertices
+    with torch.no_grad():
+        for p in model.parameters():
+            p.add_(0.2 * torch.randn_like(p))
+    ref = _posed_every_vertex(model)
+    T, J = 3, model.num_joints
+    rot = axis_angle_to_quat(0.4 * torch.randn(T, J, 3, dtype=torch.float64))
+    root = axis_angle_to_quat(torch.randn(T, 3, dtype=torch.float64))
+    shift = torch.randn(T, 3, dtype=torch.float64)
+    got, want = model(rot, root, shift), ref(rot, root, shift)
+    torch.testing.assert_close(got.vertices, want.vertices, rtol=1e-10, atol=1e-12)
+    torch.testing.assert_close(got.joints, want.joints, rtol=1e-10, atol=1e-12)
+    w = torch.randn_like(want.vertices)
+    for (name, a), b in zip(
+        model.named_parameters(),
+        torch.autograd.grad((want.vertices * w).sum(), list(ref.parameters())),
+        strict=True,
+    ):
+        (ga,) = torch.autograd.grad((model(rot, root, shift).vertices * w).sum(), [a])
+        torch.testing.assert_close(ga, b, rtol=1e-9, atol=1e-11, msg=name)
+    assert not any(k.startswith("surface_") for k in model.state_dict())
+    assert model.state_dict().keys() == ref.state_dict().keys()
+
+
+def test_the_surface_rows_keep_apart_copies_whose_skinning_differs():
+    """Without shared seams each copy learns its own weights: no rows are shared. With them, a
+    copy whose template weights differ (so its girth moves it differently) gets its own row."""
+    import dataclasses
+
+    asset = unweld(tube_asset(bones=2, rings_per_bone=2, segments=6))
+    assert ArticulatedModel(asset, share_seams=False).surface_index is None
+    shared = ArticulatedModel(asset, share_seams=True, girth=True)
+    rows = len(shared.surface_index)
+    w = asset.skin_weights.copy()
+    mixed = int(np.nonzero(w.max(1) < 0.9)[0][0])  # a vertex between two bones
+    same = torch.nonzero(shared.surface_inverse == shared.surface_inverse[mixed]).flatten()
+    assert len(same) > 1  # it has copies
+    twin = int(same[-1])
+    top = int(np.argmax(w[twin]))
+    w[twin] *= 0.5
+    w[twin, top] += 0.5  # more weight on its main bone: other girth directions, same bones
+    changed = dataclasses.replace(asset, skin_weights=w)
+    assert len(ArticulatedModel(changed, share_seams=True, girth=True).surface_index) == rows + 1
+    assert len(ArticulatedModel(changed, share_seams=True, girth=False).surface_index) == rows
+
+
+@needs_assets
+def test_the_wolf_is_posed_at_a_quarter_of_its_vertices():
+    model = ArticulatedModel(_load("animals_pack/Wolf.glb"), share_seams=True, girth=True)
+    assert len(model.surface_index) <= 0.3 * model.num_vertices

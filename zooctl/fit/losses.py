@@ -291,10 +291,11 @@ def edge_log_stretch(verts: Tensor, rest: Tensor, edges: Tensor) -> Tensor:
     """(..., E) log of each edge's length in ``verts`` (..., V, 3) over its length in ``rest``
     (V, 3): 0 where articulation kept the surface's metric, log 2 where it doubled an edge."""
 
-    def length(v: Tensor) -> Tensor:
-        return (v[..., edges[:, 0], :] - v[..., edges[:, 1], :]).norm(dim=-1).clamp(min=1e-9)
+    def squared_length(v: Tensor) -> Tensor:  # no square root, and its gradient is finite at 0
+        d = v.index_select(-2, edges[:, 0]) - v.index_select(-2, edges[:, 1])
+        return (d * d).sum(-1).clamp(min=1e-18)
 
-    return torch.log(length(verts) / length(rest))
+    return 0.5 * torch.log(squared_length(verts) / squared_length(rest))
 
 
 def edge_stretch_loss(verts: Tensor, rest: Tensor, edges: Tensor, free: float = math.log(1.5)) -> Tensor:

@@ -29,8 +29,9 @@ that names its options and takes no ``**options`` gets only those it names. The 
   the symmetry and displacement terms with the same parameters).
 
 `zooctl.rig.model.ArticulatedModel` implements all of it; a new model usually subclasses it and
-replaces ``skinning`` (a function with `zooctl.rig.skinning.linear_blend_skinning`'s signature),
-as `zooctl.rig.dqs.DualQuaternionModel` does.
+replaces ``skinning`` (a function with `zooctl.rig.skinning.linear_blend_skinning`'s signature,
+each output vertex a function of its own row alone: the model poses a seam's copies once and
+gathers them), as `zooctl.rig.dqs.DualQuaternionModel` does.
 """
 
 from __future__ import annotations

@@ -15,6 +15,8 @@ Pipeline for frame t (see `zooctl.rig.skinning` for the stretch rule):
 2. v_i = sum_k w_ik (G_k @ inverse_bind_k) (p_i + e_k(p_i) s_k)          (stretchable LBS)
 3. v'_i = u v_i + V_theta(u p_i)                                          (CASA eq. 3)
 4. world = R_root v' + t_root
+
+With shared seams, steps 0-4 run once per group of a vertex's identical copies and are gathered.
 """
 
 from __future__ import annotations
@@ -133,6 +135,8 @@ class ArticulatedModel(nn.Module):
         _, first, inverse = np.unique(points, axis=0, return_index=True, return_inverse=True)
         self.register_buffer("field_index", torch.as_tensor(first), persistent=False)
         self.register_buffer("field_inverse", torch.as_tensor(inverse.reshape(-1)), persistent=False)
+        share = np.bincount(inverse.reshape(-1), minlength=len(first)) / max(len(points), 1)
+        self.register_buffer("field_share", torch.as_tensor(share, dtype=dtype), persistent=False)
         buf("faces", asset.faces.astype(np.int64), torch.long)
         buf("parents", parents, torch.long)
         buf("inverse_bind", asset.inverse_bind)
@@ -165,6 +169,9 @@ class ArticulatedModel(nn.Module):
             self.register_buffer("girth_radial", radial, persistent=False)
             self.log_bone_girth = nn.Parameter(torch.zeros(asset.num_joints, dtype=dtype))
             self._register_load_state_dict_pre_hook(self._girth_at_one)
+        self._register_surface_rows(e)
+        # A loaded state brings its own weight groups: the surface rows follow them.
+        self.register_load_state_dict_post_hook(lambda m, _keys: m._register_surface_rows(m.endpoint))
         self.log_scale = nn.Parameter(torch.zeros((), dtype=dtype))
         self.displacement = (
             DisplacementField(asset.size(), hidden=hidden, num_freqs=num_freqs).to(dtype)
@@ -173,6 +180,45 @@ class ArticulatedModel(nn.Module):
         )
         self.tree = KinematicTree(parents)
         self.to(device)
+
+    def _register_surface_rows(self, endpoint: Tensor) -> None:
+        """The surface is posed once per group of vertices whose every input to skinning is the
+        same (bind position, candidate bones, endpoint weights, girth directions and shared
+        weights: the copies of a seam) and gathered back: a flat-shaded animal's copies pose to
+        one point. ``surface_index`` (U,) a vertex of each group in vertex order, None where no two
+        vertices share (seams not shared); ``surface_inverse`` (V,) each vertex's group."""
+        V = self.num_vertices
+        self.register_buffer("surface_index", None, persistent=False)
+        if not self.skin.shared:
+            return
+        cols = [self.points, self.skin.bones, endpoint, self.skin.groups[:, None]]
+        if self.log_bone_girth is not None:
+            cols.append(self.girth_radial.flatten(1))
+        key = torch.cat([c.double().cpu().reshape(V, -1) for c in cols], 1).numpy()
+        _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+        if len(first) == V:
+            return
+        rank = np.empty(len(first), np.int64)
+        rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+        index = np.sort(first)
+        dev = self.points.device
+
+        def rows(name: str, t: Tensor) -> None:  # made from the template, not saved
+            self.register_buffer(
+                name, t[torch.as_tensor(index, device=t.device)].contiguous(), persistent=False
+            )
+
+        self.register_buffer("surface_index", torch.as_tensor(index, device=dev), persistent=False)
+        self.register_buffer(
+            "surface_inverse", torch.as_tensor(rank[inverse.reshape(-1)], device=dev), persistent=False
+        )
+        rows("surface_points", self.points)
+        rows("surface_bones", self.skin.bones)
+        rows("surface_endpoint", endpoint)
+        rows("surface_skin_rows", self.skin.groups)
+        rows("surface_field_rows", self.field_inverse)
+        if self.log_bone_girth is not None:
+            rows("surface_radial", self.girth_radial)
 
     def _apply(self, fn, *args, **kwargs):  # keep the FK schedule on the module's device
         out = super()._apply(fn, *args, **kwargs)
@@ -227,8 +273,7 @@ class ArticulatedModel(nn.Module):
         mats = G @ self.inverse_bind
         u = self.global_scale()
         R = None if root_rotation is None else quat_to_matrix(root_rotation)  # (..., 3, 3)
-        skin = (self.rest_points(), self.skin.bones, self.skin(), s, self.endpoint if s is not None else None)
-        d = self.displacement_offsets()
+        skin, d, dm = self._surface_inputs(s)
         # The field's mean moves the whole mesh (a fit drifts into one: the root translation can
         # take it just as well); the skeleton goes with it, so it stays where the template has it
         # inside the mesh, as in the exported rig (`zooctl.fit.fitted_asset`).
@@ -240,7 +285,6 @@ class ArticulatedModel(nn.Module):
             v = self.skinning(skin[0], turned, *skin[1:])
             joints = G[..., :3, 3] @ uR.transpose(-1, -2)
             if d is not None:
-                dm = d.mean(0)
                 if R is not None:
                     d, dm = _rotate_shared(d, R), dm @ R.transpose(-1, -2)
                 v = v + d
@@ -250,14 +294,39 @@ class ArticulatedModel(nn.Module):
             joints = u * G[..., :3, 3]
             if d is not None:
                 v = v + d
-                joints = joints + d.mean(0)
+                joints = joints + dm
             if R is not None:
                 v = v @ R.transpose(-1, -2)
                 joints = joints @ R.transpose(-1, -2)
         if root_translation is not None:
             v = v + root_translation[..., None, :]
             joints = joints + root_translation[..., None, :]
+        if self.surface_index is not None:
+            v = v.index_select(-2, self.surface_inverse)
         return Pose(v, joints, G)
+
+    def _surface_inputs(self, stretch: Tensor | None) -> tuple[tuple, Tensor | None, Tensor | None]:
+        """What the skinning reads, a row per posed point ((points, bones, weights, stretch,
+        endpoint)), the field's offsets at those rows (or None) and their mean over the vertices:
+        a row per vertex, or per group of `_register_surface_rows` where it has them."""
+        if self.surface_index is None:
+            d = self.displacement_offsets()
+            end = self.endpoint if stretch is not None else None
+            return (
+                (self.rest_points(), self.skin.bones, self.skin(), stretch, end),
+                d,
+                None if d is None else d.mean(0),
+            )
+        pts = self.surface_points
+        if self.log_bone_girth is not None:
+            scale = (self.log_bone_girth.exp() - 1.0)[self.surface_bones]
+            pts = pts + (scale[..., None] * self.surface_radial).sum(-2)
+        w = torch.softmax(self.skin.logits, dim=-1)[self.surface_skin_rows]
+        end = self.surface_endpoint if stretch is not None else None
+        f = self._field_at_positions()
+        if f is None:
+            return (pts, self.surface_bones, w, stretch, end), None, None
+        return (pts, self.surface_bones, w, stretch, end), f[self.surface_field_rows], self.field_share @ f
 
     def _batch_shape(
         self, rotations, root_rotation, root_translation, translations, scales
@@ -316,15 +385,24 @@ class ArticulatedModel(nn.Module):
     def displacement_offsets(self) -> Tensor | None:
         """(V, 3) the displacement field's offsets ``V(u p)`` (CASA eq. 3, added after skinning);
         None without a field. Inside `shared_displacement` the field runs once."""
+        return self._shared("offsets", lambda: self._field_at_positions()[self.field_inverse])
+
+    def _field_at_positions(self) -> Tensor | None:
+        """(P, 3) the field at each distinct bind position (``field_index``); None without one."""
+        return self._shared(
+            "field", lambda: self.displacement(self.global_scale() * self.points[self.field_index])
+        )
+
+    def _shared(self, key: str, make) -> Tensor | None:
+        """``make()``, made once per `shared_displacement` block; None without a field."""
         if self.displacement is None:
             return None
-        cache = getattr(self, "_shared_disp", None)  # [tensor or None] inside the block
-        if cache is not None and cache[0] is not None:
-            return cache[0]
-        out = self.displacement(self.global_scale() * self.points[self.field_index])[self.field_inverse]
-        if cache is not None:
-            cache[0] = out
-        return out
+        cache = getattr(self, "_shared_disp", None)  # a dict inside the block
+        if cache is None:
+            return make()
+        if key not in cache:
+            cache[key] = make()
+        return cache[key]
 
     @contextlib.contextmanager
     def shared_displacement(self) -> Iterator[None]:
@@ -334,7 +412,7 @@ class ArticulatedModel(nn.Module):
         if getattr(self, "_shared_disp", None) is not None:  # nested: the outer block's tensor
             yield
             return
-        self._shared_disp: list[Tensor | None] | None = [None]
+        self._shared_disp: dict[str, Tensor] | None = {}
         try:
             yield
         finally:
