@@ -421,3 +421,28 @@ def test_the_surface_rows_keep_apart_copies_whose_skinning_differs():
 def test_the_wolf_is_posed_at_a_quarter_of_its_vertices():
     model = ArticulatedModel(_load("animals_pack/Wolf.glb"), share_seams=True, girth=True)
     assert len(model.surface_index) <= 0.3 * model.num_vertices
+
+
+def test_a_model_with_surface_rows_pickles_and_its_rows_follow_a_loaded_state():
+    """The model crosses process boundaries (the trials side by side) and loads fit states: it
+    pickles (no closures among its hooks), and its rows follow the weight groups a state brings
+    (here the same groups numbered another way, the logits' rows with them)."""
+    import pickle
+
+    asset = unweld(tube_asset(bones=2, rings_per_bone=2, segments=6))
+    torch.manual_seed(0)
+    model = ArticulatedModel(asset, share_seams=True, girth=True)
+    with torch.no_grad():
+        model.skin.logits.normal_()
+    again = pickle.loads(pickle.dumps(model))
+    torch.testing.assert_close(again().vertices, model().vertices, rtol=0, atol=0)
+    state = model.state_dict()
+    U = state["skin.logits"].shape[0]
+    perm = torch.randperm(U)  # new id of each old group
+    state["skin.groups"] = perm[state["skin.groups"]]
+    logits = torch.empty_like(state["skin.logits"])
+    logits[perm] = state["skin.logits"]
+    state["skin.logits"] = logits
+    fresh = ArticulatedModel(asset, share_seams=True, girth=True)
+    fresh.load_state_dict(state)
+    torch.testing.assert_close(fresh().vertices, model().vertices, rtol=0, atol=0)

@@ -170,8 +170,7 @@ class ArticulatedModel(nn.Module):
             self.log_bone_girth = nn.Parameter(torch.zeros(asset.num_joints, dtype=dtype))
             self._register_load_state_dict_pre_hook(self._girth_at_one)
         self._register_surface_rows(e)
-        # A loaded state brings its own weight groups: the surface rows follow them.
-        self.register_load_state_dict_post_hook(lambda m, _keys: m._register_surface_rows(m.endpoint))
+        self.register_load_state_dict_post_hook(self._surface_rows_after_load)
         self.log_scale = nn.Parameter(torch.zeros((), dtype=dtype))
         self.displacement = (
             DisplacementField(asset.size(), hidden=hidden, num_freqs=num_freqs).to(dtype)
@@ -219,6 +218,10 @@ class ArticulatedModel(nn.Module):
         rows("surface_field_rows", self.field_inverse)
         if self.log_bone_girth is not None:
             rows("surface_radial", self.girth_radial)
+
+    def _surface_rows_after_load(self, module, incompatible_keys) -> None:
+        """A loaded state brings its own weight groups: the surface rows follow them."""
+        self._register_surface_rows(self.endpoint)
 
     def _apply(self, fn, *args, **kwargs):  # keep the FK schedule on the module's device
         out = super()._apply(fn, *args, **kwargs)
