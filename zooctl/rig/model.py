@@ -219,7 +219,7 @@ class ArticulatedModel(nn.Module):
         if self.log_bone_girth is not None:
             rows("surface_radial", self.girth_radial)
 
-    def _surface_rows_after_load(self, module, incompatible_keys) -> None:
+    def _surface_rows_after_load(self, _module, _incompatible_keys) -> None:
         """A loaded state brings its own weight groups: the surface rows follow them."""
         self._register_surface_rows(self.endpoint)
 
@@ -322,9 +322,8 @@ class ArticulatedModel(nn.Module):
             )
         pts = self.surface_points
         if self.log_bone_girth is not None:
-            scale = (self.log_bone_girth.exp() - 1.0)[self.surface_bones]
-            pts = pts + (scale[..., None] * self.surface_radial).sum(-2)
-        w = torch.softmax(self.skin.logits, dim=-1)[self.surface_skin_rows]
+            pts = pts + self._girth_moves(self.surface_bones, self.surface_radial)
+        w = self.skin.group_weights()[self.surface_skin_rows]
         end = self.surface_endpoint if stretch is not None else None
         f = self._field_at_positions()
         if f is None:
@@ -377,8 +376,12 @@ class ArticulatedModel(nn.Module):
         weight on it, so a bone's whole cross-section scales, not only the side a camera sees."""
         if self.log_bone_girth is None:
             return None
-        scale = (self.log_bone_girth.exp() - 1.0)[self.skin.bones]  # (V, K): the candidate bones
-        return (scale[..., None] * self.girth_radial).sum(-2)
+        return self._girth_moves(self.skin.bones, self.girth_radial)
+
+    def _girth_moves(self, bones: Tensor, radial: Tensor) -> Tensor:
+        """(N, 3) the girths' move of rows with candidate bones (N, K) and directions (N, K, 3)."""
+        scale = (self.log_bone_girth.exp() - 1.0)[bones]  # (N, K): the candidate bones
+        return (scale[..., None] * radial).sum(-2)
 
     def rest_points(self) -> Tensor:
         """(V, 3) the bind vertices the skinning poses: ``points``, thickened by the girths."""

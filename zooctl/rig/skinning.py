@@ -280,8 +280,12 @@ class SkinWeights(nn.Module):
             state[key] = self.as_groups(state[key])
 
     def forward(self) -> Tensor:
-        w = torch.softmax(self.logits, dim=-1)
+        w = self.group_weights()
         return w[self.groups] if self.shared else w
+
+    def group_weights(self) -> Tensor:
+        """(U, K) the weights of each group (of each vertex where no seams are shared)."""
+        return torch.softmax(self.logits, dim=-1)
 
     def dense(self, num_joints: int) -> Tensor:
         """(V, J) dense weights (for inspection and export)."""
