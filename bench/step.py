@@ -1,10 +1,11 @@
 """What one stage-2 step costs: operators launched, host syncs, and milliseconds.
 
     python bench/step.py [--video DIR] [--template NAME] [--steps 30] [--threads 1]
-                         [--device cpu|cuda] [--torch-path] [--sites N] [--json OUT]
+                         [--device cpu|cuda] [--torch-path] [--sites N] [--profile N] [--json OUT]
 
-A GPU step of this fit is bound by kernel launches, not arithmetic (BENCHMARKS.md, "CUDA"), so
-the number of operators a step runs is what a GPU pays for, and it can be counted on any machine.
+A GPU step of this fit is bound by its host (Python, autograd and the launches) once no kernel
+holds the device (BENCHMARKS.md, "One NVIDIA H200"), so the number of operators a step runs is
+what a GPU pays for, and it can be counted on any machine; ``--profile`` shows what holds it.
 This fits ``--video`` (a `zooctl bench make` folder; default: the shared Fox rendered here at 60
 frames x 320 px) with ``--template`` (a shared Quaternius animal, default Wolf) at ``--preset
 fast`` to stage-2 iteration 20, then:
@@ -13,7 +14,9 @@ fast`` to stage-2 iteration 20, then:
   that computes, views and metadata left out) and its host syncs (operators that make the host
   wait for the device: ``item``/``int()`` of a tensor, ``nonzero``, boolean indexing), under a
   `TorchDispatchMode`; ``--sites N`` lists the N forward call sites that run the most;
-- times ``--steps`` steps (median ms, after the counted step).
+- times ``--steps`` steps (median ms, after the counted step);
+- ``--profile N``: N more steps under torch.profiler, then its operators by total CPU time and by
+  their own device time (CPU time on a CPU).
 
 ``--torch-path`` turns the CPU kernels off, so the CPU runs what a CUDA device runs (the same
 PyTorch expressions: its operator and sync counts are the device path's). The fit itself is that
@@ -59,6 +62,12 @@ def main() -> None:
     ap.add_argument("--torch-path", action="store_true", help="CPU kernels off: the device path")
     ap.add_argument("--sites", type=int, default=0, help="list the forward call sites running the most")
     ap.add_argument("--json", default=None, help="also write the JSON line here")
+    ap.add_argument(
+        "--profile",
+        type=int,
+        default=0,
+        help="after the timed steps, N more under torch.profiler: its tables",
+    )
     args = ap.parse_args()
 
     import contextlib
@@ -110,6 +119,8 @@ def main() -> None:
         if self.stage != 2:
             return orig(self, opt, it)
         seen["n"] += 1
+        if seen["n"] > 20 + args.steps:
+            return _profiled(orig, self, opt, it, seen["n"] - 20 - args.steps, args.profile, sync)
         if seen["n"] != 20:
             sync()
             t = time.perf_counter()
@@ -141,7 +152,7 @@ def main() -> None:
     stages.StageRunner.step = step
     off = _kernels.disabled() if args.torch_path else contextlib.nullcontext()
     with off:
-        fit_video(video, template, cfg, pause_at=20 + args.steps)
+        fit_video(video, template, cfg, pause_at=20 + args.steps + args.profile)
     res = {
         "machine": machine(),
         "torch": torch.__version__,
@@ -167,6 +178,33 @@ def main() -> None:
     print(line)
     if args.json:
         Path(args.json).write_text(line + "\n")
+
+
+_PROFILER: list = []
+
+
+def _profiled(orig, runner, opt, it, k: int, n: int, sync):
+    """Step ``k`` of ``n`` profiled ones: the profiler starts before the first and, after the last,
+    prints its operators by total CPU time and by their own device (else CPU) time."""
+    import torch
+    from torch.profiler import ProfilerActivity, profile
+
+    if k == 1:
+        cuda = [ProfilerActivity.CUDA] if torch.cuda.is_available() else []
+        sync()
+        _PROFILER.append(profile(activities=[ProfilerActivity.CPU, *cuda]))
+        _PROFILER[0].__enter__()
+    out = orig(runner, opt, it)
+    if k == n:
+        sync()
+        prof = _PROFILER.pop()
+        prof.__exit__(None, None, None)
+        table = prof.key_averages()
+        own = "self_cuda_time_total" if torch.cuda.is_available() else "self_cpu_time_total"
+        print(f"torch.profiler, {n} stage-2 steps:")
+        print(table.table(sort_by="cpu_time_total", row_limit=30, max_name_column_width=60))
+        print(table.table(sort_by=own, row_limit=25, max_name_column_width=60))
+    return out
 
 
 def _bool_index(args) -> bool:

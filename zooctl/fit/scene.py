@@ -118,9 +118,9 @@ class FitScene(nn.Module):
         rest_q = self.model.rest_rotation.detach()
         root_q = self.root_rotation.new_tensor([1.0, 0.0, 0.0, 0.0])
         p = self.model(
-            torch.cat((self.rotations[frames], rest_q[None])),
-            torch.cat((self.root_rotation[frames], root_q[None])),
-            torch.cat((self.root_translation[frames], self.root_translation.new_zeros(1, 3))),
+            torch.cat((self.rotations.index_select(0, frames), rest_q[None])),
+            torch.cat((self.root_rotation.index_select(0, frames), root_q[None])),
+            torch.cat((self.root_translation.index_select(0, frames), self.root_translation.new_zeros(1, 3))),
         )
         return Pose(p.vertices[:-1], p.joints[:-1], p.transforms[:-1]), p.vertices[-1].detach()
 

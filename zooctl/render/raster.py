@@ -149,18 +149,21 @@ def rasterize(vertices: Tensor, faces: Tensor, camera: Camera) -> Fragments:
     else:
         # Every pixel, the background masked (not dropped: no wait for the device to count the
         # covered ones). A background pixel sees a unit triangle at depth 1 instead of a face,
-        # so nothing it computes is inf or NaN, and its zero gradient stays zero.
+        # so nothing it computes is inf or NaN, and its zero gradient stays zero. Gathers by
+        # index_select: its backward adds atomically, where indexing's sorts the indices and sums
+        # each run of repeats serially, and on CUDA the background's face 0 made one run of most
+        # pixels (BENCHMARKS.md, "CUDA").
         hit = winner >= 0
         pix = torch.arange(winner.shape[0], device=winner.device)
         face = winner.clamp_min(0)
         dt = sf.tri.dtype
         unit = torch.tensor([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]], dtype=dt, device=winner.device)
-        tri = torch.where(hit[:, None, None], sf.tri[face], unit)
+        tri = torch.where(hit[:, None, None], sf.tri.index_select(0, face), unit)
         centre = torch.full((), 0.25, dtype=dt, device=winner.device)
         col = torch.where(hit, (pix % W).to(dt) + 0.5, centre)
         row = torch.where(hit, (torch.div(pix, W, rounding_mode="floor") % H).to(dt) + 0.5, centre)
         lam, _ = _screen_barycentrics(tri, col, row)
-        depth_v = torch.where(hit[:, None], sf.depth[face], torch.ones_like(lam))
+        depth_v = torch.where(hit[:, None], sf.depth.index_select(0, face), torch.ones_like(lam))
         bary, depth = _perspective_correct(lam, depth_v)
         bary_img = torch.where(hit[:, None], bary, torch.zeros_like(bary))
         depth_img = torch.where(hit, depth, torch.zeros_like(depth))
@@ -209,8 +212,10 @@ def interpolate(attributes: Tensor, faces: Tensor, frags: Fragments) -> Tensor:
             return out.view(B, H, W, -1)
     fid = frags.face_ids.clamp_min(0)  # background reads face 0, then is zeroed by bary = 0
     vid = faces[fid]  # (B, H, W, 3)
-    b = torch.arange(B, device=vid.device)[:, None, None, None]
-    vals = attributes[b, vid]  # (B, H, W, 3, C)
+    V, C = attributes.shape[-2:]
+    rows = (torch.arange(B, device=vid.device)[:, None, None, None] * V + vid).reshape(-1)
+    # index_select, as in `rasterize`: background pixels all read one vertex
+    vals = attributes.expand(B, V, C).reshape(B * V, C).index_select(0, rows).view(B, H, W, 3, C)
     return (frags.bary[..., None] * vals).sum(-2)
 
 

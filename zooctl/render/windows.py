@@ -90,8 +90,9 @@ def project_faces(vertices: Tensor, faces: Tensor, camera: Camera) -> ScreenFace
         check_face_indices(faces, vertices.shape[1])
         tri, depth, valid = _GatherFacesKernel.apply(xy, z, faces.contiguous(), float(cam.near))
         return ScreenFaces(tri, depth, valid, B, int(faces.shape[0]))
-    tri = xy[:, faces].reshape(-1, 3, 2)
-    depth = z[:, faces].reshape(-1, 3)
+    corners = faces.reshape(-1)  # index_select: a backward without sorting (`raster.rasterize`)
+    tri = xy.index_select(1, corners).reshape(-1, 3, 2)
+    depth = z.index_select(1, corners).reshape(-1, 3)
     # min() propagates NaN, so this equals (depth > near).all(-1), in one reduction instead of two.
     valid = (depth.min(-1).values > cam.near) & torch.isfinite(tri.reshape(-1, 6)).all(-1)
     return ScreenFaces(tri, depth, valid, B, int(faces.shape[0]))

@@ -69,5 +69,5 @@ def forward_kinematics(local: Tensor, tree: KinematicTree) -> Tensor:
     eye = torch.eye(4, dtype=local.dtype, device=local.device).expand(*local.shape[:-3], 1, 4, 4)
     g = torch.cat((local, eye), -3)
     for reach in tree.jumps:
-        g = g[..., reach, :, :] @ g
+        g = g.index_select(-3, reach) @ g  # index_select: a backward without sorting
     return g[..., :-1, :, :]

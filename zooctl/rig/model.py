@@ -323,12 +323,16 @@ class ArticulatedModel(nn.Module):
         pts = self.surface_points
         if self.log_bone_girth is not None:
             pts = pts + self._girth_moves(self.surface_bones, self.surface_radial)
-        w = self.skin.group_weights()[self.surface_skin_rows]
+        w = self.skin.group_weights().index_select(0, self.surface_skin_rows)
         end = self.surface_endpoint if stretch is not None else None
         f = self._field_at_positions()
         if f is None:
             return (pts, self.surface_bones, w, stretch, end), None, None
-        return (pts, self.surface_bones, w, stretch, end), f[self.surface_field_rows], self.field_share @ f
+        return (
+            (pts, self.surface_bones, w, stretch, end),
+            f.index_select(0, self.surface_field_rows),
+            self.field_share @ f,
+        )
 
     def _batch_shape(
         self, rotations, root_rotation, root_translation, translations, scales
@@ -380,7 +384,7 @@ class ArticulatedModel(nn.Module):
 
     def _girth_moves(self, bones: Tensor, radial: Tensor) -> Tensor:
         """(N, 3) the girths' move of rows with candidate bones (N, K) and directions (N, K, 3)."""
-        scale = (self.log_bone_girth.exp() - 1.0)[bones]  # (N, K): the candidate bones
+        scale = (self.log_bone_girth.exp() - 1.0).index_select(0, bones.reshape(-1)).view(bones.shape)
         return (scale[..., None] * radial).sum(-2)
 
     def rest_points(self) -> Tensor:
@@ -391,7 +395,7 @@ class ArticulatedModel(nn.Module):
     def displacement_offsets(self) -> Tensor | None:
         """(V, 3) the displacement field's offsets ``V(u p)`` (CASA eq. 3, added after skinning);
         None without a field. Inside `shared_displacement` the field runs once."""
-        return self._shared("offsets", lambda: self._field_at_positions()[self.field_inverse])
+        return self._shared("offsets", lambda: self._field_at_positions().index_select(0, self.field_inverse))
 
     def _field_at_positions(self) -> Tensor | None:
         """(P, 3) the field at each distinct bind position (``field_index``); None without one."""

@@ -53,7 +53,7 @@ def symmetry_loss(
     ``sample`` (S,) optional point indices to bound the O(N^2) cost on big meshes.
     """
     if sample is not None:
-        points = points[..., sample, :]
+        points = points.index_select(-2, torch.as_tensor(sample, device=points.device))
     return chamfer(points, reflect(points, normal, offset))
 
 
@@ -65,7 +65,8 @@ def bone_length_prior(log_scales: Tensor, pairs: Tensor | None = None) -> Tensor
     """
     loss = (log_scales**2).mean()
     if pairs is not None and len(pairs):
-        loss = loss + ((log_scales[..., pairs[:, 0]] - log_scales[..., pairs[:, 1]]) ** 2).mean()
+        left, right = log_scales.index_select(-1, pairs[:, 0]), log_scales.index_select(-1, pairs[:, 1])
+        loss = loss + ((left - right) ** 2).mean()
     return loss
 
 

@@ -100,7 +100,7 @@ def child_offset_shift(stretch: Tensor, parents: Tensor, child_e: Tensor, invers
     has_parent = parents >= 0
     p = parents.clamp_min(0)
     lin = inverse_bind[p, :3, :3]  # (J, 3, 3)
-    shift = torch.einsum("jab,...jb->...ja", lin, stretch[..., p, :] * child_e[:, None])
+    shift = torch.einsum("jab,...jb->...ja", lin, stretch.index_select(-2, p) * child_e[:, None])
     return shift * has_parent[:, None].to(shift.dtype)
 
 
