@@ -6,6 +6,7 @@ a small fraction of their scale, float64 to 1e-9), gradcheck the kernels' hand-w
 passes in float64, and check the automatic fallback when no compiler is available.
 """
 
+import contextlib
 import os
 import subprocess
 import sys
@@ -292,3 +293,39 @@ def test_soft_backward_leaves_the_callers_denormals_alone():
     assert tiny.item() != 0.0
     SoftSilhouette((40, 48), sigma=0.05)(verts, faces, cam).sum().backward()
     assert (tiny * 1.0).item() != 0.0 and (tiny / 2).item() != 0.0
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_edge_length_kernel_matches_pytorch(dtype):
+    """The edge-stretch term's squared lengths and gradients, a zero-length edge (clamped) included."""
+    from zooctl.fit.losses import edge_squared_length, edge_stretch_loss, mesh_edges
+
+    v, f = uv_sphere(60)
+    edges = mesh_edges(torch.as_tensor(f))
+    g = torch.Generator().manual_seed(0)
+    rest = torch.as_tensor(v, dtype=dtype)
+    posed = rest + 0.2 * torch.randn(3, *rest.shape, generator=g, dtype=dtype)
+    posed[1, edges[5, 1]] = posed[1, edges[5, 0]]  # one edge collapsed to a point
+    weights = torch.randn(3, edges.shape[0], generator=g, dtype=dtype)
+    out = {}
+    for path in ("kernel", "torch"):
+        x = posed.clone().requires_grad_(True)
+        with _kernels.disabled() if path == "torch" else contextlib.nullcontext():
+            d2 = edge_squared_length(x, edges)
+            ((d2 * weights).sum() + edge_stretch_loss(x, rest, edges)).backward()
+            out[path] = (d2.detach(), x.grad, edge_squared_length(rest, edges))
+    assert out["kernel"][0][1, 5] == 1e-18 and out["kernel"][1].abs().sum() > 0
+    tol = {"atol": 1e-12, "rtol": 1e-12} if dtype == torch.float64 else {"atol": 1e-6, "rtol": 1e-5}
+    for a, b in zip(out["kernel"], out["torch"], strict=True):
+        torch.testing.assert_close(a, b, **tol)
+
+
+def test_edge_length_kernel_gradcheck_and_bad_edges():
+    from zooctl.errors import InputError
+    from zooctl.fit.losses import _EdgeSquaredLengthKernel, edge_squared_length
+
+    v = torch.randn(2, 7, 3, dtype=torch.float64, requires_grad=True)
+    edges = torch.tensor([[0, 1], [1, 2], [2, 0], [3, 6], [6, 4], [4, 3], [5, 0]])
+    assert torch.autograd.gradcheck(lambda x: _EdgeSquaredLengthKernel.apply(x, edges), (v,))
+    with pytest.raises(InputError, match="edges name vertex 7"):
+        edge_squared_length(v, torch.tensor([[0, 7]]))

@@ -36,6 +36,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from ..errors import InputError
 from ..render import _kernels
 from ..rig.priors import reflect
 from ..rig.rotations import quat_conjugate, quat_mul, quat_normalize, quat_to_axis_angle, quat_to_matrix
@@ -287,15 +288,46 @@ def mesh_edges(faces: Tensor) -> Tensor:
     return torch.unique(torch.sort(e, dim=1).values, dim=0)
 
 
+class _EdgeSquaredLengthKernel(torch.autograd.Function):
+    """CPU kernel of `edge_squared_length`: v (B, V, 3), edges (E, 2) -> (B, E)."""
+
+    @staticmethod
+    def forward(ctx, v: Tensor, edges: Tensor) -> Tensor:  # type: ignore[override]
+        v = v.detach().contiguous()
+        B, V, _ = v.shape
+        out = v.new_empty(B, edges.shape[0])
+        _kernels.kernel_for("edge_sq_forward", v)(v, edges, B, V, edges.shape[0], out)
+        ctx.save_for_backward(v, edges)
+        return out
+
+    @staticmethod
+    def backward(ctx, g: Tensor):  # type: ignore[override]
+        v, edges = ctx.saved_tensors
+        B, V, _ = v.shape
+        g_v = torch.empty_like(v)
+        g = g.to(v.dtype).contiguous()
+        _kernels.kernel_for("edge_sq_backward", v)(v, edges, g, B, V, edges.shape[0], g_v)
+        return g_v, None
+
+
+def edge_squared_length(verts: Tensor, edges: Tensor) -> Tensor:
+    """(..., E) each edge's squared length in ``verts`` (..., V, 3), at least 1e-18: no square
+    root, and a gradient finite at 0. CPU float tensors use a C++ kernel (`zooctl.render._kernels`):
+    the gathers' backward costs more than the rest of the term on the CPU (BENCHMARKS.md)."""
+    e = edges.contiguous()
+    flat = verts.reshape(-1, *verts.shape[-2:])
+    if _kernels.kernel_for("edge_sq_forward", flat, indices=(e,)) is not None and flat.shape[-1] == 3:
+        if e.numel() and (int(e.min()) < 0 or int(e.max()) >= flat.shape[1]):
+            raise InputError(f"edges name vertex {int(e.max())} but there are {flat.shape[1]} vertices")
+        return _EdgeSquaredLengthKernel.apply(flat, e).view(*verts.shape[:-2], e.shape[0])
+    d = verts.index_select(-2, e[:, 0]) - verts.index_select(-2, e[:, 1])
+    return (d * d).sum(-1).clamp(min=1e-18)
+
+
 def edge_log_stretch(verts: Tensor, rest: Tensor, edges: Tensor) -> Tensor:
     """(..., E) log of each edge's length in ``verts`` (..., V, 3) over its length in ``rest``
     (V, 3): 0 where articulation kept the surface's metric, log 2 where it doubled an edge."""
-
-    def squared_length(v: Tensor) -> Tensor:  # no square root, and its gradient is finite at 0
-        d = v.index_select(-2, edges[:, 0]) - v.index_select(-2, edges[:, 1])
-        return (d * d).sum(-1).clamp(min=1e-18)
-
-    return 0.5 * torch.log(squared_length(verts) / squared_length(rest))
+    return 0.5 * torch.log(edge_squared_length(verts, edges) / edge_squared_length(rest, edges))
 
 
 def edge_stretch_loss(verts: Tensor, rest: Tensor, edges: Tensor, free: float = math.log(1.5)) -> Tensor:

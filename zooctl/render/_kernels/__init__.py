@@ -1,5 +1,5 @@
-"""CPU kernels of the renderers (the camera projection included, and the contour loss's
-nearest-vertex search): plain C++
+"""CPU kernels of the renderers (the camera projection included, the contour loss's
+nearest-vertex search and the edge-stretch term's edge lengths): plain C++
 compiled with the system compiler on first use.
 
 Why not ``torch.utils.cpp_extension.load_inline``: building against the PyTorch headers takes
@@ -83,6 +83,8 @@ _SIGNATURES = {
     "splat_finish_forward": [_P, _P, _I, _D, _I, _I, _I, _P, _I],
     "splat_finish_backward": [_P, _P, _P, _I, _D, _I, _I, _I, _P, _I],
     "nearest_points": [_P, _P, _I, _I, _I, _P, _I],
+    "edge_sq_forward": [_P, _P, _I, _I, _I, _P, _I],
+    "edge_sq_backward": [_P, _P, _P, _I, _I, _I, _P, _I],
     "to_camera_forward": [_P, _P, _P, _I, _I, _P, _I],
     "to_camera_backward": [_P, _P, _P, _I, _I, _P, _P, _P, _I],
     "face_windows": [_P, _P, _I, _I, _I, _D, _P, _I],
