@@ -3,11 +3,14 @@
 Not differentiable and not for fitting: it draws what an asset looks like, for `bank render`
 stills, videos and contact sheets, on any machine (the same code runs with ``device="cuda"``).
 
-Rasterisation: every face's screen bounding box is covered by a square tile of candidate pixels,
-faces grouped by tile size (1, 2, 4, ... pixels) so one vectorised pass handles each group; each
-covered pixel keeps the face with the smallest depth through one ``scatter_reduce(amin)`` of a
-(depth, face id) key packed into an int64. Shading interpolates smooth vertex normals and vertex
-colours with perspective-correct barycentrics; lighting is two-sided (open meshes look right).
+Rasterisation: `PreviewRenderer` takes the fit's z-buffer (`zooctl.render.raster.rasterize`: the
+C++ kernels on the CPU, the same face ids through PyTorch elsewhere). `zbuffer_mesh`, which the
+retrieval views render with, covers every face's screen bounding box by a square tile of
+candidate pixels, faces grouped by tile size (1, 2, 4, ... pixels) so one vectorised pass handles
+each group; each covered pixel keeps the face with the smallest depth through one
+``scatter_reduce(amin)`` of a (depth, face id) key packed into an int64. Shading interpolates
+smooth vertex normals and vertex colours with perspective-correct barycentrics; lighting is
+two-sided (open meshes look right).
 """
 
 from __future__ import annotations
@@ -40,19 +43,6 @@ def vertex_normals(vertices: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
     for k in range(3):
         n.index_add_(1, faces[:, k], fn)
     return torch.nn.functional.normalize(n, dim=-1, eps=1e-12)
-
-
-def is_closed_and_oriented(faces: torch.Tensor) -> bool:
-    """True when every directed edge occurs once and its reverse once too (closed, outward or
-    inward consistently), so back faces can be culled without opening holes."""
-    f = faces.detach().cpu().numpy().astype(np.int64)
-    a = f.reshape(-1)
-    b = np.roll(f, -1, axis=1).reshape(-1)
-    n = int(max(a.max(), b.max())) + 1
-    fwd = a * n + b
-    if len(np.unique(fwd)) != len(fwd):
-        return False
-    return bool(np.isin(b * n + a, fwd).all())
 
 
 def fit_camera(
@@ -172,7 +162,6 @@ class PreviewRenderer:
                 cam.intrinsics * s, cam.rotation, cam.translation, cam.height * s, cam.width * s, cam.near
             )
         normals = vertex_normals(verts, f)
-        cull = is_closed_and_oriented(f)
         # Passes of at most _BATCH_PIXELS rendered pixels and _BATCH_FACES faces: bounded memory.
         step = max(1, min(_BATCH_PIXELS // (cam.height * cam.width), _BATCH_FACES // len(f)))
         parts = []
@@ -185,7 +174,7 @@ class PreviewRenderer:
                 cam.width,
                 cam.near,
             )
-            parts.append(self._render_batch(verts[i : i + step], normals[i : i + step], f, col, c, cull))
+            parts.append(self._render_batch(verts[i : i + step], normals[i : i + step], f, col, c))
         img = torch.cat(parts)
         # img: (B, H*s, W*s, 3) linear RGB in [0, 1]
         if s > 1:
@@ -194,28 +183,18 @@ class PreviewRenderer:
         return out[0] if single else out
 
     def _render_batch(
-        self,
-        v: torch.Tensor,
-        n: torch.Tensor,
-        f: torch.Tensor,
-        col: torch.Tensor,
-        cam: Camera,
-        cull: bool,
+        self, v: torch.Tensor, n: torch.Tensor, f: torch.Tensor, col: torch.Tensor, cam: Camera
     ) -> torch.Tensor:
         """v, n (B, V, 3) vertices and normals, f (F, 3), col (V, 3), cam a batch of B ->
         linear RGB (B, H, W, 3)."""
+        from .raster import rasterize
+
         H, W = cam.height, cam.width
-        pc = v @ cam.rotation.transpose(1, 2) + cam.translation[:, None]  # camera frame, +Z forward
-        z = pc[..., 2]
-        k = cam.intrinsics[:, None]
-        xy = pc[..., :2] / z.clamp(min=1e-9)[..., None] * k[..., :2] + k[..., 2:]
         centers = cam.centers()[0]  # (B, 3)
-        skip = None
-        if cull:  # a closed, consistently oriented surface hides every face that looks away
-            tri = v[:, f]  # (B, F, 3, 3)
-            fn = torch.cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0], dim=-1)
-            skip = (fn * (tri[:, :, 0] - centers[:, None])).sum(-1) > 0
-        face_ids, bary = zbuffer_mesh(xy, z, f, H, W, cam.near, skip)
+        # The fit's z-buffer: C++ kernels on the CPU, 16 times faster here than `zbuffer_mesh`
+        # (BENCHMARKS.md), and the same face ids on any device.
+        frags = rasterize(v, f, cam)
+        face_ids, bary = frags.face_ids, frags.bary
         img = _background(H, W, self.device).expand(len(v), H, W, 3).clone()
         hit = face_ids >= 0
         if not bool(hit.any()):
