@@ -152,7 +152,7 @@ def rasterize(vertices: Tensor, faces: Tensor, camera: Camera) -> Fragments:
         # so nothing it computes is inf or NaN, and its zero gradient stays zero. Gathers by
         # index_select: its backward adds atomically, where indexing's sorts the indices and sums
         # each run of repeats serially, and on CUDA the background's face 0 made one run of most
-        # pixels (BENCHMARKS.md, "CUDA").
+        # pixels (BENCHMARKS.md, "One NVIDIA H200").
         hit = winner >= 0
         pix = torch.arange(winner.shape[0], device=winner.device)
         face = winner.clamp_min(0)
