@@ -25,6 +25,7 @@ import torch
 
 from ..errors import InputError
 from .camera import Camera
+from .raster import rasterize
 
 DEFAULT_COLOR = (0.72, 0.68, 0.62)
 BACKGROUND_TOP = (0.93, 0.94, 0.96)
@@ -187,8 +188,6 @@ class PreviewRenderer:
     ) -> torch.Tensor:
         """v, n (B, V, 3) vertices and normals, f (F, 3), col (V, 3), cam a batch of B ->
         linear RGB (B, H, W, 3)."""
-        from .raster import rasterize
-
         H, W = cam.height, cam.width
         centers = cam.centers()[0]  # (B, 3)
         # The fit's z-buffer: C++ kernels on the CPU (a 320 px frame 2.5 times faster than with
