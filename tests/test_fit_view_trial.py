@@ -98,7 +98,8 @@ def test_a_start_from_above_is_not_mirrored_and_pausing_changes_nothing(tmp_path
     np.testing.assert_allclose(resumed.iou, whole.iou, atol=1e-6)
 
 
-def test_fit_with_a_given_template_records_the_mirror_trial(tmp_path, store, capsys):
+def fit_named_tube(tmp_path, store, capsys, config: dict, frames: int = 3) -> dict:
+    """`zooctl fit` of a tube's video with the tube named as its template: the checked record."""
     from cli_helpers import run_inprocess
     from test_fit_e2e import validate_record
 
@@ -106,15 +107,20 @@ def test_fit_with_a_given_template_records_the_mirror_trial(tmp_path, store, cap
 
     thin = tube_asset(bones=3, name="thin")
     Bank(store).add(thin)
-    folder = make_video(thin, tmp_path / "v", frames=3, size=32, seed=0)
+    folder = make_video(thin, tmp_path / "v", frames=frames, size=32, seed=0)
     cfg = tmp_path / "c.json"
-    cfg.write_text(json.dumps(TINY))
+    cfg.write_text(json.dumps(config))
     r = run_inprocess(
         capsys, "fit", str(folder), "--template", "thin", "--config", str(cfg), "--name", "vt", "--json"
     )
     assert r.code == 0, r.err
     rec = json.loads((store / "fits" / "vt" / "record.json").read_text())
     validate_record(rec)
+    return rec
+
+
+def test_fit_with_a_given_template_records_the_mirror_trial(tmp_path, store, capsys):
+    rec = fit_named_tube(tmp_path, store, capsys, TINY)
     view = rec["camera"]["search"]["view_trial"]
     assert view["start"] in ("search", "mirror") and set(view["trial_iou"]) == {"search", "mirror"}
     assert rec["timings"]["mirror_trial"] == view["extra_seconds"]

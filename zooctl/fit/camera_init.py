@@ -271,7 +271,60 @@ def initialise_camera(
             key_iou,
         )
     rotation = view_rotation(*best[:3])
+    if cfg.track == "steady":
+        start, turn = _steady_turn(scorer, cfg, present, first, best[:3], focal)
+        return _tracked(
+            scorer, masks, cfg, rest, principal, present, first, start, focal, iou, top, fit_scale, turn
+        )
     return _tracked(scorer, masks, cfg, rest, principal, present, first, rotation, focal, iou, top, fit_scale)
+
+
+def _yaw(degrees: float) -> np.ndarray:
+    return view_rotation(degrees, 0.0, 0.0)
+
+
+def _steady_turn(
+    scorer: SilhouetteScorer,
+    cfg: CameraConfig,
+    present: list[int],
+    first: int,
+    start: tuple[float, float, float],
+    focal: float,
+) -> tuple[np.ndarray, float]:
+    """(the start rotation at ``first``, the turn in degrees per frame about the template's up
+    axis) whose steady turn best fits keyframes spread over the whole video.
+
+    A camera circling the animal, or an animal turning on the spot, turns the root about the
+    animal's own up axis (``R_t = R_0 Ry(w t)``) at a rate that changes slowly. Scored over the
+    whole video, the turn is seen where a keyframe-to-keyframe tracker meets a view whose silhouette
+    barely changes with the yaw (an elongated body seen end on) and may turn back. ``start``: the
+    search's best view (azimuth, elevation, roll); turns over the video of up to one full circle
+    either way, in steps of ``track_step``, then a finer grid around the best (the start's azimuth
+    too). Alone it loses more fits than it mends (BENCHMARKS.md, "Where the own rig's novel view is
+    lost now"): `zooctl.fit.view_trial.start_trial` tries it beside the greedy track."""
+    keys = present[:: max(cfg.track_every, 1)]
+    if len(keys) > _MAX_KNOWN_KEYFRAMES:
+        keys = [keys[int(round(i))] for i in np.linspace(0, len(keys) - 1, _MAX_KNOWN_KEYFRAMES)]
+    span = max(present[-1] - first, 1)
+    step = max(cfg.track_step, 1.0)
+
+    def scored(cands: list[tuple[float, float, float, float]]) -> np.ndarray:
+        total = np.zeros(len(cands))
+        for k in keys:
+            rots = [view_rotation(*c[:3]) @ _yaw(c[3] * (k - first)) for c in cands]
+            total += scorer.score(rots, [k], [focal] * len(rots))
+        return total / len(keys)
+
+    turns = np.arange(-360.0, 360.0 + step / 2, step) / span
+    coarse = [(*start, float(w)) for w in turns]
+    best = coarse[int(np.argmax(scored(coarse)))]
+    fine = [
+        (best[0] + da, best[1], best[2], best[3] + dw / span)
+        for da in (-step / 2, 0.0, step / 2)
+        for dw in (-step / 2, -step / 4, 0.0, step / 4, step / 2)
+    ]
+    best = fine[int(np.argmax(scored(fine)))]
+    return view_rotation(*best[:3]), float(best[3])
 
 
 def _tracked(
@@ -287,20 +340,25 @@ def _tracked(
     iou: float,
     top: list[dict[str, float]],
     fit_scale: float,
+    turn: float | None = None,
 ) -> CameraInit:
     """The root rotation tracked over keyframes from ``rotation`` at frame ``first``, every
-    frame aligned to its mask's box (the camera search's last steps)."""
+    frame aligned to its mask's box (the camera search's last steps). ``turn`` (degrees a frame
+    about the template's up axis, `_steady_turn`): each keyframe's small turns are of the steady
+    turn's prediction, at half the step, instead of the keyframe before."""
     T = len(masks)
     key_rot = {first: rotation}
     key_iou = [iou]
     prev = key_rot[first]
-    ts = cfg.track_step
+    ts = cfg.track_step if turn is None else cfg.track_step / 2
     deltas = [
         view_rotation(a, e, r) for a in (-ts, 0.0, ts) for e in (-ts, 0.0, ts) for r in (-ts / 2, 0.0, ts / 2)
     ]
     for k in range(first + cfg.track_every, T, max(cfg.track_every, 1)):
         if scorer.boxes[k] is None:
             continue
+        if turn is not None:
+            prev = rotation @ _yaw(turn * (k - first))
         rots = [prev @ d for d in deltas] + [d @ prev for d in deltas]
         sc = scorer.score(rots, [k], [focal] * len(rots))
         prev = rots[int(np.argmax(sc))]

@@ -23,6 +23,8 @@ CONFIG_VERSION = 1
 POSE_PRIORS = ("none", "rest", "clips", "motion")
 MIRROR_TRIALS = ("given", "always", "never")
 FOCAL_GUESSES = ("normal", "search")
+TRACKERS = ("greedy", "steady")
+START_TRIALS = ("none", "steady")
 PRESET_NAMES = ("fast", "quality")
 _RATE = {"exclusiveMinimum": 0}
 _WEIGHT = {"minimum": 0}
@@ -63,6 +65,20 @@ class CameraConfig:
     search_frames: int = spec(3, help="frames scored per candidate", minimum=1)
     track_every: int = spec(6, help="keyframes for the per-frame root rotation tracking", minimum=1)
     track_step: float = spec(15.0, help="degrees of the local tracking grid", minimum=0)
+    track: str = spec(
+        "greedy",
+        help="how the root rotation is followed over the keyframes: greedy (each keyframe the best small "
+        "turn of the one before) or steady (a start and a steady turn about the animal's up axis scored "
+        "over the whole video, then each keyframe the best small turn of that prediction)",
+        enum=TRACKERS,
+    )
+    start_trial: str = spec(
+        "none",
+        help="for a template the user named: none, or steady (the fit also starts from the steady "
+        "track, both paused at trials.iters, and goes on from the one with the lower mean loss over its "
+        "last 50 iterations)",
+        enum=START_TRIALS,
+    )
     # A start seeing the animal from below is tried against its depth mirror (zooctl.fit.view_trial),
     # kept unless its trial IoU is more than the margin (the trials' noise) lower: retrieved
     # templates are other animals, whose trial IoU misled.

@@ -503,11 +503,20 @@ def _run_and_write(
     t_trials: float | None,
     t_start: float,
 ) -> dict[str, Any]:
-    from .view_trial import mirror_wanted, trial_with_mirror
+    from .view_trial import mirror_wanted, start_trial, trial_with_mirror
 
     mirror_s = None
     try:
-        if state is None and mirror_wanted(cfg, template is not None) and cfg.ablation.optimise:
+        if (
+            state is None
+            and template is not None
+            and cfg.camera.start_trial == "steady"
+            and cfg.ablation.optimise
+        ):
+            # a named template: its greedy and steady starts tried, each with its mirror check
+            kept = start_trial(video, asset, cfg, reporter, checkpoint)
+            state, mirror_s = kept.state, kept.view.get("extra_seconds")
+        elif state is None and mirror_wanted(cfg, template is not None) and cfg.ablation.optimise:
             # No template trial ran: the template's own start gets its depth-mirror check here;
             # the fit goes on from the trial kept (as if never paused when nothing was tried).
             kept = trial_with_mirror(video, asset, cfg, reporter, checkpoint)

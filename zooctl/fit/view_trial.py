@@ -15,13 +15,17 @@ applies them at its start).
 ``camera.mirror_trial`` says for which templates: ``given`` (default) only for a template the
 user named (``--template``), as a retrieved template is another animal, whose trial IoU does not
 tell the better view (BENCHMARKS.md, Fit); ``always`` for retrieval's candidates too; ``never``.
+
+``camera.start_trial = "steady"`` (`start_trial`, a named template only) tries two starts the same
+way: the camera search's greedy track and its steady turn (`zooctl.fit.camera_init`), kept by the
+fit's loss at the pause rather than by IoU.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -129,3 +133,45 @@ def continue_trial(
     The same fit as a trial paused there in one go."""
     res = fit_video(video, template, cfg, reporter, resume=state, pause_at=pause_at)
     return TrialResult(trial_iou(res), trial_displacement(res), res.paused)
+
+
+def trial_loss(state: dict[str, Any] | None, last: int = 50) -> float:
+    """Mean total loss over a paused trial's last ``last`` stage-2 iterations (inf without any):
+    each iteration sees another batch of frames, so one iteration's loss is noisy."""
+    totals = [h["total"] for h in (state or {}).get("history", {}).get("stage2", [])[-last:]]
+    return float(np.mean(totals)) if totals else float("inf")
+
+
+def start_trial(
+    video: FitVideo,
+    template: RiggedAsset,
+    cfg: FitConfig,
+    reporter: Reporter | None = None,
+    checkpoint: Callable[[dict[str, Any]], None] | None = None,
+) -> TrialResult:
+    """The template's trial from the camera search's greedy track and from its steady track
+    (``camera.track``), each with its depth-mirror check (`trial_with_mirror`); the one whose
+    loss (`trial_loss`) is lower at the pause is kept. Silhouette IoU does not tell which start
+    is right (the rest pose fits a wrongly turned animal as well), the fit's whole loss mostly does
+    (BENCHMARKS.md, "Where the own rig's novel view is lost now"). The kept trial's view records
+    both losses under ``start_trial``."""
+    greedy_cfg = replace(cfg, camera=replace(cfg.camera, track="greedy"))
+    steady_cfg = replace(cfg, camera=replace(cfg.camera, track="steady"))
+    mirror = mirror_wanted(cfg, True)
+    t = time.perf_counter()
+    greedy = trial_with_mirror(video, template, greedy_cfg, reporter, checkpoint, mirror)
+    greedy_s = time.perf_counter() - t
+    if reporter is not None:
+        reporter.message(f"trying {template.name} from a steady turn too")
+    t = time.perf_counter()
+    steady = trial_with_mirror(video, template, steady_cfg, reporter, checkpoint, mirror)
+    steady_s = time.perf_counter() - t
+    losses = {"greedy": round(trial_loss(greedy.state), 6), "steady": round(trial_loss(steady.state), 6)}
+    kept, name, extra = (
+        (steady, "steady", greedy_s) if losses["steady"] < losses["greedy"] else (greedy, "greedy", steady_s)
+    )
+    view = dict(kept.view or {}, start_trial={"loss": losses, "kept": name, "extra_seconds": round(extra, 2)})
+    view["extra_seconds"] = round(float((kept.view or {}).get("extra_seconds") or 0.0) + extra, 2)
+    if kept.state is not None:
+        kept.state["camera_init"] = dict(kept.state["camera_init"], view_trial=view)
+    return TrialResult(kept.iou, kept.displacement, kept.state, view)
