@@ -66,13 +66,12 @@ def main() -> None:
         if video.gt is None or "vertices" not in video.gt:
             continue
         res = fit_video(video, bank.get(rec["template"]), cfg, resume=state)
-        T = res.scene.num_frames
-        sel = np.unique(np.linspace(0, T - 1, min(4, T)).astype(int))
-        pred, _ = metrics._camera_frame_pred(res, sel)
-        if pred.shape[1] != video.gt["vertices"].shape[1]:
+        if res.scene.model.num_vertices != video.gt["vertices"].shape[1]:
             print(f"{name}: its template is not the video's own rig; skipped", file=sys.stderr)
             continue
         scores = metrics.evaluate_fit(res, reanimate_iters=1)
+        sel = np.asarray(scores["frames_evaluated"])
+        pred, _ = metrics._camera_frame_pred(res, sel)
         moved, errors = [], []
         for i, t in enumerate(sel):
             truth, _ = metrics._camera_frame_gt(res, int(t))
@@ -85,7 +84,7 @@ def main() -> None:
             "novel": scores["novel_view_iou"],
             "novel_orientation_given": metrics._finite_mean(given) if given else None,
             "rotation_error_deg": [round(e, 1) for e in errors],
-            "frames": [int(t) for t in sel],
+            "frames": scores["frames_evaluated"],
         }
         rows.append(row)
         lines.append(json.dumps(row))

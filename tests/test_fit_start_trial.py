@@ -4,11 +4,13 @@ lower at the trials' pause."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
 import numpy as np
 import pytest
+from test_fit_known_camera import _rotation_error_deg
 
 from zooctl.benchdata.make import make_video
 from zooctl.fit.camera_init import SilhouetteScorer, initialise_camera, view_rotation
@@ -27,10 +29,6 @@ TINY = {
     "camera": {"azimuths": 4, "elevations": [10.0], "search_size": 32, "start_trial": "steady"},
     "trials": {"iters": 3},
 }
-
-
-def _turn_deg(A: np.ndarray, B: np.ndarray) -> float:
-    return math.degrees(math.acos(np.clip((np.trace(A.T @ B) - 1) / 2, -1.0, 1.0)))
 
 
 def _turning_masks(asset, az0: float, el: float, per_frame: float, frames: int, size: int, focal: float):
@@ -59,8 +57,8 @@ def test_the_steady_track_turns_with_a_steadily_turning_body(per_frame):
     init = initialise_camera(asset.vertices, asset.faces, masks, cfg, 1.0)
     truth = [CAMERA_ROTATION @ view_rotation(30.0 + per_frame * t, 20.0) for t in range(frames)]
     fitted = [CAMERA_ROTATION @ quat_to_matrix(q) for q in init.root_rotation]
-    assert abs(_turn_deg(fitted[0], fitted[-1]) - abs(per_frame) * (frames - 1)) < 15.0
-    assert max(_turn_deg(fitted[t], truth[t]) for t in range(0, frames, 6)) < 20.0
+    assert abs(_rotation_error_deg(fitted[0], fitted[-1]) - abs(per_frame) * (frames - 1)) < 15.0
+    assert max(_rotation_error_deg(fitted[t], truth[t]) for t in range(0, frames, 6)) < 20.0
     assert min(init.keyframe_iou) > 0.7
 
 
@@ -89,15 +87,9 @@ def test_the_start_trial_keeps_the_start_of_lower_loss_and_the_fit_goes_on_from_
     done = fit_video(video, thin, cfg, resume=kept.state)
     assert len(done.history["stage2"]) == cfg.stage2.iters
     # the kept start's own fit, unpaused, is the same fit
-    track = replace_track(cfg, info["kept"])
+    track = dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, track=info["kept"]))
     whole = fit_video(video, thin, track)
     np.testing.assert_allclose(done.iou, whole.iou, atol=1e-6)
-
-
-def replace_track(cfg: FitConfig, track: str) -> FitConfig:
-    import dataclasses
-
-    return dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, track=track))
 
 
 def test_fit_with_a_named_template_records_the_start_trial(tmp_path, store, capsys):

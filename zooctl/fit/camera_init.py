@@ -221,9 +221,7 @@ def initialise_camera(
     if camera_rotations is not None:
         # Keyframes over the whole video; a candidate is the root rotation at ``first``, and the
         # camera's motion carries it to every other frame.
-        frames = present[:: max(cfg.track_every, 1)]
-        if len(frames) > _MAX_KNOWN_KEYFRAMES:
-            frames = [frames[int(round(i))] for i in np.linspace(0, len(frames) - 1, _MAX_KNOWN_KEYFRAMES)]
+        frames = _spread_keyframes(present, cfg)
         follow = camera_follow(np.asarray(camera_rotations, np.float64), first)
         score = lambda rots, fs: _score_followed(scorer, follow, rots, frames, fs)  # noqa: E731
     else:
@@ -302,16 +300,14 @@ def _steady_turn(
     either way, in steps of ``track_step``, then a finer grid around the best (the start's azimuth
     too). Alone it loses more fits than it mends (BENCHMARKS.md, "Where the own rig's novel view is
     lost now"): `zooctl.fit.view_trial.start_trial` tries it beside the greedy track."""
-    keys = present[:: max(cfg.track_every, 1)]
-    if len(keys) > _MAX_KNOWN_KEYFRAMES:
-        keys = [keys[int(round(i))] for i in np.linspace(0, len(keys) - 1, _MAX_KNOWN_KEYFRAMES)]
+    keys = _spread_keyframes(present, cfg)
     span = max(present[-1] - first, 1)
     step = max(cfg.track_step, 1.0)
 
     def scored(cands: list[tuple[float, float, float, float]]) -> np.ndarray:
         total = np.zeros(len(cands))
         for k in keys:
-            rots = [view_rotation(*c[:3]) @ _yaw(c[3] * (k - first)) for c in cands]
+            rots = [view_rotation(c[0] + c[3] * (k - first), c[1], c[2]) for c in cands]
             total += scorer.score(rots, [k], [focal] * len(rots))
         return total / len(keys)
 
@@ -382,6 +378,15 @@ def _tracked(
 
 
 _MAX_KNOWN_KEYFRAMES = 10
+
+
+def _spread_keyframes(present: list[int], cfg: CameraConfig) -> list[int]:
+    """Every ``track_every``-th frame with a mask, at most `_MAX_KNOWN_KEYFRAMES` spread evenly
+    over them: the keyframes a whole-video score sums over."""
+    frames = present[:: max(cfg.track_every, 1)]
+    if len(frames) > _MAX_KNOWN_KEYFRAMES:
+        frames = [frames[int(round(i))] for i in np.linspace(0, len(frames) - 1, _MAX_KNOWN_KEYFRAMES)]
+    return frames
 
 
 def camera_follow(camera_rotations: np.ndarray, first: int) -> np.ndarray:
