@@ -154,6 +154,7 @@ def davis(args) -> None:
     from zooctl.fit.job import load_source
     from zooctl.fit.run import fit_video, input_mask_iou
     from zooctl.fit.template import select_template
+    from zooctl.fit.view_trial import template_start
     from zooctl.store.bank import Bank
 
     store = Path(args.store) if args.store else Path(tempfile.mkdtemp()) / "store"
@@ -163,8 +164,8 @@ def davis(args) -> None:
         bank = Bank(store)
     fixed = dict(t.split("=", 1) for t in args.template)
     print(f"machine: {machine()}; preset {args.preset}; store {store}")
-    print("| video | masks | frames | template (top 3 retrieval) | IoU vs annotations | wall s |")
-    print("|---|---|---|---|---|---|")
+    print("| video | masks | frames | template (top 3 retrieval) | start | IoU vs annotations | wall s |")
+    print("|---|---|---|---|---|---|---|")
     for name in args.videos:
         folder = SHARED / "videos" / name
         first = _first_annotation(folder)  # original pixels, as `--box` takes them
@@ -185,6 +186,13 @@ def davis(args) -> None:
             )
             cfg, _ = resolve_focal(cfg, video)  # the focal `zooctl fit` would use (`camera.focal_guess`)
             asset, cands, trial, _ = select_template(bank, fixed.get(name), video, cfg)
+            if trial is None:  # as `zooctl fit` starts a template given or left after the trials
+                kept = template_start(video, asset, cfg, name in fixed)
+                trial = None if kept is None else kept.state
+                view = {} if kept is None else kept.view or {}
+                start = view.get("start_trial", {}).get("kept", "greedy") + "/" + view.get("start", "search")
+            else:
+                start = "trials"
             res = fit_video(video, asset, cfg, resume=trial)
             wall = time.perf_counter() - t
             H, W = video.size
@@ -199,7 +207,7 @@ def davis(args) -> None:
                 or "fixed"
             )
             print(
-                f"| {name} | {kind} | {video.num_frames} | {asset.name} ({top}) | {iou:.3f} | {wall:.0f} |",
+                f"| {name} | {kind} | {video.num_frames} | {asset.name} ({top}) | {start} | {iou:.3f} | {wall:.0f} |",
                 flush=True,
             )
 

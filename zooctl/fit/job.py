@@ -503,24 +503,16 @@ def _run_and_write(
     t_trials: float | None,
     t_start: float,
 ) -> dict[str, Any]:
-    from .view_trial import mirror_wanted, start_trial, trial_with_mirror
+    from .view_trial import template_start
 
     mirror_s = None
     try:
-        if (
-            state is None
-            and template is not None
-            and cfg.camera.start_trial == "steady"
-            and cfg.ablation.optimise
-        ):
-            # a named template: its greedy and steady starts tried, each with its mirror check
-            kept = start_trial(video, asset, cfg, reporter, checkpoint)
-            state, mirror_s = kept.state, kept.view.get("extra_seconds")
-        elif state is None and mirror_wanted(cfg, template is not None) and cfg.ablation.optimise:
-            # No template trial ran: the template's own start gets its depth-mirror check here;
-            # the fit goes on from the trial kept (as if never paused when nothing was tried).
-            kept = trial_with_mirror(video, asset, cfg, reporter, checkpoint)
-            state, mirror_s = kept.state, kept.view.get("extra_seconds")
+        if state is None:
+            # no template trial ran: a named template's start is tried here (its depth mirror,
+            # and with `camera.start_trial` its steady track)
+            kept = template_start(video, asset, cfg, template is not None, reporter, checkpoint)
+            if kept is not None:
+                state, mirror_s = kept.state, kept.view.get("extra_seconds")
         result = fit_video(video, asset, cfg, reporter, checkpoint, state)
     except KeyboardInterrupt:
         record["status"] = "interrupted"

@@ -175,3 +175,24 @@ def start_trial(
     if kept.state is not None:
         kept.state["camera_init"] = dict(kept.state["camera_init"], view_trial=view)
     return TrialResult(kept.iou, kept.displacement, kept.state, view)
+
+
+def template_start(
+    video: FitVideo,
+    template: RiggedAsset,
+    cfg: FitConfig,
+    template_given: bool,
+    reporter: Reporter | None = None,
+    checkpoint: Callable[[dict[str, Any]], None] | None = None,
+) -> TrialResult | None:
+    """Where a fit with no template trials behind it starts: the kept trial of `start_trial` (a
+    named template with ``camera.start_trial = "steady"``) or of `trial_with_mirror` (when
+    `mirror_wanted`), or None (the fit starts from the camera search as it is)."""
+    if not cfg.ablation.optimise:
+        return None
+    if template_given and cfg.camera.start_trial == "steady":
+        return start_trial(video, template, cfg, reporter, checkpoint)
+    if mirror_wanted(cfg, template_given):
+        # the fit goes on from the trial kept (as if never paused when nothing was tried)
+        return trial_with_mirror(video, template, cfg, reporter, checkpoint)
+    return None
