@@ -174,3 +174,31 @@ def test_bench_run_reports_the_colour_error(tmp_path, store):
     assert plain["rows"][0]["input_psnr"] < row["input_psnr"]
     flat = run_benchmark(tmp_path / "flat", store, own_template=True, overrides=tiny_overrides())
     assert "view_psnr" not in flat["rows"][0] and "| n/a |" in markdown_table(flat)
+
+
+def test_a_world_background_moves_with_the_orbiting_camera_and_a_still_one_does_not(tmp_path):
+    """`bench make --background world`: the scene is fixed in the world, so the camera's turn read
+    from it (`zooctl.video.camera_motion`) is the benchmark camera's own; with the default still
+    background the scene stands still in the frame and reads as a camera at rest. The animal is
+    drawn the same over either."""
+    from zooctl.video.camera_motion import background_motion
+
+    asset = build_animal("quadruped", name="quad")
+    still = make_video(asset, tmp_path / "still", frames=13, size=160, seed=1, appearance="textured")
+    world = make_video(
+        asset, tmp_path / "world", frames=13, size=160, seed=1, appearance="textured", background="world"
+    )
+    assert json.loads((world / "meta.json").read_text())["background"] == "world"
+    assert "background" not in json.loads((still / "meta.json").read_text())
+    with np.load(still / "video.npz") as s, np.load(world / "video.npz") as w:
+        np.testing.assert_array_equal(s["masks"], w["masks"])
+        np.testing.assert_array_equal(s["frames"][s["masks"]], w["frames"][w["masks"]])
+        C, K = w["gt_cam_rotation"], w["intrinsics"]
+        moved = background_motion(w["frames"], w["masks"], float(K[0]), (K[2], K[3]))
+        rest = background_motion(s["frames"], s["masks"], float(K[0]), (K[2], K[3]))
+    truth = C[-1] @ C[0].T
+    turn = np.degrees(np.arccos(np.clip((np.trace(truth) - 1) / 2, -1, 1)))
+    assert turn > 10.0  # the camera did orbit
+    err = np.degrees(np.arccos(np.clip((np.trace(moved.rotations[-1] @ truth.T) - 1) / 2, -1, 1)))
+    assert moved.known.all() and err < 0.1 * turn
+    assert np.allclose(rest.rotations, np.eye(3), atol=1e-3)

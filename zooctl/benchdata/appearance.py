@@ -28,6 +28,7 @@ squared errors of every such pixel of a camera pooled; ``view_psnr`` the mean ov
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -80,15 +81,23 @@ class Coat:
         return np.clip(base * shade[:, None], 0, 1)
 
 
-def _fractal(h: int, w: int, rng: np.random.Generator, octaves: int = 6, base: int = 4) -> np.ndarray:
-    """(h, w) float in about [-1, 1]: value noise of ``octaves`` octaves (cubic upsampling)."""
+def _fractal(
+    h: int, w: int, rng: np.random.Generator, octaves: int = 6, base: int = 4, ref: int | None = None
+) -> np.ndarray:
+    """(h, w) float in about [-1, 1]: value noise of ``octaves`` octaves (cubic upsampling), octave
+    ``o`` of ``base * 2**o`` cells across the image, or with ``ref`` across every ``ref`` pixels of
+    each side (at most one a pixel: a large image gets the grain a ``ref``-pixel one has)."""
     import cv2
 
     out = np.zeros((h, w), np.float32)
     amp, total = 1.0, 0.0
     for o in range(octaves):
         n = base * 2**o
-        grid = rng.uniform(-1, 1, (n + 1, n + 1)).astype(np.float32)
+        if ref is None:
+            grid = rng.uniform(-1, 1, (n + 1, n + 1)).astype(np.float32)
+        else:
+            ny, nx = (min(side, math.ceil(n * side / ref)) + 1 for side in (h, w))
+            grid = rng.uniform(-1, 1, (ny, nx)).astype(np.float32)
         out += amp * cv2.resize(grid, (w, h), interpolation=cv2.INTER_CUBIC)
         total += amp
         amp *= 0.55
@@ -103,27 +112,75 @@ _GROUNDS = {  # sRGB
 }
 
 
-def natural_background(h: int, w: int, rng: np.random.Generator) -> np.ndarray:
-    """(h, w, 3) uint8: sky, hills and textured ground (module docstring)."""
+def natural_background(
+    h: int, w: int, rng: np.random.Generator, horizon_at: float | None = None, ref: int | None = None
+) -> np.ndarray:
+    """(h, w, 3) uint8: sky, hills and textured ground (module docstring); the horizon at a random
+    height, or at row ``horizon_at * h``; ``ref``: the texture's grain that of a ``ref``-pixel
+    image (`_fractal`), for a panorama."""
     names = list(_GROUNDS)
     a, b = rng.choice(len(names), 2, replace=False)
     near, far = np.array(_GROUNDS[names[a]], np.float32), np.array(_GROUNDS[names[b]], np.float32)
     horizon = rng.uniform(0.2, 0.45) * h
-    ridge = horizon + 0.06 * h * _fractal(1, w, rng, 4, 2)[0]  # (w,) the hills' outline
+    if horizon_at is not None:
+        horizon = horizon_at * h
+    ridge = horizon + 0.06 * h * _fractal(1, w, rng, 4, 2, ref=ref)[0]  # (w,) the hills' outline
     rows = np.arange(h, dtype=np.float32)[:, None]
     depth = np.clip((rows - horizon) / max(h - horizon, 1.0), 0, 1)  # 0 at the horizon, 1 at the bottom
-    mix = 0.5 + 0.5 * _fractal(h, w, rng)
+    mix = 0.5 + 0.5 * _fractal(h, w, rng, ref=ref)
     ground = near * mix[..., None] + far * (1 - mix[..., None])
-    grain = _fractal(h, w, rng, 7, 16)[..., None]
+    grain = _fractal(h, w, rng, 7, 16, ref=ref)[..., None]
     ground = ground * (1.0 + (0.12 + 0.2 * depth[..., None]) * grain) * (0.8 + 0.2 * depth[..., None])
     top, low = np.array([96, 146, 210], np.float32), np.array([196, 214, 228], np.float32)
     t = np.clip(rows / max(horizon, 1.0), 0, 1)[..., None]
-    sky = np.broadcast_to(top * (1 - t) + low * t, (h, w, 3)) + 6 * _fractal(h, w, rng, 3, 2)[..., None]
-    hills = np.array([92, 110, 104], np.float32) * (1.0 + 0.1 * _fractal(h, w, rng, 5, 8)[..., None])
+    sky = (
+        np.broadcast_to(top * (1 - t) + low * t, (h, w, 3))
+        + 6 * _fractal(h, w, rng, 3, 2, ref=ref)[..., None]
+    )
+    hills = np.array([92, 110, 104], np.float32) * (1.0 + 0.1 * _fractal(h, w, rng, 5, 8, ref=ref)[..., None])
     above = (rows < ridge[None])[..., None]  # (h, w, 1)
     hill = ((rows >= ridge[None]) & (rows < horizon + 0.04 * h))[..., None]
     img = np.where(above, sky, np.where(hill, hills, ground))
     return np.clip(img, 0, 255).astype(np.uint8)
+
+
+# The world scene's panorama: latitudes it covers (degrees) and its resolution (pixels a degree).
+_PANO_LAT = (40.0, -80.0)
+_PANO_PX_PER_DEG = 8.0
+
+
+def world_backgrounds(
+    rng: np.random.Generator,
+    intrinsics: np.ndarray,
+    rotations: np.ndarray,
+    size: tuple[int, int],
+) -> np.ndarray:
+    """(T, H, W, 3) uint8: a distant natural scene (`natural_background` laid round the camera as
+    an equirectangular panorama, the horizon level) as seen by cameras of ``intrinsics`` (fx, fy,
+    cx, cy) and world-to-camera ``rotations`` (T, 3, 3), OpenCV axes, world up +y. The scene is
+    fixed in the world, so it moves in the frame as the camera turns, as a real one does; its
+    seam lies behind the first camera."""
+    import cv2
+
+    top, bottom = _PANO_LAT
+    ph, pw = int((top - bottom) * _PANO_PX_PER_DEG), int(360 * _PANO_PX_PER_DEG)
+    pano = natural_background(ph, pw, rng, horizon_at=top / (top - bottom), ref=int(40 * _PANO_PX_PER_DEG))
+    H, W = size
+    fx, fy, cx, cy = (float(v) for v in intrinsics)
+    u, v = np.meshgrid(np.arange(W, dtype=np.float64) + 0.5, np.arange(H, dtype=np.float64) + 0.5)
+    rays = np.stack([(u - cx) / fx, (v - cy) / fy, np.ones_like(u)], -1)  # camera frame
+    ahead = rotations[0].T @ np.array([0.0, 0.0, 1.0])
+    lon0 = math.atan2(ahead[0], -ahead[2])
+    out = np.empty((len(rotations), H, W, 3), np.uint8)
+    for i, R in enumerate(np.asarray(rotations, np.float64)):
+        d = rays @ R  # world directions (R^T applied to each row)
+        d /= np.linalg.norm(d, axis=-1, keepdims=True)
+        lat = np.degrees(np.arcsin(np.clip(d[..., 1], -1, 1)))
+        lon = (np.degrees(np.arctan2(d[..., 0], -d[..., 2]) - lon0) + 180.0) % 360.0  # start view: 180
+        mx = (lon * _PANO_PX_PER_DEG).astype(np.float32)
+        my = np.clip((top - lat) * _PANO_PX_PER_DEG, 0, ph - 1).astype(np.float32)
+        out[i] = cv2.remap(pano, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
+    return out
 
 
 # -- the colour error ------------------------------------------------------------------------------

@@ -6,7 +6,9 @@ get a new random rotation (slerped between those keyframes) and the others hold 
 video's frame rate, played forwards and backwards, the root joints at their rest translation), an
 artist's motion in which the bones move as the animal does (an asset without clips gets
 ``random``). The camera orbits the animal, its azimuth moving by 15 to 22.5 degrees every 12
-frames; the light direction, ambient level and background are random. Saved per video, in
+frames; the light direction, ambient level and background are random. The background is still in
+the frame (``background="still"``, the default) or a distant scene fixed in the world that moves
+in the frame as the camera orbits (``world``). Saved per video, in
 ``DIR/<name>/``:
 
 - ``video.npz``: frames (T, H, W, 3) uint8, masks (T, H, W) bool, flow (T-1, H, W, 2) float16
@@ -23,7 +25,7 @@ frames; the light direction, ambient level and background are random. Saved per 
   scene instead of flat colours over a gradient) also ``gt_view_frames`` (C, T, H, W, 3) uint8,
   what those cameras see of the animal (black around it);
 - ``meta.json``: asset name, frames, size, fps, seed, the vertical field of view (``fov``), motion
-  (and the clip), ``appearance`` for a textured video; ``video.mp4``: the frames as H.264.
+  (and the clip), ``appearance`` for a textured video, ``background`` for a ``world`` one; ``video.mp4``: the frames as H.264.
 """
 
 from __future__ import annotations
@@ -39,12 +41,13 @@ from ..asset import RiggedAsset
 from ..errors import UsageError
 from ..geometry import compose_trs, quat_normalize, quat_slerp
 from ..store.fs import write_bytes_atomic, write_json_atomic
-from .appearance import APPEARANCES, Coat, natural_background
+from .appearance import APPEARANCES, Coat, natural_background, world_backgrounds
 
 KEY_EVERY = 12
 BONES_PER_KEY = 8
 # (azimuth, elevation) offsets in degrees of the held-out cameras from each frame's input camera.
 NOVEL_VIEWS = ((90.0, 0.0), (0.0, 35.0))
+BACKGROUNDS = ("still", "world")
 
 
 def _random_quat(rng: np.random.Generator, max_deg: float) -> np.ndarray:
@@ -198,7 +201,7 @@ def shade_frames(
         fid = frags.face_ids.numpy()
         m = fid >= 0
         for b, i in enumerate(idx):
-            img = bg.copy()
+            img = (bg[i] if bg.ndim == 4 else bg).copy()
             if coat is None:
                 img[m[b]] = shade[b][fid[b][m[b]]]
             else:
@@ -220,12 +223,17 @@ def make_video(
     clip: str | None = None,
     appearance: str = "flat",
     fov: float = 40.0,
+    background: str = "still",
 ) -> Path:
     """Render one test video of ``asset`` into ``out_dir/<asset.name>/`` (module docstring);
     ``fov``: the camera's vertical field of view in degrees (the held-out cameras' too);
     ``clip`` names the clip a ``motion="clips"`` video plays (default: one drawn at random);
     ``appearance`` ``textured``: a coat and a scene that a colour bake can be judged on
-    (`zooctl.benchdata.appearance`), and the held-out cameras' frames."""
+    (`zooctl.benchdata.appearance`), and the held-out cameras' frames. ``background``: ``still``,
+    one image fixed in the frame (a gradient, or the natural scene when textured), as if the
+    animal turned on a stand before a backdrop; ``world``, a distant natural scene fixed in the
+    world (`world_backgrounds`), which moves in the frame as the camera orbits, as a real
+    background does."""
     from ..io.video import write_mp4
     from ..render.camera import Camera
     from ..render.preview import fit_camera, orbit_camera
@@ -239,6 +247,8 @@ def make_video(
         raise UsageError(f"--motion {motion!r} is not one of {', '.join(MOTIONS)}")
     if appearance not in APPEARANCES:
         raise UsageError(f"--appearance {appearance!r} is not one of {', '.join(APPEARANCES)}")
+    if background not in BACKGROUNDS:
+        raise UsageError(f"--background {background!r} is not one of {', '.join(BACKGROUNDS)}")
     rng = np.random.default_rng([seed, sum(asset.name.encode())])
     # 12 more frames than shown: the last one is a held-out novel pose for the re-animation metric.
     played = clip_motion(asset, frames + KEY_EVERY, rng, fps, clip) if motion == "clips" else None
@@ -280,6 +290,10 @@ def make_video(
     if appearance == "textured":  # drawn apart: a flat video's draws stay what they were
         look = np.random.default_rng([seed, sum(asset.name.encode()), 1])
         coat, bg = Coat(asset, look), natural_background(size, size, look)
+    if background == "world":  # drawn apart too: a still video's draws stay what they were
+        bg = world_backgrounds(
+            np.random.default_rng([seed, sum(asset.name.encode()), 2]), K, Rs, (size, size)
+        )
     rgb, masks = shade_frames(asset, verts, cams, light / np.linalg.norm(light), ambient, bg, coat=coat)
     views = [orbit(da, de) for da, de in NOVEL_VIEWS]
     extra = {}
@@ -359,6 +373,7 @@ def make_video(
             "motion": "clips" if clip_name else "random",
             "clip": clip_name,
             **({"appearance": appearance} if coat is not None else {}),
+            **({"background": background} if background != "still" else {}),
         },
     )
     write_mp4(dest / "video.mp4", rgb, fps)

@@ -72,13 +72,28 @@ def make(
         "over a natural-looking scene, and the held-out cameras' frames, so `bench run` reports the "
         "fit's colour error (PSNR) from them.",
     ),
+    background: str = typer.Option(
+        "still",
+        "--background",
+        help="still: the background image fixed in the frame, as if the animal turned before a backdrop; "
+        "world: a distant natural scene fixed in the world, moving in the frame as the camera orbits "
+        "(what a real camera sees; the fit's `camera.motion background` reads the camera's turn from it).",
+    ),
 ) -> None:
     """Render PlanetZoo-style test videos with ground truth (motion, camera, masks, flow)."""
     from ..benchdata.make import make_video
 
     for _name, load in _assets(bank, asset):
         dest = make_video(
-            load(), out, frames=frames, size=size, seed=seed, motion=motion, appearance=appearance, fov=fov
+            load(),
+            out,
+            frames=frames,
+            size=size,
+            seed=seed,
+            motion=motion,
+            appearance=appearance,
+            fov=fov,
+            background=background,
         )
         console.print(f"made {dest}", highlight=False, markup=False)
 

@@ -17,6 +17,13 @@ candidate is scored on keyframes spread over the whole video. Silhouettes alone 
 animal turning one way from its depth mirror turning the other; the camera's known motion can.
 An animal that itself turns far in the world (a fish swimming round) gets the one orientation
 that fits its keyframes best, and the optimisation has to follow the rest.
+
+With the camera's motion estimated from the background (``camera.motion = "background"``,
+`zooctl.video.camera_motion`), the camera's turn is a prediction, not a fact: the tracker's small
+grid is centred on the previous keyframe carried by the camera's turn since, so the animal's own
+turn is still searched, and each of a few distinct good starts is tracked that way, the track
+whose keyframes fit best kept (a start and its mirror cast the same first frames; turned by the
+camera over the video, only one of them keeps fitting).
 """
 
 from __future__ import annotations
@@ -181,6 +188,7 @@ def initialise_camera(
     camera_rotations: np.ndarray | None = None,
     start: np.ndarray | None = None,
     turned: bool = False,
+    camera_motion: np.ndarray | None = None,
 ) -> CameraInit:
     """Search focal and viewpoint, track the root rotation, align every frame (module docstring).
 
@@ -192,7 +200,11 @@ def initialise_camera(
     ``start``: (3, 3) the first frame's root rotation, known (a window of a long clip continuing
     the one before it): no search, only the tracking and the alignment, at ``cfg.focal``.
     ``turned``: start from the best view at least 90 degrees of azimuth from the search's best
-    instead (the animal facing the other way). Returns a `CameraInit` in fit pixels.
+    instead (the animal facing the other way). ``camera_motion``: (T, 3, 3) world-to-camera
+    rotations estimated from the background (`zooctl.video.camera_motion`), a prediction: the
+    search and the tracker score each frame's rotation carried by the camera's turn since the
+    search's frame, the animal's own turn still searched (ignored when ``camera_rotations`` are
+    known). Returns a `CameraInit` in fit pixels.
     """
     T, H, W = masks.shape
     principal = principal if principal is not None else (W / 2, H / 2)
@@ -202,12 +214,36 @@ def initialise_camera(
     head = [t for t in present if t < first + max(cfg.track_every, 1)]
     frames = [head[int(round(i))] for i in np.linspace(0, len(head) - 1, min(cfg.search_frames, len(head)))]
     frames = sorted(set(frames))
+    follow = None
+    if camera_motion is not None and camera_rotations is None:
+        follow = camera_follow(np.asarray(camera_motion, np.float64), first)
+
+    def track(
+        rotation: np.ndarray, focal: float, iou: float, top: list, turn: float | None = None
+    ) -> CameraInit:
+        return _tracked(
+            scorer,
+            masks,
+            cfg,
+            rest,
+            principal,
+            present,
+            first,
+            rotation,
+            focal,
+            iou,
+            top,
+            fit_scale,
+            turn,
+            follow,
+        )
+
     if start is not None:
         if cfg.focal is None:
             raise ValueError("a known start rotation needs a known focal")
         focal = float(cfg.focal)
         iou = float(scorer.score([start], [first], [focal])[0])
-        return _tracked(scorer, masks, cfg, rest, principal, present, first, start, focal, iou, [], fit_scale)
+        return track(start, focal, iou, [])
     if cfg.focal is not None:
         focals = [float(cfg.focal)]
     else:
@@ -222,7 +258,9 @@ def initialise_camera(
         # Keyframes over the whole video; a candidate is the root rotation at ``first``, and the
         # camera's motion carries it to every other frame.
         frames = _spread_keyframes(present, cfg)
-        follow = camera_follow(np.asarray(camera_rotations, np.float64), first)
+        known = camera_follow(np.asarray(camera_rotations, np.float64), first)
+        score = lambda rots, fs: _score_followed(scorer, known, rots, frames, fs)  # noqa: E731
+    elif follow is not None:
         score = lambda rots, fs: _score_followed(scorer, follow, rots, frames, fs)  # noqa: E731
     else:
         score = lambda rots, fs: scorer.score(rots, frames, fs)  # noqa: E731
@@ -245,21 +283,33 @@ def initialise_camera(
     # Local refinement: a finer grid around the best view (and focal, unless given).
     step = 360.0 / cfg.azimuths / 2
     fsteps = [1.0] if cfg.focal is not None else [0.85, 1.0, 1.18]
-    local = [
-        (best[0] + da, best[1] + de, best[2] + dr, best[3] * fs)
-        for da in (-step, 0.0, step)
-        for de in (-step / 2, 0.0, step / 2)
-        for dr in (-step / 2, 0.0, step / 2)
-        for fs in fsteps
-    ]
-    lscores = score([view_rotation(*c[:3]) for c in local], [c[3] for c in local])
-    best = local[int(np.argmax(lscores))]
-    iou = float(lscores.max())
+
+    def refine(c: tuple[float, float, float, float]) -> tuple[tuple[float, float, float, float], float]:
+        local = [
+            (c[0] + da, c[1] + de, c[2] + dr, c[3] * fs)
+            for da in (-step, 0.0, step)
+            for de in (-step / 2, 0.0, step / 2)
+            for dr in (-step / 2, 0.0, step / 2)
+            for fs in fsteps
+        ]
+        lscores = score([view_rotation(*x[:3]) for x in local], [x[3] for x in local])
+        return local[int(np.argmax(lscores))], float(lscores.max())
+
+    if follow is not None and cfg.track != "steady":
+        # The first frames cannot tell a view from its mirror turning the other way; the camera's
+        # turn over the whole video can: each distinct good start is tracked, the best track kept.
+        starts = _distinct_starts([cands[i] for i in order])
+        tracks = []
+        for c in starts:
+            b, i = refine(c)
+            tracks.append(track(view_rotation(*b[:3]), b[3], i, top))
+        return max(tracks, key=lambda x: float(np.mean(x.keyframe_iou)))
+    best, iou = refine(best)
     focal = best[3]
     if camera_rotations is not None:
         R0 = view_rotation(*best[:3])
-        rot_q = np.stack([matrix_to_quat(follow[t] @ R0) for t in range(T)])
-        key_iou = [float(scorer.score([follow[k] @ R0], [k], [focal])[0]) for k in frames]
+        rot_q = np.stack([matrix_to_quat(known[t] @ R0) for t in range(T)])
+        key_iou = [float(scorer.score([known[k] @ R0], [k], [focal])[0]) for k in frames]
         return CameraInit(
             focal * fit_scale,
             rot_q,
@@ -270,11 +320,34 @@ def initialise_camera(
         )
     rotation = view_rotation(*best[:3])
     if cfg.track == "steady":
-        start, turn = _steady_turn(scorer, cfg, present, first, best[:3], focal)
-        return _tracked(
-            scorer, masks, cfg, rest, principal, present, first, start, focal, iou, top, fit_scale, turn
-        )
-    return _tracked(scorer, masks, cfg, rest, principal, present, first, rotation, focal, iou, top, fit_scale)
+        start, turn = _steady_turn(scorer, cfg, present, first, best[:3], focal, follow)
+        return track(start, focal, iou, top, turn)
+    return track(rotation, focal, iou, top)
+
+
+_MOTION_STARTS = 4  # distinct starts tracked when the camera's motion is estimated
+_DISTINCT_DEG = 60.0
+
+
+def _distinct_starts(
+    ranked: list[tuple[float, float, float, float]],
+) -> list[tuple[float, float, float, float]]:
+    """The best `_MOTION_STARTS` of ``ranked`` candidates (azimuth, elevation, roll, focal; best
+    first) whose views differ pairwise by at least `_DISTINCT_DEG` degrees of rotation."""
+    kept: list[tuple[float, float, float, float]] = []
+    rots: list[np.ndarray] = []
+    for c in ranked:
+        R = view_rotation(*c[:3])
+        if all(_angle(R @ Q.T) >= _DISTINCT_DEG for Q in rots):
+            kept.append(c)
+            rots.append(R)
+            if len(kept) == _MOTION_STARTS:
+                break
+    return kept
+
+
+def _angle(R: np.ndarray) -> float:
+    return math.degrees(math.acos(float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
 
 
 def _yaw(degrees: float) -> np.ndarray:
@@ -288,6 +361,7 @@ def _steady_turn(
     first: int,
     start: tuple[float, float, float],
     focal: float,
+    follow: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float]:
     """(the start rotation at ``first``, the turn in degrees per frame about the template's up
     axis) whose steady turn best fits keyframes spread over the whole video.
@@ -299,7 +373,9 @@ def _steady_turn(
     search's best view (azimuth, elevation, roll); turns over the video of up to one full circle
     either way, in steps of ``track_step``, then a finer grid around the best (the start's azimuth
     too). Alone it loses more fits than it mends (BENCHMARKS.md, "Where the own rig's novel view is
-    lost now"): `zooctl.fit.view_trial.start_trial` tries it beside the greedy track."""
+    lost now"): `zooctl.fit.view_trial.start_trial` tries it beside the greedy track. ``follow``
+    (`camera_follow` of the camera's estimated motion): the turn is the animal's own, the camera's
+    carried on top."""
     keys = _spread_keyframes(present, cfg)
     span = max(present[-1] - first, 1)
     step = max(cfg.track_step, 1.0)
@@ -308,6 +384,8 @@ def _steady_turn(
         total = np.zeros(len(cands))
         for k in keys:
             rots = [view_rotation(c[0] + c[3] * (k - first), c[1], c[2]) for c in cands]
+            if follow is not None:
+                rots = [follow[k] @ R for R in rots]
             total += scorer.score(rots, [k], [focal] * len(rots))
         return total / len(keys)
 
@@ -337,15 +415,18 @@ def _tracked(
     top: list[dict[str, float]],
     fit_scale: float,
     turn: float | None = None,
+    follow: np.ndarray | None = None,
 ) -> CameraInit:
     """The root rotation tracked over keyframes from ``rotation`` at frame ``first``, every
     frame aligned to its mask's box (the camera search's last steps). ``turn`` (degrees a frame
     about the template's up axis, `_steady_turn`): each keyframe's small turns are of the steady
-    turn's prediction, at half the step, instead of the keyframe before."""
+    turn's prediction, at half the step, instead of the keyframe before. ``follow`` (T, 3, 3)
+    (`camera_follow` of the camera's estimated motion): the prediction is carried by the camera's
+    turn since the keyframe before (since ``first`` for the steady turn's)."""
     T = len(masks)
     key_rot = {first: rotation}
     key_iou = [iou]
-    prev = key_rot[first]
+    prev, last = key_rot[first], first
     ts = cfg.track_step if turn is None else cfg.track_step / 2
     deltas = [
         view_rotation(a, e, r) for a in (-ts, 0.0, ts) for e in (-ts, 0.0, ts) for r in (-ts / 2, 0.0, ts / 2)
@@ -355,9 +436,13 @@ def _tracked(
             continue
         if turn is not None:
             prev = rotation @ _yaw(turn * (k - first))
+            if follow is not None:
+                prev = follow[k] @ prev
+        elif follow is not None:
+            prev = follow[k] @ follow[last].T @ prev
         rots = [prev @ d for d in deltas] + [d @ prev for d in deltas]
         sc = scorer.score(rots, [k], [focal] * len(rots))
-        prev = rots[int(np.argmax(sc))]
+        prev, last = rots[int(np.argmax(sc))], k
         key_rot[k] = prev
         key_iou.append(float(sc.max()))
     # Per-frame rotations by slerp between keyframes (held constant outside them).

@@ -25,6 +25,7 @@ MIRROR_TRIALS = ("given", "always", "never")
 FOCAL_GUESSES = ("normal", "search")
 TRACKERS = ("greedy", "steady")
 START_TRIALS = ("none", "steady")
+CAMERA_MOTIONS = ("given", "background", "none")
 PRESET_NAMES = ("fast", "quality")
 _RATE = {"exclusiveMinimum": 0}
 _WEIGHT = {"minimum": 0}
@@ -71,6 +72,16 @@ class CameraConfig:
         "turn of the one before) or steady (a start and a steady turn about the animal's up axis scored "
         "over the whole video, then each keyframe the best small turn of that prediction)",
         enum=TRACKERS,
+    )
+    motion: str = spec(
+        "given",
+        help="the camera's turn between frames read from the background's motion outside the animal "
+        "(zooctl.video.camera_motion) carries the tracker's prediction, and a few distinct starts are "
+        "tracked so, the best kept: given (for a template the user named), background (every template, "
+        "retrieval's candidates too), none (the tracker assumes a camera at rest). Pairs of frames it "
+        "cannot read count as at rest, a camera turning less than track_step over the video as at rest; "
+        "known camera rotations take precedence",
+        enum=CAMERA_MOTIONS,
     )
     start_trial: str = spec(
         "none",
@@ -450,11 +461,14 @@ class FitConfig:
 
     def for_named_template(self) -> FitConfig:
         """This config for a template the user named: stage 2's joints at ``lr_joints_given``
-        (when set) instead of ``lr_joints``. A copy; the fit's record keeps the rate it used."""
-        st = self.stage2
-        if st.lr_joints_given is None:
-            return self
-        return dataclasses.replace(self, stage2=dataclasses.replace(st, lr_joints=st.lr_joints_given))
+        (when set) instead of ``lr_joints``, and ``camera.motion`` ``given`` as ``background``. A
+        copy; the fit's record keeps what it used."""
+        out, st = self, self.stage2
+        if st.lr_joints_given is not None:
+            out = dataclasses.replace(out, stage2=dataclasses.replace(st, lr_joints=st.lr_joints_given))
+        if out.camera.motion == "given":
+            out = dataclasses.replace(out, camera=dataclasses.replace(out.camera, motion="background"))
+        return out
 
     def keep_shape(self) -> FitConfig:
         """This config with the template's shape, bone lengths and skinning kept (`KEEP_SHAPE`):

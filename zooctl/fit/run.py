@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -218,13 +219,17 @@ def _fit_window(
                 f"{template.name} has no clips to learn joint limits from: weights.joint_limits does nothing"
             )
     if held is not None:
-        held.place(scene, crop, cfg, s, (W / 2 - x0, H / 2 - y0), H)
+        motion, motion_used = _camera_motion(video, cfg)
+        held.place(
+            scene, crop, cfg, s, (W / 2 - x0, H / 2 - y0), H, motion.rotations if motion_used else None
+        )
         cam_info: dict[str, Any] = {}
         history: dict[str, list[dict[str, float]]] = {"stage1": [], "stage2": []}
         start_stage, start_iter, opt_state, colours = 1, 0, None, None
     elif resume is None:
         rep.message("searching the camera and viewpoint")
         t1 = time.perf_counter()
+        motion, motion_used = _camera_motion(video, cfg)
         rest = scene.rest_vertices().cpu().numpy()
         init = initialise_camera(
             rest,
@@ -237,6 +242,7 @@ def _fit_window(
             H,
             video.camera_rotations,
             turned=start == "turned",
+            camera_motion=motion.rotations if motion_used else None,
         )
         elevation = view_elevation(init.root_rotation)
         if start == "mirror":
@@ -247,6 +253,8 @@ def _fit_window(
             scene.root_translation.copy_(torch.as_tensor(init.root_translation, dtype=torch.float32))
         timings["camera"] = time.perf_counter() - t1
         cam_info = _camera_info(init, s) | {"elevation_deg": elevation}
+        if motion is not None:
+            cam_info["motion"] = {"from": "background", "used": motion_used} | motion.summary()
         history = {"stage1": [], "stage2": []}
         start_stage, start_iter, opt_state, colours = 1, 0, None, None
     else:
@@ -290,6 +298,30 @@ def _colour_targets(video: FitVideo, box: tuple[int, int, int, int], h: int, w: 
     if key not in video.cache:
         video.cache[key] = colour_targets(video.frames, box, h, w, device)
     return video.cache[key]
+
+
+def estimated_camera_motion(video: FitVideo, cfg: FitConfig) -> Any:
+    """The camera's turn read from the background (`zooctl.video.camera_motion.background_motion`)
+    when ``camera.motion`` is ``background`` and the camera's rotations are not known, else None;
+    kept in ``video.cache`` for the template trials' fits. Read at the fit's focal (a normal lens
+    when the camera search is to choose it)."""
+    if cfg.camera.motion != "background" or video.camera_rotations is not None:
+        return None
+    H, W = video.size
+    focal = float(cfg.camera.focal) if cfg.camera.focal is not None else math.hypot(W, H)
+    key = ("camera_motion", round(focal, 3))
+    if key not in video.cache:
+        from ..video.camera_motion import background_motion
+
+        video.cache[key] = background_motion(video.frames, video.masks, focal, seed=cfg.seed)
+    return video.cache[key]
+
+
+def _camera_motion(video: FitVideo, cfg: FitConfig) -> tuple[Any, bool]:
+    """(`estimated_camera_motion`, whether the camera search uses it): a camera that turns less
+    than the tracker's step over the video tells no start from another, and is taken as at rest."""
+    motion = estimated_camera_motion(video, cfg)
+    return motion, motion is not None and motion.span_deg() >= cfg.camera.track_step
 
 
 def new_scene(
@@ -382,11 +414,13 @@ class _Held:
         s: float,
         principal: tuple[float, float],
         H: int,
+        camera_motion: np.ndarray | None = None,
     ) -> None:
         """The window's ``scene`` (its first `anchors` frames the fitted ones before it): the
         body and the focal from the whole clip's fit, the anchors' pose and root, the root
-        tracked on from the last anchor's and each frame aligned to its mask, the joints at the
-        last anchor's pose."""
+        tracked on from the last anchor's (carried by ``camera_motion``, the window's camera
+        turn, when given) and each frame aligned to its mask, the joints at the last anchor's
+        pose."""
         from ..geometry import quat_to_matrix
 
         whole, a, lo = self.whole.scene, self.anchors, self.span[0]
@@ -409,6 +443,7 @@ class _Held:
             H,
             None,
             start=start,
+            camera_motion=camera_motion,
         )
         with torch.no_grad():
             scene.log_focal.fill_(float(np.log(focal_px * s)))
