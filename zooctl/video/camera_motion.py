@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -43,7 +43,6 @@ class CameraMotion:
     rotations: np.ndarray
     known: np.ndarray
     points: np.ndarray
-    info: dict[str, Any] = field(default_factory=dict)
 
     def span_deg(self) -> float:
         """The largest turn of any frame from the first, in degrees."""
@@ -70,10 +69,10 @@ def _angle_deg(R: np.ndarray) -> float:
     return math.degrees(math.acos(float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
 
 
-def kabsch(a: np.ndarray, b: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
+def kabsch(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """(3, 3) the rotation R that best maps unit rays ``a`` (N, 3) onto ``b`` (N, 3) (``b ~ a @ R.T``),
-    least squares with optional weights ``w`` (N,)."""
-    H = (a if w is None else a * w[:, None]).T @ b
+    least squares."""
+    H = a.T @ b
     U, _, Vt = np.linalg.svd(H)
     d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
     return Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
