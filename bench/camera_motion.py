@@ -13,17 +13,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import time
 from pathlib import Path
 
 import numpy as np
 
+from zooctl.geometry import rotation_angle_deg
 from zooctl.video.camera_motion import background_motion
-
-
-def _angle(R: np.ndarray) -> float:
-    return math.degrees(math.acos(float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
 
 
 def main() -> None:
@@ -46,10 +42,10 @@ def main() -> None:
         m = background_motion(frames, masks, float(K[0]), (float(K[2]), float(K[3])))
         sec = time.perf_counter() - t
         truth = C @ C[0].T
-        worst = max(_angle(m.rotations[i] @ truth[i].T) for i in range(len(C)))
+        worst = max(rotation_angle_deg(m.rotations[i] @ truth[i].T) for i in range(len(C)))
         row = {
             "video": d.name,
-            "true_turn_deg": round(max(_angle(R) for R in truth), 2),
+            "true_turn_deg": round(max(rotation_angle_deg(R) for R in truth), 2),
             "read_turn_deg": round(m.span_deg(), 2),
             "worst_error_deg": round(worst, 3),
             "pairs_read": int(m.known.sum()),

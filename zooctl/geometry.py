@@ -129,6 +129,11 @@ def quat_slerp(q0: np.ndarray, q1: np.ndarray, t: np.ndarray | float) -> np.ndar
     return quat_normalize(w0 * q0 + w1 * q1)
 
 
+def rotation_angle_deg(R: np.ndarray) -> float:
+    """The angle in degrees of the (3, 3) rotation ``R`` (how far it turns, about any axis)."""
+    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
+
+
 def compose_trs(t: np.ndarray, q: np.ndarray, s: np.ndarray) -> np.ndarray:
     """Translation (..., 3), rotation wxyz (..., 4), scale (..., 3) -> (..., 4, 4) = T @ R @ S."""
     t = np.asarray(t, dtype=np.float64)

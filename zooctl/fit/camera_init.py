@@ -29,11 +29,11 @@ camera over the video, only one of them keeps fitting).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..geometry import matrix_to_quat, quat_slerp, quat_to_matrix
+from ..geometry import matrix_to_quat, quat_slerp, quat_to_matrix, rotation_angle_deg
 from .config import CameraConfig
 from .scene import CAMERA_ROTATION
 
@@ -219,7 +219,12 @@ def initialise_camera(
         follow = camera_follow(np.asarray(camera_motion, np.float64), first)
 
     def track(
-        rotation: np.ndarray, focal: float, iou: float, top: list, turn: float | None = None
+        rotation: np.ndarray,
+        focal: float,
+        iou: float,
+        top: list,
+        turn: float | None = None,
+        place: bool = True,
     ) -> CameraInit:
         return _tracked(
             scorer,
@@ -236,6 +241,7 @@ def initialise_camera(
             fit_scale,
             turn,
             follow,
+            place,
         )
 
     if start is not None:
@@ -302,8 +308,11 @@ def initialise_camera(
         tracks = []
         for c in starts:
             b, i = refine(c)
-            tracks.append(track(view_rotation(*b[:3]), b[3], i, top))
-        return max(tracks, key=lambda x: float(np.mean(x.keyframe_iou)))
+            tracks.append(track(view_rotation(*b[:3]), b[3], i, top, place=False))
+        kept = max(tracks, key=lambda x: float(np.mean(x.keyframe_iou)))
+        focal = kept.focal / fit_scale
+        trans = _box_translations(scorer, masks, kept.root_rotation, rest, focal, principal, present)
+        return replace(kept, root_translation=trans)
     best, iou = refine(best)
     focal = best[3]
     if camera_rotations is not None:
@@ -338,16 +347,12 @@ def _distinct_starts(
     rots: list[np.ndarray] = []
     for c in ranked:
         R = view_rotation(*c[:3])
-        if all(_angle(R @ Q.T) >= _DISTINCT_DEG for Q in rots):
+        if all(rotation_angle_deg(R @ Q.T) >= _DISTINCT_DEG for Q in rots):
             kept.append(c)
             rots.append(R)
             if len(kept) == _MOTION_STARTS:
                 break
     return kept
-
-
-def _angle(R: np.ndarray) -> float:
-    return math.degrees(math.acos(float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
 
 
 def _yaw(degrees: float) -> np.ndarray:
@@ -416,13 +421,15 @@ def _tracked(
     fit_scale: float,
     turn: float | None = None,
     follow: np.ndarray | None = None,
+    place: bool = True,
 ) -> CameraInit:
     """The root rotation tracked over keyframes from ``rotation`` at frame ``first``, every
     frame aligned to its mask's box (the camera search's last steps). ``turn`` (degrees a frame
     about the template's up axis, `_steady_turn`): each keyframe's small turns are of the steady
     turn's prediction, at half the step, instead of the keyframe before. ``follow`` (T, 3, 3)
     (`camera_follow` of the camera's estimated motion): the prediction is carried by the camera's
-    turn since the keyframe before (since ``first`` for the steady turn's)."""
+    turn since the keyframe before (since ``first`` for the steady turn's). ``place`` False: no
+    per-frame box alignment (the translations left zero), for a track that may not be kept."""
     T = len(masks)
     key_rot = {first: rotation}
     key_iou = [iou]
@@ -458,7 +465,11 @@ def _tracked(
         else:
             a = (t - keys[j]) / (keys[j + 1] - keys[j])
             rot_q[t] = quat_slerp(kq[j], kq[j + 1], a)
-    trans = _box_translations(scorer, masks, rot_q, rest, focal, principal, present)
+    trans = (
+        _box_translations(scorer, masks, rot_q, rest, focal, principal, present)
+        if place
+        else np.zeros((T, 3))
+    )
     return CameraInit(focal * fit_scale, rot_q, trans, top, iou, key_iou)
 
 

@@ -300,13 +300,15 @@ def _colour_targets(video: FitVideo, box: tuple[int, int, int, int], h: int, w: 
     return video.cache[key]
 
 
-def estimated_camera_motion(video: FitVideo, cfg: FitConfig) -> Any:
-    """The camera's turn read from the background (`zooctl.video.camera_motion.background_motion`)
-    when ``camera.motion`` is ``background`` and the camera's rotations are not known, else None;
-    kept in ``video.cache`` for the template trials' fits. Read at the fit's focal (a normal lens
-    when the camera search is to choose it)."""
+def _camera_motion(video: FitVideo, cfg: FitConfig) -> tuple[Any, bool]:
+    """(the camera's turn read from the background, `zooctl.video.camera_motion.background_motion`,
+    or None; whether the camera search uses it). Read when ``camera.motion`` is ``background`` and
+    the camera's rotations are not known, at the fit's focal (a normal lens when the camera search
+    is to choose it), and kept in ``video.cache`` for the template trials' fits. Used when the
+    camera turns at least the tracker's step over the video: less tells no start from another,
+    and is taken as at rest."""
     if cfg.camera.motion != "background" or video.camera_rotations is not None:
-        return None
+        return None, False
     H, W = video.size
     focal = float(cfg.camera.focal) if cfg.camera.focal is not None else math.hypot(W, H)
     key = ("camera_motion", round(focal, 3))
@@ -314,14 +316,8 @@ def estimated_camera_motion(video: FitVideo, cfg: FitConfig) -> Any:
         from ..video.camera_motion import background_motion
 
         video.cache[key] = background_motion(video.frames, video.masks, focal, seed=cfg.seed)
-    return video.cache[key]
-
-
-def _camera_motion(video: FitVideo, cfg: FitConfig) -> tuple[Any, bool]:
-    """(`estimated_camera_motion`, whether the camera search uses it): a camera that turns less
-    than the tracker's step over the video tells no start from another, and is taken as at rest."""
-    motion = estimated_camera_motion(video, cfg)
-    return motion, motion is not None and motion.span_deg() >= cfg.camera.track_step
+    motion = video.cache[key]
+    return motion, motion.span_deg() >= cfg.camera.track_step
 
 
 def new_scene(

@@ -15,12 +15,13 @@ silhouette (`zooctl.fit.camera_init`), never as a known camera.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+from ..geometry import rotation_angle_deg
 
 # Working size (longest side, pixels) and the tracker's settings.
 _WORK_SIDE = 320
@@ -46,14 +47,16 @@ class CameraMotion:
 
     def span_deg(self) -> float:
         """The largest turn of any frame from the first, in degrees."""
-        return max((_angle_deg(R) for R in self.rotations), default=0.0)
+        return max((rotation_angle_deg(R) for R in self.rotations), default=0.0)
 
     def summary(self) -> dict[str, Any]:
         """What fit.json records: pairs measured, the median points, the turn over the video."""
         T = len(self.rotations)
-        total = _angle_deg(self.rotations[-1]) if T > 1 else 0.0
+        total = rotation_angle_deg(self.rotations[-1]) if T > 1 else 0.0
         path = sum(
-            _angle_deg(self.rotations[t + 1] @ self.rotations[t].T) for t in range(T - 1) if self.known[t]
+            rotation_angle_deg(self.rotations[t + 1] @ self.rotations[t].T)
+            for t in range(T - 1)
+            if self.known[t]
         )
         return {
             "span_deg": round(self.span_deg(), 1),
@@ -63,10 +66,6 @@ class CameraMotion:
             "turn_deg": round(float(path), 1),
             "net_turn_deg": round(float(total), 1),
         }
-
-
-def _angle_deg(R: np.ndarray) -> float:
-    return math.degrees(math.acos(float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
 
 
 def kabsch(a: np.ndarray, b: np.ndarray) -> np.ndarray:
