@@ -4,6 +4,7 @@ chosen leave-one-video-out (issue 50: the novel view with retrieved templates).
     python bench/trial_pick.py log DIR --store STORE --out LOG.jsonl [--part I/N] [--own-template] [--turned]
         [--candidates N --skip-logged LOG.jsonl ...]
     python bench/trial_pick.py choose LOG.jsonl [LOG2.jsonl ...] [--finished RUN.json] [--candidates N]
+        [--displacement W]
 
 ``log`` runs, for every benchmark video of DIR (`zooctl bench make`; its own asset excluded from
 retrieval, as `zooctl bench run` does), the template trials of ``--preset fast`` as
@@ -12,7 +13,8 @@ stage-2 iterations), and for every candidate's trial writes its trial IoU, seman
 benchmark's 3D metrics at the pause (`zooctl.fit.metrics.evaluate_fit`: novel view, mIoU, Joint)
 and what the trial did to the template to get there: its joints' mean and 90th-percentile angle
 from the rest pose, their frame-to-frame angle, the bones' stretch, the skinning weights' drift
-(the KL of the skin prior), the displacement, and every loss term over the last 25 steps.
+(the KL of the skin prior), the displacement, every loss term over the last 25 steps, and, where
+the camera's turn is read from the background, how the root turns in the world (`world_turn`).
 ``--own-template``: each video's own asset the only candidate (fitted as a named template is,
 from the search's start or its depth mirror: `trial_with_mirror`);
 ``--turned``: each candidate also tried from the camera search's best view at least 90 degrees of
@@ -20,8 +22,9 @@ azimuth from its pick (`fit_video`'s ``start="turned"``). ``--candidates N``: re
 (the family's best moved up to the N-th place, as the fit does), less those ``--skip-logged``
 logs hold.
 
-``choose`` scores pick rules on the logged videos: the rule before the displacement term (trial
-IoU + 0.1 x semantic), the oracle (the best novel view among the tried), and that score less
+``choose`` scores pick rules on the logged videos: the base rule (trial IoU + 0.1 x semantic, less
+``--displacement`` W times the displacement: 0, the rule before the displacement term, by
+default; 1.5 today's), the oracle (the best novel view among the tried), and that score less
 lambda x one feature, with lambda chosen on all videos (in-sample) and leave-one-video-out (chosen
 on the others, scored on the held-out one), by the mean novel view at the trials' end.
 ``--finished`` (a `zooctl bench run --json` of the same videos) checks how well the trial's novel
@@ -52,6 +55,8 @@ FEATURES = (
     "displacement",
     "loss_total",
     "loss_prior",
+    "world_step_deg",
+    "world_spread_deg",
 )
 # a geometric grid per feature, from about a tenth to about ten times what a typical spread of the
 # feature between candidates is worth in trial IoU (0.01)
@@ -64,8 +69,31 @@ LAMBDAS = {
     "displacement": tuple(0.01 / 0.01 * 2.0**k for k in range(-3, 5)),
     "loss_total": tuple(0.01 / 0.02 * 2.0**k for k in range(-3, 5)),
     "loss_prior": tuple(0.01 / 0.003 * 2.0**k for k in range(-3, 5)),
+    "world_step_deg": tuple(0.01 / 0.5 * 2.0**k for k in range(-3, 5)),
+    "world_spread_deg": tuple(0.01 / 5.0 * 2.0**k for k in range(-3, 5)),
 }
 PRIOR_TERMS = ("smooth", "symmetry", "bone_length", "skin", "displacement", "pose", "root_smooth", "scale")
+
+
+def world_turn(res, follow: np.ndarray | None) -> dict[str, float]:
+    """How the trial's root turns in the world, the camera's turn read from the background
+    (``follow``, `zooctl.fit.camera_init.camera_follow`) taken out: the mean angle between
+    consecutive frames (``world_step_deg``) and the mean angle of each frame from their mean
+    orientation (``world_spread_deg``). A template that explains an orbiting camera's video by
+    spinning or wobbling its body where the camera turned round it is the wrong shape. NaN where
+    the turn was not read (a camera at rest tells nothing)."""
+    from zooctl.geometry import quat_to_matrix, rotation_angle_deg
+
+    if follow is None:
+        return {"world_step_deg": float("nan"), "world_spread_deg": float("nan")}
+    q = res.scene.root_rotation.detach().cpu().numpy().astype(np.float64)
+    R = quat_to_matrix(q / np.linalg.norm(q, axis=-1, keepdims=True))
+    W = np.transpose(follow, (0, 2, 1)) @ R
+    steps = [rotation_angle_deg(W[t + 1] @ W[t].T) for t in range(len(W) - 1)]
+    U, _, Vt = np.linalg.svd(W.sum(0))
+    mean = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+    spread = [rotation_angle_deg(w @ mean.T) for w in W]
+    return {"world_step_deg": float(np.mean(steps)), "world_spread_deg": float(np.mean(spread))}
 
 
 def features(res) -> dict[str, float]:
@@ -122,6 +150,7 @@ def log(args) -> None:
     for v in vids:
         cfg = preset("fast")
         video = load_source(str(v), store, None, cfg.max_frames)
+        follow = _read_turn(video, cfg)
         own = _own_asset(v)
         if args.own_template:  # the animal's own rig, as a named template is fitted
             cfg = cfg.for_named_template()
@@ -158,7 +187,7 @@ def log(args) -> None:
                     "novel_view_iou": m["novel_view_iou"],
                     "miou": m["miou"],
                     "joint": m["joint"],
-                    "features": features(res),
+                    "features": features(res) | world_turn(res, follow),
                     "wall": round(wall, 2),
                     "cpu": round(cpu, 2),
                 }
@@ -180,12 +209,28 @@ def log(args) -> None:
         )
 
 
+def _read_turn(video, cfg) -> np.ndarray | None:
+    """(T, 3, 3) the camera's turn read from the background as the fit reads it
+    (`zooctl.fit.run._camera_motion` with ``camera.motion`` background) in the fit's axes, or None
+    below its gate."""
+    import dataclasses
+
+    from zooctl.fit.camera_init import camera_follow
+    from zooctl.fit.run import _camera_motion
+
+    motion, used = _camera_motion(
+        video, dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, motion="background"))
+    )
+    return camera_follow(motion.rotations, 0) if used else None
+
+
 def _pick(video: dict, feature: str | None, lam: float) -> dict:
     """The candidate a rule picks: the highest trial IoU + 0.1 semantic - lam x feature (ties: the
     first in retrieval order, as `pick_trial`)."""
 
     def score(c: dict) -> float:
-        return c["score"] - (lam * c["features"][feature] if feature else 0.0)
+        x = c["features"][feature] if feature else 0.0
+        return c["score"] - (lam * x if np.isfinite(x) else 0.0)
 
     scores = [score(c) for c in video["candidates"]]
     return video["candidates"][int(np.argmax(scores))]
@@ -216,6 +261,9 @@ def choose(args) -> None:
                 else:
                     merged[row["video"]] = row
     videos = sorted(merged.values(), key=lambda v: v["video"])
+    for v in videos:  # the base rule: today's trial score, the displacement term at its weight
+        for c in v["candidates"]:
+            c["score"] -= args.displacement * c["features"]["displacement"]
     if args.candidates:
         for v in videos:
             v["candidates"] = v["candidates"][: args.candidates]
@@ -227,7 +275,7 @@ def choose(args) -> None:
     today = [_pick(v, None, 0.0) for v in videos]
     f = lambda picks, k: np.mean([p[k] for p in picks])  # noqa: E731
     print(
-        f"| before (trial IoU + 0.1 semantic) | {f(today, 'novel_view_iou'):.3f} | {f(today, 'novel_view_iou'):.3f} | {f(today, 'miou'):.3f} | {f(today, 'joint'):.3f} | 0 |"
+        f"| base (trial IoU + 0.1 semantic - {args.displacement:g} displacement) | {f(today, 'novel_view_iou'):.3f} | {f(today, 'novel_view_iou'):.3f} | {f(today, 'miou'):.3f} | {f(today, 'joint'):.3f} | 0 |"
     )
     print(
         f"| oracle (best novel view of the 3) | {f(oracle, 'novel_view_iou'):.3f} | | {f(oracle, 'miou'):.3f} | {f(oracle, 'joint'):.3f} | {sum(o is not t for o, t in zip(oracle, today))} |"
@@ -301,6 +349,12 @@ def main() -> None:
     b.add_argument("logs", nargs="+")
     b.add_argument("--finished")
     b.add_argument("--candidates", type=int, help="only each video's first N candidates, in the logs' order")
+    b.add_argument(
+        "--displacement",
+        type=float,
+        default=0.0,
+        help="the base rule's displacement weight (1.5: the trials' rule since 2026-11-29; 0: the rule before)",
+    )
     b.set_defaults(func=choose)
     args = ap.parse_args()
     args.func(args)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 from test_fit_e2e import validate_record
 
 from zooctl.benchdata.make import make_video
@@ -337,3 +338,70 @@ def test_the_winner_is_tried_longer_and_kept_longer_only_where_that_fits_better(
         res = fit_video(video, asset, cfg, resume=state)
         along = float(res.scene.model.bone_scales().detach()[0])
         assert (along > 1.3) is kept and along > 0.8
+
+
+def test_a_trials_body_turn_in_the_world_is_measured_against_the_cameras_turn():
+    """`trial_world_spread`: a body that keeps its orientation in the world while the camera
+    orbits (its root turning with the camera) spreads by nothing; one that also spins in the
+    world by about its mean turn from the middle; without a turn, nothing is measured. The trial
+    score takes the spread off at `TRIAL_WORLD_SPREAD_WEIGHT` a degree."""
+    import torch
+
+    from zooctl.fit.camera_init import camera_follow
+    from zooctl.fit.template import TRIAL_WORLD_SPREAD_WEIGHT, trial_score
+    from zooctl.fit.view_trial import trial_world_spread
+    from zooctl.geometry import matrix_to_quat, quat_to_matrix
+
+    def about_y(deg):  # (T, 3, 3) rotations about the vertical
+        a = np.radians(deg)
+        R = np.zeros((len(a), 3, 3))
+        R[:, 0, 0], R[:, 0, 2], R[:, 1, 1], R[:, 2, 0], R[:, 2, 2] = (
+            np.cos(a),
+            np.sin(a),
+            1,
+            -np.sin(a),
+            np.cos(a),
+        )
+        return R
+
+    T = 21
+    cams = about_y(4.0 * np.arange(T))  # the camera orbits 80 degrees
+    turn = camera_follow(cams @ np.diag([1.0, -1.0, -1.0]), 0)
+    start = quat_to_matrix(np.array([0.8, 0.2, 0.5, -0.1]) / np.linalg.norm([0.8, 0.2, 0.5, -0.1]))
+
+    def state(R):
+        return {"scene": {"root_rotation": torch.as_tensor(matrix_to_quat(R), dtype=torch.float32)}}
+
+    still = turn @ start
+    assert trial_world_spread(state(still), turn) < 0.1
+    spin = about_y(2.0 * np.arange(T))  # the body spins 40 degrees about its up axis
+    spinning = trial_world_spread(state(turn @ start @ spin), turn)
+    assert 9.0 < spinning < 11.0  # 0..20 degrees either side of the middle: a mean of 10
+    assert trial_world_spread(state(still), None) is None
+    assert trial_world_spread(None, turn) is None
+    assert trial_score(0.8, 0.0, 0.0, spinning) == pytest.approx(0.8 - TRIAL_WORLD_SPREAD_WEIGHT * spinning)
+    assert trial_score(0.8, 0.0, 0.0, None) == 0.8
+
+
+def test_the_trials_measure_the_body_turn_only_where_the_camera_turns(tmp_path, store):
+    """Over a scene fixed in the world, seen by the benchmark's orbiting camera, every trial
+    records how far its body turned in the world (``trial_world_spread_deg``); over a still
+    background (a camera at rest to the read) no trial does, and ``camera.motion`` none reads
+    nothing."""
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.template import try_candidates
+
+    bank, thin = _bank_with_views(store)
+    kw = {"frames": 19, "size": 160, "seed": 1, "appearance": "textured"}
+    world = load_fit_video(make_video(thin, tmp_path / "w", background="world", **kw))
+    still = load_fit_video(make_video(thin, tmp_path / "s", **kw))
+    for video, motion, measured in ((world, "given", True), (still, "given", False), (world, "none", False)):
+        cfg = FitConfig.from_dict(
+            {**json.loads(json.dumps(TINY)), "camera": TINY["camera"] | {"motion": motion}}
+        )
+        cands = [{"name": "fat", "score": -2.0}, {"name": "thin", "score": -1.0}]
+        _, out, _ = try_candidates(bank, video, cands, cfg)
+        spreads = [c.get("trial_world_spread_deg") for c in out]
+        assert all((s is not None) == measured for s in spreads), (motion, spreads)
+        if measured:
+            assert all(0.0 <= s < 180.0 for s in spreads)

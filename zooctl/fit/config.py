@@ -80,7 +80,8 @@ class CameraConfig:
         "tracked so, the best kept: given (for a template the user named), background (every template, "
         "retrieval's candidates too), none (the tracker assumes a camera at rest). Pairs of frames it "
         "cannot read count as at rest, a camera turning less than track_step over the video as at rest; "
-        "known camera rotations take precedence",
+        "known camera rotations take precedence. Unless none, the template trials also read it to score "
+        "how far each trial's body turns in the world (zooctl.fit.template.trial_score)",
         enum=CAMERA_MOTIONS,
     )
     start_trial: str = spec(

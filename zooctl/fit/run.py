@@ -23,7 +23,7 @@ from ..asset import RiggedAsset
 from ..errors import InputError, UsageError
 from ..geometry import silhouette_iou
 from ..rig.priors import find_symmetry_plane
-from .camera_init import CameraInit, initialise_camera
+from .camera_init import CameraInit, camera_follow, initialise_camera
 from .config import FitConfig
 from .depth_mirror import depth_mirror, view_elevation
 from .inputs import FitVideo, MaskWindow, crop_box, fit_resolution, resample_flow, resample_masks
@@ -298,6 +298,25 @@ def _colour_targets(video: FitVideo, box: tuple[int, int, int, int], h: int, w: 
     if key not in video.cache:
         video.cache[key] = colour_targets(video.frames, box, h, w, device)
     return video.cache[key]
+
+
+def trial_camera_turn(video: FitVideo, cfg: FitConfig) -> np.ndarray | None:
+    """(T, 3, 3) each frame's camera turn in the fit's axes (`camera_follow`, frame 0 the
+    reference) over the frames a template trial fits (the first window of a long clip): from the
+    given camera rotations, else read from the background (`_camera_motion`, whatever the camera
+    search does with it) unless ``camera.motion`` is ``none``. None where the camera turns less
+    than ``camera.track_step`` over them: a camera at rest tells nothing of the body's turn."""
+    video = video.truncated(cfg.max_frames)
+    spans = cfg.windows(video.num_frames)
+    if len(spans) > 1:
+        video = video.cache.setdefault(("window", spans[0]), video.part(*spans[0]))
+    if video.camera_rotations is not None:
+        return camera_follow(np.asarray(video.camera_rotations, np.float64), 0)
+    if cfg.camera.motion == "none":
+        return None
+    read = dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, motion="background"))
+    motion, used = _camera_motion(video, read)
+    return camera_follow(motion.rotations, 0) if used else None
 
 
 def _camera_motion(video: FitVideo, cfg: FitConfig) -> tuple[Any, bool]:

@@ -5,7 +5,8 @@ the masked crops of a few frames are embedded with the enabled embedders and the
 `try_candidates` then gives the best few a short fit each and keeps the one that scores best
 (``FitConfig.trials``, `trial_score`): the embeddings alone often rank the wrong body plan first
 (BENCHMARKS.md, Retrieval), and the fit's own mask IoU is a direct check, weighed with what the
-classifier sees and what the template's surface had to move to fit (``trials.margin`` lets
+classifier sees, what the template's surface had to move to fit and, where the camera turns
+round the animal, how far the body had to turn in the world to follow it (``trials.margin`` lets
 retrieval's order settle near-ties). A trial is the beginning of the full fit, paused: the
 winner's fit goes on from its trial, so the trials cost only the losers' fits.
 """
@@ -156,8 +157,9 @@ def try_candidates(
     there, and only those `kept_trials` keeps (``cfg.trials.prune_margin``) go on to
     ``cfg.trials.iters`` and compete; the others' candidates get ``pruned_at`` beside the trial IoU
     they stopped at. A depth-mirror check then compares at the checkpoint."""
+    from .run import trial_camera_turn
     from .trial_pool import Trial, run_trials
-    from .view_trial import mirror_wanted
+    from .view_trial import mirror_wanted, trial_world_spread
 
     tried = candidates[: cfg.trials.candidates]
     if len(tried) < 2:
@@ -170,13 +172,23 @@ def try_candidates(
     if reporter is not None:
         reporter.message("trial fits: " + ", ".join(a.name for a in assets))
     results = run_trials(video, [Trial(a, first, mirror) for a in assets], cfg, reporter)  # retrieval order
-    for cand, res in zip(tried, results, strict=True):
+    turn = trial_camera_turn(video, cfg)
+    spread: list[float | None] = [None] * len(tried)
+
+    def record(i: int) -> None:
+        res, cand = results[i], tried[i]
         cand["trial_iou"] = round(res.iou, 4)
         cand["trial_displacement"] = round(res.displacement, 4)
-        cand["view_trial"] = res.view
+        spread[i] = trial_world_spread(res.state, turn)
+        if spread[i] is not None:
+            cand["trial_world_spread_deg"] = round(spread[i], 2)
+
+    for i, res in enumerate(results):
+        record(i)
+        tried[i]["view_trial"] = res.view
 
     def score(i: int) -> float:
-        return trial_score(results[i].iou, semantic[i], results[i].displacement)
+        return trial_score(results[i].iou, semantic[i], results[i].displacement, spread[i])
 
     on = list(range(len(tried)))  # the trials that go on to cfg.trials.iters
     if first < cfg.trials.iters:
@@ -192,14 +204,13 @@ def try_candidates(
             video, [Trial(assets[i], cfg.trials.iters, state=results[i].state) for i in on], cfg, reporter
         )
         for i, res in zip(on, more, strict=True):
-            tried[i]["trial_iou"] = round(res.iou, 4)
-            tried[i]["trial_displacement"] = round(res.displacement, 4)
             results[i] = res
+            record(i)
     win = on[pick_trial([score(i) for i in on], cfg.trials.margin)]
     best, best_state = assets[win], results[win].state
     if cfg.trials.longer != 1.0:
         best_state = (
-            _try_longer(video, tried[win], best, semantic[win], score(win), mirror, cfg, reporter)
+            _try_longer(video, tried[win], best, semantic[win], score(win), mirror, cfg, reporter, turn)
             or best_state
         )
     if reporter is not None:
@@ -218,12 +229,14 @@ def _try_longer(
     mirror: bool,
     cfg: FitConfig,
     reporter: Reporter | None,
+    turn: np.ndarray | None = None,
 ) -> dict[str, Any] | None:
     """The winner's trial again with its body ``cfg.trials.longer`` times longer (`fit_video`'s
     ``length``): its paused state where its `trial_score` beats the winner's ``score`` (a tie keeps
     the template's own proportions), else None. ``cand`` gets ``longer_trial_iou``,
     ``longer_trial_displacement`` and, when kept, ``length``."""
     from .trial_pool import Trial, run_trials
+    from .view_trial import trial_world_spread
 
     factor = cfg.trials.longer
     if reporter is not None:
@@ -231,7 +244,7 @@ def _try_longer(
     (res,) = run_trials(video, [Trial(asset, cfg.trials.iters, mirror, length=factor)], cfg, reporter)
     cand["longer_trial_iou"] = round(res.iou, 4)
     cand["longer_trial_displacement"] = round(res.displacement, 4)
-    if trial_score(res.iou, semantic, res.displacement) <= score:
+    if trial_score(res.iou, semantic, res.displacement, trial_world_spread(res.state, turn)) <= score:
         return None
     cand["length"] = factor
     return res.state
@@ -245,18 +258,30 @@ TRIAL_SEMANTIC_WEIGHT = 0.1
 # the largest weight that keeps every pick of the seven real videos, below the best one for the
 # 28-video benchmark's novel view (BENCHMARKS.md, Fit: the template that changes its shape least).
 TRIAL_DISPLACEMENT_WEIGHT = 1.5
+# Trial IoU a degree of the trial body's turn in the world costs (`trial_world_spread`, only where
+# the camera turns): chosen leave-one-video-out on the 28 world-background videos (BENCHMARKS.md,
+# Fit: the body's turn in the world picks the template).
+TRIAL_WORLD_SPREAD_WEIGHT = 0.016
 TRIAL_NOISE = 0.01  # about what a trial's IoU moves between seeds (BENCHMARKS.md, Fit: template trials)
 
 
-def trial_score(iou: float, semantic: float = 0.0, displacement: float = 0.0) -> float:
+def trial_score(
+    iou: float, semantic: float = 0.0, displacement: float = 0.0, world_spread: float | None = None
+) -> float:
     """What the template trials rank by: the trial's input-view mask IoU, plus
     `TRIAL_SEMANTIC_WEIGHT` times its candidate's semantic score (0..1: how surely the classifier
     sees that animal or its nearest relative in the bank; 0 without one), less
     `TRIAL_DISPLACEMENT_WEIGHT` times its displacement. An input-view silhouette cannot tell a dog
     from a duck-billed dinosaur seen side on; a classifier sure of a dog can, and a stylised render
     it is not sure of moves the choice by little. A template that had to bulge its surface to
-    match the silhouettes is the worse animal from the sides the camera does not see."""
-    return iou + TRIAL_SEMANTIC_WEIGHT * semantic - TRIAL_DISPLACEMENT_WEIGHT * displacement
+    match the silhouettes is the worse animal from the sides the camera does not see.
+
+    Where the camera turns round the animal (``world_spread``, degrees: `trial_world_spread`),
+    less `TRIAL_WORLD_SPREAD_WEIGHT` times how far the trial's body turns in the world: a
+    template of the wrong shape matches the outlines of an orbiting camera by turning its body
+    frame by frame."""
+    spread = 0.0 if world_spread is None else TRIAL_WORLD_SPREAD_WEIGHT * world_spread
+    return iou + TRIAL_SEMANTIC_WEIGHT * semantic - TRIAL_DISPLACEMENT_WEIGHT * displacement - spread
 
 
 def close_trials_note(candidates: list[dict[str, Any]], chosen: str, source: str) -> str | None:

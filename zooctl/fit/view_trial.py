@@ -71,6 +71,26 @@ def trial_displacement(result: FitResult) -> float:
     return 0.0 if disp is None else float(disp.norm(dim=-1).mean()) / result.scene.size
 
 
+def trial_world_spread(state: dict[str, Any] | None, turn: np.ndarray | None) -> float | None:
+    """How far a paused trial's body turns in the world: the mean angle (degrees) of each frame's
+    root rotation, the camera's turn taken out (``turn``, `zooctl.fit.run.trial_camera_turn`),
+    from their mean. None without a turn or a state. A template of the animal's shape follows an
+    orbiting camera with a body that turns as the animal does; one of another shape matches each
+    frame's outline by turning the body where the camera went round it."""
+    from ..geometry import quat_to_matrix, rotation_angle_deg
+
+    if state is None or turn is None:
+        return None
+    q = state["scene"]["root_rotation"].detach().cpu().numpy().astype(np.float64)
+    if len(q) != len(turn):
+        return None
+    R = quat_to_matrix(q / np.linalg.norm(q, axis=-1, keepdims=True))
+    world = np.transpose(turn, (0, 2, 1)) @ R
+    U, _, Vt = np.linalg.svd(world.sum(0))  # the chordal mean rotation
+    mean = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+    return float(np.mean([rotation_angle_deg(w @ mean.T) for w in world]))
+
+
 def trial_with_mirror(
     video: FitVideo,
     template: RiggedAsset,
