@@ -77,23 +77,20 @@ PRIOR_TERMS = ("smooth", "symmetry", "bone_length", "skin", "displacement", "pos
 
 def world_turn(res, follow: np.ndarray | None) -> dict[str, float]:
     """How the trial's root turns in the world, the camera's turn read from the background
-    (``follow``, `zooctl.fit.camera_init.camera_follow`) taken out: the mean angle between
-    consecutive frames (``world_step_deg``) and the mean angle of each frame from their mean
-    orientation (``world_spread_deg``). A template that explains an orbiting camera's video by
-    spinning or wobbling its body where the camera turned round it is the wrong shape. NaN where
-    the turn was not read (a camera at rest tells nothing)."""
+    (``follow``, `zooctl.fit.run.trial_camera_turn`) taken out: the mean angle between consecutive
+    frames (``world_step_deg``) and the mean angle of each frame from their mean orientation
+    (``world_spread_deg``, `zooctl.fit.view_trial.trial_world_spread`, what the trials score by).
+    NaN where the turn was not read (a camera at rest tells nothing)."""
+    from zooctl.fit.view_trial import trial_world_spread
     from zooctl.geometry import quat_to_matrix, rotation_angle_deg
 
     if follow is None:
         return {"world_step_deg": float("nan"), "world_spread_deg": float("nan")}
     q = res.scene.root_rotation.detach().cpu().numpy().astype(np.float64)
-    R = quat_to_matrix(q / np.linalg.norm(q, axis=-1, keepdims=True))
-    W = np.transpose(follow, (0, 2, 1)) @ R
+    W = np.transpose(follow, (0, 2, 1)) @ quat_to_matrix(q / np.linalg.norm(q, axis=-1, keepdims=True))
     steps = [rotation_angle_deg(W[t + 1] @ W[t].T) for t in range(len(W) - 1)]
-    U, _, Vt = np.linalg.svd(W.sum(0))
-    mean = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
-    spread = [rotation_angle_deg(w @ mean.T) for w in W]
-    return {"world_step_deg": float(np.mean(steps)), "world_spread_deg": float(np.mean(spread))}
+    spread = trial_world_spread({"scene": {"root_rotation": res.scene.root_rotation}}, follow)
+    return {"world_step_deg": float(np.mean(steps)), "world_spread_deg": float(spread)}
 
 
 def features(res) -> dict[str, float]:
@@ -132,7 +129,7 @@ def log(args) -> None:
     from zooctl.fit.config import preset
     from zooctl.fit.job import load_source
     from zooctl.fit.metrics import evaluate_fit
-    from zooctl.fit.run import fit_video
+    from zooctl.fit.run import fit_video, trial_camera_turn
     from zooctl.fit.template import choose_template, trial_score
     from zooctl.fit.view_trial import trial_iou, trial_with_mirror
     from zooctl.store.bank import Bank
@@ -150,7 +147,7 @@ def log(args) -> None:
     for v in vids:
         cfg = preset("fast")
         video = load_source(str(v), store, None, cfg.max_frames)
-        follow = _read_turn(video, cfg)
+        follow = trial_camera_turn(video, cfg)
         own = _own_asset(v)
         if args.own_template:  # the animal's own rig, as a named template is fitted
             cfg = cfg.for_named_template()
@@ -207,21 +204,6 @@ def log(args) -> None:
             [(r["name"], r["iou"], round(r["novel_view_iou"], 3)) for r in rows],
             flush=True,
         )
-
-
-def _read_turn(video, cfg) -> np.ndarray | None:
-    """(T, 3, 3) the camera's turn read from the background as the fit reads it
-    (`zooctl.fit.run._camera_motion` with ``camera.motion`` background) in the fit's axes, or None
-    below its gate."""
-    import dataclasses
-
-    from zooctl.fit.camera_init import camera_follow
-    from zooctl.fit.run import _camera_motion
-
-    motion, used = _camera_motion(
-        video, dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, motion="background"))
-    )
-    return camera_follow(motion.rotations, 0) if used else None
 
 
 def _pick(video: dict, feature: str | None, lam: float) -> dict:
