@@ -314,19 +314,18 @@ def trial_camera_turn(video: FitVideo, cfg: FitConfig) -> np.ndarray | None:
         return camera_follow(np.asarray(video.camera_rotations, np.float64), 0)
     if cfg.camera.motion == "none":
         return None
-    read = dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, motion="background"))
-    motion, used = _camera_motion(video, read)
+    motion, used = _camera_motion(video, cfg, always=True)
     return camera_follow(motion.rotations, 0) if used else None
 
 
-def _camera_motion(video: FitVideo, cfg: FitConfig) -> tuple[Any, bool]:
+def _camera_motion(video: FitVideo, cfg: FitConfig, always: bool = False) -> tuple[Any, bool]:
     """(the camera's turn read from the background, `zooctl.video.camera_motion.background_motion`,
-    or None; whether the camera search uses it). Read when ``camera.motion`` is ``background`` and
-    the camera's rotations are not known, at the fit's focal (a normal lens when the camera search
-    is to choose it), and kept in ``video.cache`` for the template trials' fits. Used when the
-    camera turns at least the tracker's step over the video: less tells no start from another,
+    or None; whether it is used). Read when ``camera.motion`` is ``background`` (or ``always``)
+    and the camera's rotations are not known, at the fit's focal (a normal lens when the camera
+    search is to choose it), and kept in ``video.cache`` for the template trials' fits. Used when
+    the camera turns at least the tracker's step over the video: less tells no start from another,
     and is taken as at rest."""
-    if cfg.camera.motion != "background" or video.camera_rotations is not None:
+    if (cfg.camera.motion != "background" and not always) or video.camera_rotations is not None:
         return None, False
     H, W = video.size
     focal = float(cfg.camera.focal) if cfg.camera.focal is not None else math.hypot(W, H)
