@@ -389,7 +389,7 @@ def test_the_trials_measure_the_body_turn_only_where_the_camera_turns(tmp_path, 
     background (a camera at rest to the read) no trial does, and ``camera.motion`` none reads
     nothing."""
     from zooctl.fit.inputs import load_fit_video
-    from zooctl.fit.template import try_candidates
+    from zooctl.fit.template import trial_score, try_candidates
 
     bank, thin = _bank_with_views(store)
     kw = {"frames": 19, "size": 160, "seed": 1, "appearance": "textured"}
@@ -397,11 +397,40 @@ def test_the_trials_measure_the_body_turn_only_where_the_camera_turns(tmp_path, 
     still = load_fit_video(make_video(thin, tmp_path / "s", **kw))
     for video, motion, measured in ((world, "given", True), (still, "given", False), (world, "none", False)):
         cfg = FitConfig.from_dict(
-            {**json.loads(json.dumps(TINY)), "camera": TINY["camera"] | {"motion": motion}}
+            {
+                **json.loads(json.dumps(TINY)),
+                "camera": TINY["camera"] | {"motion": motion},
+                "trials": TINY["trials"] | {"carried": True},
+            }
         )
-        cands = [{"name": "fat", "score": -2.0}, {"name": "thin", "score": -1.0}]
+        cands = [
+            {"name": "fat", "score": -2.0, "semantic": 0.0},
+            {"name": "thin", "score": -1.0, "semantic": 0.0},
+        ]
         _, out, _ = try_candidates(bank, video, cands, cfg)
         spreads = [c.get("trial_world_spread_deg") for c in out]
         assert all((s is not None) == measured for s in spreads), (motion, spreads)
+        # Where the turn is read, each candidate is also tried from a start carried by it, and
+        # keeps the start that scores better: its record says which, and the other's score.
+        starts = [c.get("trial_start") for c in out]
+        assert all((s in ("search", "carried")) == measured for s in starts), (motion, starts)
         if measured:
             assert all(0.0 <= s < 180.0 for s in spreads)
+            for c in out:
+                kept = trial_score(
+                    c["trial_iou"], c["semantic"], c["trial_displacement"], c["trial_world_spread_deg"]
+                )
+                assert kept >= c["other_start_score"] - 1e-3
+
+
+def test_the_fit_goes_on_carried_where_its_trial_started_carried():
+    """`winner_config`: a chosen template whose trial started carried by the camera's turn goes
+    on with ``camera.motion`` background (a long clip's later windows carried as its first);
+    otherwise the config is the one given."""
+    from zooctl.fit.template import winner_config
+
+    cfg = FitConfig()
+    cands = [{"name": "a", "trial_start": "carried"}, {"name": "b", "trial_start": "search"}, {"name": "c"}]
+    assert winner_config(cfg, cands, "a").camera.motion == "background"
+    assert cfg.camera.motion == "given"  # a copy
+    assert winner_config(cfg, cands, "b") is cfg and winner_config(cfg, cands, "c") is cfg

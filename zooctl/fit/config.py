@@ -270,6 +270,14 @@ class TemplateTrials:
         minimum=1,
         maximum=3,
     )
+    carried: bool = spec(
+        False,
+        help="where the camera turns round the animal (its turn read from the background, at least "
+        "camera.track_step over the trial's frames), each candidate is also tried from a start "
+        "carried by the camera's turn (camera.motion background), and its trial is the start that "
+        "scores better. Only there: elsewhere the two starts are one. Off by default: about 1.5 times the fit time where the camera turns",
+        required=False,
+    )
     # Successive halving: the trials all stop at a checkpoint, and those clearly behind there
     # (their pick score, as the winner's, more than the margin below the best) go no further.
     prune_at: int | None = spec(

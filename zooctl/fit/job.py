@@ -294,7 +294,7 @@ def fit_job(
     folder in the store. ``fits``: where the record goes instead of ``store_root``'s fits (a batch
     worker's private folder; the batch driver commits it, `zooctl.pipelines.batch_fit`)."""
     from ..store.bank import Bank
-    from .template import select_template
+    from .template import select_template, winner_config
 
     fits = fits if fits is not None else FitStore(store_root)
     bank = bank if bank is not None else Bank.open(store_root)
@@ -349,6 +349,7 @@ def fit_job(
         asset, candidates, state, t_trials = select_template(
             bank, template, video, cfg, exclude=exclude, reporter=reporter
         )
+        cfg = winner_config(cfg, candidates, asset.name)
     t_ret = time.perf_counter() - t_ret - (t_trials or 0.0)
     if out is not None:
         out_dir = Path(out)

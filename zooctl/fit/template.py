@@ -13,6 +13,7 @@ winner's fit goes on from its trial, so the trials cost only the losers' fits.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -156,7 +157,13 @@ def try_candidates(
     `pick_trial`'s (``cfg.trials.margin``). With ``cfg.trials.prune_at`` every trial first stops
     there, and only those `kept_trials` keeps (``cfg.trials.prune_margin``) go on to
     ``cfg.trials.iters`` and compete; the others' candidates get ``pruned_at`` beside the trial IoU
-    they stopped at. A depth-mirror check then compares at the checkpoint."""
+    they stopped at. A depth-mirror check then compares at the checkpoint.
+
+    Where the camera turns round the animal (`trial_camera_turn` reads it) and ``cfg.trials.carried``,
+    each candidate is tried twice, from the search's start and from one carried by the camera's
+    turn (``camera.motion`` background), and its trial is the start of the higher `trial_score`
+    (``trial_start`` and ``other_start_score`` in its record; `winner_config` carries the rest of
+    the winner's fit the same way)."""
     from .run import trial_camera_turn
     from .trial_pool import Trial, run_trials
     from .view_trial import mirror_wanted, trial_world_spread
@@ -169,55 +176,96 @@ def try_candidates(
     first = cfg.trials.iters if prune_at is None else min(prune_at, cfg.trials.iters)
     mirror = mirror_wanted(cfg, template_given=False)
     assets = [bank.get(c["name"]) for c in tried]
-    if reporter is not None:
-        reporter.message("trial fits: " + ", ".join(a.name for a in assets))
-    results = run_trials(video, [Trial(a, first, mirror) for a in assets], cfg, reporter)  # retrieval order
     turn = trial_camera_turn(video, cfg)
-    spread: list[float | None] = [None] * len(tried)
+    # Each run: (candidate, its start's camera.motion or None for the config's own).
+    runs: list[tuple[int, str | None]] = [(i, None) for i in range(len(tried))]
+    if (
+        cfg.trials.carried
+        and turn is not None
+        and video.camera_rotations is None
+        and cfg.camera.motion != "background"
+    ):
+        runs += [(i, "background") for i in range(len(tried))]
+    if reporter is not None:
+        reporter.message(
+            "trial fits: "
+            + ", ".join(a.name for a in assets)
+            + (", each also from a start carried by the camera's turn" if len(runs) > len(tried) else "")
+        )
+    trials = [Trial(assets[i], first, mirror, motion=m) for i, m in runs]
+    results = run_trials(video, trials, cfg, reporter)  # retrieval order, the carried starts after
+    spread: list[float | None] = [None] * len(runs)
 
-    def record(i: int) -> None:
-        res, cand = results[i], tried[i]
+    def measure(k: int) -> None:
+        spread[k] = trial_world_spread(results[k].state, turn)
+
+    def score(k: int) -> float:
+        i = runs[k][0]
+        return trial_score(results[k].iou, semantic[i], results[k].displacement, spread[k])
+
+    def record(i: int, k: int | None = None) -> int:
+        """Candidate ``i``'s trial into its record: run ``k``, or the best-scoring of its starts
+        (retrieval's search first on a tie). Returns the run's index."""
+        ks = [j for j, (c, _) in enumerate(runs) if c == i]
+        if k is None:
+            k = max(ks, key=lambda j: (score(j), -j))
+            tried[i]["view_trial"] = results[k].view
+            if len(ks) > 1:
+                tried[i]["trial_start"] = "carried" if runs[k][1] is not None else "search"
+                tried[i]["other_start_score"] = round(max(score(j) for j in ks if j != k), 4)
+        res, cand = results[k], tried[i]
         cand["trial_iou"] = round(res.iou, 4)
         cand["trial_displacement"] = round(res.displacement, 4)
-        spread[i] = trial_world_spread(res.state, turn)
-        if spread[i] is not None:
-            cand["trial_world_spread_deg"] = round(spread[i], 2)
+        cand.pop("trial_world_spread_deg", None)
+        if spread[k] is not None:
+            cand["trial_world_spread_deg"] = round(spread[k], 2)
+        return k
 
-    for i, res in enumerate(results):
-        record(i)
-        tried[i]["view_trial"] = res.view
-
-    def score(i: int) -> float:
-        return trial_score(results[i].iou, semantic[i], results[i].displacement, spread[i])
-
-    on = list(range(len(tried)))  # the trials that go on to cfg.trials.iters
+    for k in range(len(runs)):
+        measure(k)
+    on = [record(i) for i in range(len(tried))]  # each candidate's better start: these go on
     if first < cfg.trials.iters:
-        on = kept_trials([score(i) for i in on], cfg.trials.prune_margin)
+        on = [on[j] for j in kept_trials([score(k) for k in on], cfg.trials.prune_margin)]
         for i, cand in enumerate(tried):
-            if i not in on:
+            if not any(runs[k][0] == i for k in on):
                 cand["pruned_at"] = first  # its trial_iou is the one at the checkpoint
         if reporter is not None:
-            reporter.message(
-                f"trial fits of {', '.join(tried[i]['name'] for i in on)} go on to {cfg.trials.iters} iterations"
-            )
+            names = ", ".join(tried[runs[k][0]]["name"] for k in on)
+            reporter.message(f"trial fits of {names} go on to {cfg.trials.iters} iterations")
         more = run_trials(
-            video, [Trial(assets[i], cfg.trials.iters, state=results[i].state) for i in on], cfg, reporter
+            video,
+            [Trial(assets[runs[k][0]], cfg.trials.iters, state=results[k].state) for k in on],
+            cfg,
+            reporter,
         )
-        for i, res in zip(on, more, strict=True):
-            results[i] = res
-            record(i)
-    win = on[pick_trial([score(i) for i in on], cfg.trials.margin)]
-    best, best_state = assets[win], results[win].state
+        for k, res in zip(on, more, strict=True):
+            results[k] = res
+            measure(k)
+            record(runs[k][0], k)
+    won = on[pick_trial([score(k) for k in on], cfg.trials.margin)]
+    win = runs[won][0]
+    best, best_state = assets[win], results[won].state
     if cfg.trials.longer != 1.0:
         best_state = (
-            _try_longer(video, tried[win], best, semantic[win], score(win), mirror, cfg, reporter, turn)
+            _try_longer(
+                video, tried[win], best, semantic[win], score(won), mirror, cfg, reporter, turn, runs[won][1]
+            )
             or best_state
         )
     if reporter is not None:
-        reporter.message(f"template {best.name}: trial mask IoU {results[win].iou:.3f}")
+        reporter.message(f"template {best.name}: trial mask IoU {results[won].iou:.3f}")
     if best_state is not None:
         best_state["timings"] = {}  # the trials are timed as a whole by the caller
     return best, candidates, best_state
+
+
+def winner_config(cfg: FitConfig, candidates: list[dict[str, Any]], chosen: str) -> FitConfig:
+    """The config the chosen template's fit goes on with: ``camera.motion`` ``background`` where
+    its trial started carried by the camera's turn (``trial_start``), so a long clip's later
+    windows are carried as its first was; else ``cfg`` itself."""
+    if any(c["name"] == chosen and c.get("trial_start") == "carried" for c in candidates):
+        return dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, motion="background"))
+    return cfg
 
 
 def _try_longer(
@@ -230,18 +278,22 @@ def _try_longer(
     cfg: FitConfig,
     reporter: Reporter | None,
     turn: np.ndarray | None = None,
+    motion: str | None = None,
 ) -> dict[str, Any] | None:
     """The winner's trial again with its body ``cfg.trials.longer`` times longer (`fit_video`'s
     ``length``): its paused state where its `trial_score` beats the winner's ``score`` (a tie keeps
     the template's own proportions), else None. ``cand`` gets ``longer_trial_iou``,
-    ``longer_trial_displacement`` and, when kept, ``length``."""
+    ``longer_trial_displacement`` and, when kept, ``length``. ``motion``: the winner's start's
+    ``camera.motion`` (`zooctl.fit.trial_pool.Trial`)."""
     from .trial_pool import Trial, run_trials
     from .view_trial import trial_world_spread
 
     factor = cfg.trials.longer
     if reporter is not None:
         reporter.message(f"trial fit of {asset.name} {factor:g} times longer")
-    (res,) = run_trials(video, [Trial(asset, cfg.trials.iters, mirror, length=factor)], cfg, reporter)
+    (res,) = run_trials(
+        video, [Trial(asset, cfg.trials.iters, mirror, length=factor, motion=motion)], cfg, reporter
+    )
     cand["longer_trial_iou"] = round(res.iou, 4)
     cand["longer_trial_displacement"] = round(res.displacement, 4)
     if trial_score(res.iou, semantic, res.displacement, trial_world_spread(res.state, turn)) <= score:

@@ -19,6 +19,7 @@ and the trials run one after another here).
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import multiprocessing
 import queue as queue_mod
@@ -40,13 +41,15 @@ if TYPE_CHECKING:
 class Trial:
     """One trial to run: ``asset``'s fit paused after ``pause_at`` stage-2 iterations, from the
     start (``state`` None; ``mirror``: with `trial_with_mirror`'s depth-mirror check; ``length``:
-    the template's body made that much longer first) or on from a paused ``state``."""
+    the template's body made that much longer first; ``motion``: the fit's ``camera.motion`` for
+    this trial, when not None) or on from a paused ``state``."""
 
     asset: RiggedAsset
     pause_at: int
     mirror: bool = False
     state: dict[str, Any] | None = None
     length: float = 1.0
+    motion: str | None = None
 
 
 def trial_threads(cfg: FitConfig, n: int, threads: int | None = None) -> list[int]:
@@ -114,6 +117,8 @@ def _one_by_one(
 def _run(video: FitVideo, trial: Trial, cfg: FitConfig, reporter: Reporter | None) -> TrialResult:
     from .view_trial import continue_trial, trial_with_mirror
 
+    if trial.motion is not None:
+        cfg = dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, motion=trial.motion))
     if trial.state is None:
         return trial_with_mirror(
             video,
