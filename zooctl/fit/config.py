@@ -275,7 +275,8 @@ class TemplateTrials:
         help="where the camera turns round the animal (its turn read from the background, at least "
         "camera.track_step over the trial's frames), each candidate is also tried from a start "
         "carried by the camera's turn (camera.motion background), and its trial is the start that "
-        "scores better. Only there: elsewhere the two starts are one. Off by default: about 1.5 times the fit time where the camera turns",
+        "scores better. Only there: elsewhere the two starts are one. Off by default: about 1.5 "
+        "times the fit time where the camera turns",
         required=False,
     )
     # Successive halving: the trials all stop at a checkpoint, and those clearly behind there
@@ -476,8 +477,12 @@ class FitConfig:
         if st.lr_joints_given is not None:
             out = dataclasses.replace(out, stage2=dataclasses.replace(st, lr_joints=st.lr_joints_given))
         if out.camera.motion == "given":
-            out = dataclasses.replace(out, camera=dataclasses.replace(out.camera, motion="background"))
+            out = out.with_camera_motion("background")
         return out
+
+    def with_camera_motion(self, motion: str) -> FitConfig:
+        """A copy of this config with ``camera.motion`` set to ``motion``."""
+        return dataclasses.replace(self, camera=dataclasses.replace(self.camera, motion=motion))
 
     def keep_shape(self) -> FitConfig:
         """This config with the template's shape, bone lengths and skinning kept (`KEEP_SHAPE`):

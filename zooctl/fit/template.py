@@ -13,7 +13,6 @@ winner's fit goes on from its trial, so the trials cost only the losers' fits.
 
 from __future__ import annotations
 
-import dataclasses
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -264,7 +263,7 @@ def winner_config(cfg: FitConfig, candidates: list[dict[str, Any]], chosen: str)
     its trial started carried by the camera's turn (``trial_start``), so a long clip's later
     windows are carried as its first was; else ``cfg`` itself."""
     if any(c["name"] == chosen and c.get("trial_start") == "carried" for c in candidates):
-        return dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, motion="background"))
+        return cfg.with_camera_motion("background")
     return cfg
 
 

@@ -19,7 +19,6 @@ and the trials run one after another here).
 
 from __future__ import annotations
 
-import dataclasses
 import io
 import multiprocessing
 import queue as queue_mod
@@ -118,7 +117,7 @@ def _run(video: FitVideo, trial: Trial, cfg: FitConfig, reporter: Reporter | Non
     from .view_trial import continue_trial, trial_with_mirror
 
     if trial.motion is not None:
-        cfg = dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, motion=trial.motion))
+        cfg = cfg.with_camera_motion(trial.motion)
     if trial.state is None:
         return trial_with_mirror(
             video,
