@@ -443,3 +443,22 @@ def test_a_browser_that_hangs_up_mid_reply_prints_nothing(tmp_path, capsys):
         server.shutdown()
         server.server_close()
     assert "Traceback" not in capsys.readouterr().err
+
+
+def test_wait_for_polls_through_navigations(browser, tmp_path):
+    """A poll sent while the page is replaced by another (a row's click) is a 'not yet', not an
+    error: here a chain of pages, each opening the next at once, is polled without a pause until
+    the last one is ready."""
+    n = 30
+    for i in range(n):
+        body = (
+            "<script>document.body.dataset.ready = '1'</script>"
+            if i == n - 1
+            else f"<script>location.replace('p{i + 1}.html')</script>"
+        )
+        (tmp_path / f"p{i}.html").write_text(f"<!doctype html><html><body>{body}</body></html>")
+    browser.goto("about:blank")
+    browser.evaluate("1")
+    browser.goto((tmp_path / "p0.html").as_uri())
+    browser.wait_for("document.body && document.body.dataset.ready === '1'", timeout=30, poll=0)
+    assert browser.evaluate("location.href").endswith(f"p{n - 1}.html")

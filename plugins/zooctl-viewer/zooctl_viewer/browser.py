@@ -131,6 +131,14 @@ class _WebSocket:
             pass
 
 
+# DevTools' answers to a command sent while the page's document is being replaced.
+NAVIGATING = (
+    "Inspected target navigated or closed",
+    "Execution context was destroyed",
+    "Cannot find context with specified id",
+)
+
+
 class Chromium:
     """One headless Chromium with one page of ``width`` x ``height`` CSS pixels."""
 
@@ -222,10 +230,18 @@ class Chromium:
         return res.get("result", {}).get("value")
 
     def wait_for(self, expression: str, timeout: float | None = None, poll: float = 0.02) -> Any:
-        """Poll ``expression`` until it is truthy; returns its value. Raises on timeout."""
+        """Poll ``expression`` until it is truthy; returns its value. Raises on timeout.
+
+        A poll that lands while the page navigates (a click that opens another page) finds no
+        context to run in; that poll counts as not yet, and the next one asks the new page."""
         end = time.monotonic() + (self.timeout if timeout is None else timeout)
         while time.monotonic() < end:
-            value = self.evaluate(expression)
+            try:
+                value = self.evaluate(expression)
+            except BrowserError as e:
+                if not any(m in str(e) for m in NAVIGATING):
+                    raise
+                value = None
             if value:
                 return value
             time.sleep(poll)
