@@ -141,3 +141,24 @@ def test_a_lens_the_frames_record_gives_the_focal(bench, tmp_path):
     cfg2.camera.lens_35mm = 2.0 * round(f35)
     rec = fit_job(str(davis), store, cfg2, name="exif2", template="quadruped", outputs=())
     assert rec["focal"]["lens"]["from"] == "config" and rec["focal"]["px"] == pytest.approx(2 * px)
+
+
+def test_bench_statue_scores_the_animal_frozen_at_its_first_frame(bench, tmp_path):
+    """`bench/statue.py`: frame 0's true surface held still, scored as a fit is. On frame 0 it is
+    the truth (every camera sees the true masks); later the animal moves away from it."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    _, folder, _, _ = bench
+    out = tmp_path / "statue.json"
+    script = Path(__file__).resolve().parent.parent / "bench" / "statue.py"
+    subprocess.run(
+        [sys.executable, str(script), str(folder.parent), "--json", str(out)], check=True, capture_output=True
+    )
+    (row,) = json.loads(out.read_text())["rows"]
+    assert row["video"] == folder.name and row["frames_evaluated"][0] == 0
+    assert row["input_view_iou_per_frame"][0] == 1.0
+    assert [v[0] for v in row["novel_view_iou_per_frame"]] == [1.0, 1.0]
+    later = row["input_view_iou_per_frame"][1:] + [x for v in row["novel_view_iou_per_frame"] for x in v[1:]]
+    assert min(later) < 0.95 and 0 < row["novel_view_iou"] < 1 and 0 < row["miou"] < 1
