@@ -172,3 +172,31 @@ def test_a_turned_start_faces_at_least_90_degrees_from_the_searchs(tmp_path):
     assert np.isfinite(res.iou).all()
     with pytest.raises(ValueError, match="search, mirror or turned"):
         fit_video(video, thin, _config(), start="sideways")
+
+
+def test_where_the_camera_turns_the_mirror_trial_weighs_each_starts_turn_in_the_world(tmp_path):
+    """Over a scene fixed in the world (the benchmark's orbiting camera), both starts record how far
+    their body turned in the world, and the start kept is the one of higher IoU less
+    `TRIAL_WORLD_SPREAD_WEIGHT` times that turn (within the margin); over a still background
+    nothing is measured and the IoU alone decides, as before."""
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.view_trial import TRIAL_WORLD_SPREAD_WEIGHT
+
+    thin = tube_asset(bones=3, name="thin")
+    kw = {"frames": 19, "size": 160, "seed": 1, "appearance": "textured"}
+    cfg = _config(motion="background")
+    world = load_fit_video(make_video(thin, tmp_path / "w", background="world", **kw))
+    info = trial_with_mirror(world, thin, cfg).view
+    iou, spread = info["trial_iou"], info["world_spread_deg"]
+    assert set(spread) == {"search", "mirror"} and all(0.0 <= s < 180.0 for s in spread.values())
+    score = {k: iou[k] - TRIAL_WORLD_SPREAD_WEIGHT * spread[k] for k in iou}
+    assert info["start"] == (
+        "mirror" if score["mirror"] >= score["search"] - cfg.camera.mirror_margin else "search"
+    )
+    still = load_fit_video(make_video(thin, tmp_path / "s", **kw))
+    info = trial_with_mirror(still, thin, cfg).view
+    assert "world_spread_deg" not in info and set(info["trial_iou"]) == {"search", "mirror"}
+    both = info["trial_iou"]
+    assert info["start"] == (
+        "mirror" if both["mirror"] >= both["search"] - cfg.camera.mirror_margin else "search"
+    )

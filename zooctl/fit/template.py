@@ -19,6 +19,7 @@ import numpy as np
 
 from ..asset import RiggedAsset
 from ..errors import UsageError
+from .view_trial import TRIAL_WORLD_SPREAD_WEIGHT
 
 if TYPE_CHECKING:
     from ..store.bank import Bank
@@ -309,10 +310,6 @@ TRIAL_SEMANTIC_WEIGHT = 0.1
 # the largest weight that keeps every pick of the seven real videos, below the best one for the
 # 28-video benchmark's novel view (BENCHMARKS.md, Fit: the template that changes its shape least).
 TRIAL_DISPLACEMENT_WEIGHT = 1.5
-# Trial IoU a degree of the trial body's turn in the world costs (`trial_world_spread`, only where
-# the camera turns): chosen leave-one-video-out on the 28 world-background videos (BENCHMARKS.md,
-# Fit: the body's turn in the world picks the template).
-TRIAL_WORLD_SPREAD_WEIGHT = 0.016
 TRIAL_NOISE = 0.01  # about what a trial's IoU moves between seeds (BENCHMARKS.md, Fit: template trials)
 
 

@@ -7,7 +7,10 @@ in the world is the camera's height: the depth mirror of a view from above is a 
 and people film animals from above or level far more often than from below. So when the
 search's start sees the animal from below, the fit also tries the start's depth mirror (a trial:
 the beginning of the fit, paused) and keeps the mirror unless its trial mask IoU falls more than
-``camera.mirror_margin`` (the trials' own noise) below the search's. Nothing is tried when the
+``camera.mirror_margin`` (the trials' own noise) below the search's. Where the camera's turn is
+read from the background, each trial's IoU is first less `TRIAL_WORLD_SPREAD_WEIGHT` times how far
+its body turned in the world (`trial_world_spread`), as the template trials score: a start facing
+the wrong way matches an orbiting camera's outlines by spinning its body. Nothing is tried when the
 camera's rotations are known: their motion tells the two views apart (`initialise_camera`).
 The mirror itself, and the camera's elevation, are `zooctl.fit.depth_mirror`'s (`fit_video`
 applies them at its start).
@@ -30,12 +33,19 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .run import FitResult, Reporter, fit_video
+from .run import FitResult, Reporter, fit_video, trial_camera_turn
 
 if TYPE_CHECKING:
     from ..asset import RiggedAsset
     from .config import FitConfig
     from .inputs import FitVideo
+
+
+# Trial IoU a degree of a trial body's turn in the world costs (`trial_world_spread`, only where
+# the camera turns): chosen leave-one-video-out on the 28 world-background videos for the template
+# trials (BENCHMARKS.md, Fit: the body's turn in the world picks the template); the depth-mirror
+# trial weighs its two starts by it too.
+TRIAL_WORLD_SPREAD_WEIGHT = 0.016
 
 
 def mirror_wanted(cfg: FitConfig, template_given: bool) -> bool:
@@ -131,7 +141,13 @@ def trial_with_mirror(
         info["trial_iou"] = {"search": round(iou, 4), "mirror": round(m_iou, 4)}
         # the trial not kept: the time the mirror check added to the fit
         info["extra_seconds"] = round(mirror_s, 2)
-        if m_iou >= iou - cfg.camera.mirror_margin:
+        turn = trial_camera_turn(video, cfg)
+        spreads = [trial_world_spread(r.paused, turn) for r in (search, mirrored)]
+        cost = [0.0, 0.0]
+        if spreads[0] is not None and spreads[1] is not None:
+            info["world_spread_deg"] = {"search": round(spreads[0], 2), "mirror": round(spreads[1], 2)}
+            cost = [TRIAL_WORLD_SPREAD_WEIGHT * sp for sp in spreads]
+        if m_iou - cost[1] >= iou - cost[0] - cfg.camera.mirror_margin:
             info["start"] = "mirror"
             info["extra_seconds"] = round(search_s, 2)
             kept, iou = mirrored, m_iou
