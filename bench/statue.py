@@ -20,29 +20,10 @@ import json
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from zooctl.benchdata.run import bench_videos
-from zooctl.fit.metrics import scale_line_search, surface_samples
+from zooctl.fit.metrics import scale_line_search, surface_samples, world_silhouettes
 from zooctl.geometry import silhouette_iou
-from zooctl.render.camera import Camera
-from zooctl.render.raster import rasterize
-
-
-def _seen(
-    verts: np.ndarray, faces: np.ndarray, K: np.ndarray, rot: np.ndarray, tr: np.ndarray, h: int, w: int
-):
-    """(S, H, W) bool: vertices (S, V, 3) in the world seen by S cameras."""
-    S = len(rot)
-    cam = Camera(
-        torch.as_tensor(np.tile(K, (S, 1)), dtype=torch.float32),
-        torch.as_tensor(rot, dtype=torch.float32),
-        torch.as_tensor(tr, dtype=torch.float32),
-        h,
-        w,
-    )
-    v = torch.as_tensor(verts, dtype=torch.float32)
-    return rasterize(v, torch.as_tensor(faces, dtype=torch.long), cam).mask.numpy()
 
 
 def statue_scores(video: Path, frames: int = 4) -> dict:
@@ -53,12 +34,14 @@ def statue_scores(video: Path, frames: int = 4) -> dict:
     statue = np.repeat(gv[:1], len(sel), 0)  # frame 0's surface, where it stood, at every frame
     R, t = d["gt_cam_rotation"][sel], d["gt_cam_translation"][sel]
     row = {"video": video.name, "frames_evaluated": [int(s) for s in sel]}
-    seen = silhouette_iou(_seen(statue, faces, K, R, t, H, W), d["masks"][sel])
+    seen = silhouette_iou(world_silhouettes(statue, faces, K, R, t, H, W), d["masks"][sel])
     row["input_view_iou_per_frame"] = [round(float(x), 4) for x in seen]
     row["input_view_iou"] = float(np.nanmean(seen))
     per_view, per_frame = [], []
     for c in range(d["gt_view_masks"].shape[0]):
-        sil = _seen(statue, faces, K, d["gt_view_rotation"][c, sel], d["gt_view_translation"][c, sel], H, W)
+        sil = world_silhouettes(
+            statue, faces, K, d["gt_view_rotation"][c, sel], d["gt_view_translation"][c, sel], H, W
+        )
         ious = silhouette_iou(sil, d["gt_view_masks"][c, sel])
         per_frame.append([round(float(x), 4) for x in ious])
         per_view.append(float(np.nanmean(ious)))

@@ -218,9 +218,6 @@ def held_out_silhouettes(
     novel-view IoU compares them (module docstring); None without held-out views. ``input_view``:
     first the input camera's, the fit placed the same way against the truth's mesh rendered by
     it. pred_cam (S, V, 3): the fit's vertices in its camera frame; scales (S,)."""
-    from ..render.camera import Camera
-    from ..render.raster import rasterize
-
     gt = result.video.gt
     # the held-out cameras' intrinsics: the video's own, or its truth's when the fit read another
     # source (`zooctl.fit.job.attach_truth`) and estimated its focal
@@ -232,18 +229,10 @@ def held_out_silhouettes(
     R, t = gt["cam_rotation"][sel], gt["cam_translation"][sel]  # input cameras (S, 3, 3), (S, 3)
     world = np.einsum("svb,sba->sva", pred_cam * scales[:, None, None] - t[:, None], R)  # R^T (p - t)
     faces = torch.as_tensor(np.asarray(result.template.faces), dtype=torch.long)
-    intrinsics = torch.as_tensor(np.tile(np.asarray(K, np.float64), (S, 1)), dtype=torch.float32)
     world_t = torch.as_tensor(world, dtype=torch.float32)
 
     def seen_by(rot: np.ndarray, tr: np.ndarray, verts: torch.Tensor, tris: torch.Tensor) -> np.ndarray:
-        cam = Camera(
-            intrinsics,
-            torch.as_tensor(rot, dtype=torch.float32),
-            torch.as_tensor(tr, dtype=torch.float32),
-            H,
-            W,
-        )
-        return rasterize(verts, tris, cam).mask.numpy()
+        return world_silhouettes(verts, tris, K, rot, tr, H, W)
 
     out: list[tuple[str, np.ndarray, np.ndarray]] = []
     if input_view:
@@ -262,6 +251,27 @@ def held_out_silhouettes(
             )
         )
     return out
+
+
+def world_silhouettes(
+    verts: Any, faces: Any, intrinsics: Any, rot: Any, trans: Any, height: int, width: int
+) -> np.ndarray:
+    """(S, H, W) bool hard silhouettes of world vertices (S, V, 3) with faces (F, 3), seen by S
+    cameras: world-to-camera rotations (S, 3, 3), translations (S, 3), one intrinsics (4,)
+    (fx, fy, cx, cy) for all."""
+    from ..render.camera import Camera
+    from ..render.raster import rasterize
+
+    S = len(rot)
+    cam = Camera(
+        torch.as_tensor(np.tile(np.asarray(intrinsics, np.float64), (S, 1)), dtype=torch.float32),
+        torch.as_tensor(rot, dtype=torch.float32),
+        torch.as_tensor(trans, dtype=torch.float32),
+        height,
+        width,
+    )
+    v = torch.as_tensor(verts, dtype=torch.float32)
+    return rasterize(v, torch.as_tensor(faces, dtype=torch.long), cam).mask.numpy()
 
 
 def novel_view_iou(

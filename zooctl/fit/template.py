@@ -19,7 +19,7 @@ import numpy as np
 
 from ..asset import RiggedAsset
 from ..errors import UsageError
-from .view_trial import TRIAL_WORLD_SPREAD_WEIGHT
+from .view_trial import TRIAL_WORLD_SPREAD_WEIGHT, mirror_wanted, trial_world_spread
 
 if TYPE_CHECKING:
     from ..store.bank import Bank
@@ -166,7 +166,6 @@ def try_candidates(
     the winner's fit the same way)."""
     from .run import trial_camera_turn
     from .trial_pool import Trial, run_trials
-    from .view_trial import mirror_wanted, trial_world_spread
 
     tried = candidates[: cfg.trials.candidates]
     if len(tried) < 2:
@@ -286,7 +285,6 @@ def _try_longer(
     ``longer_trial_displacement`` and, when kept, ``length``. ``motion``: the winner's start's
     ``camera.motion`` (`zooctl.fit.trial_pool.Trial`)."""
     from .trial_pool import Trial, run_trials
-    from .view_trial import trial_world_spread
 
     factor = cfg.trials.longer
     if reporter is not None:
