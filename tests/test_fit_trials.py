@@ -434,3 +434,35 @@ def test_the_fit_goes_on_carried_where_its_trial_started_carried():
     assert winner_config(cfg, cands, "a").camera.motion == "background"
     assert cfg.camera.motion == "given"  # a copy
     assert winner_config(cfg, cands, "b") is cfg and winner_config(cfg, cands, "c") is cfg
+
+
+def test_a_retrieval_sure_of_its_first_candidate_skips_the_trials(tmp_path, store, monkeypatch):
+    """``trials.sure``: a first candidate ahead of every other by that much is fitted without
+    trials; a lead short of it by a hair leaves the trials to choose. The lead is recorded."""
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.template import retrieval_lead, select_template
+
+    monkeypatch.setenv("ZOOCTL_EMBEDDERS", "silhouette")
+    bank, thin = _bank_with_views(store)
+    video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
+
+    def select(sure):
+        cfg = FitConfig.from_dict(
+            {**json.loads(json.dumps(TINY)), "trials": {"candidates": 2, "iters": 2, "sure": sure}}
+        )
+        return select_template(bank, None, video, cfg)
+
+    asset, cands, state, seconds = select(None)
+    lead = cands[0]["lead"]
+    assert lead == pytest.approx(retrieval_lead(cands), abs=1e-4) and lead >= 0
+    assert lead == pytest.approx(cands[1]["score"] - cands[0]["score"], abs=1e-4)  # two assets: the other one
+    assert all("trial_iou" in c for c in cands) and state is not None and seconds > 0
+    asset, cands, state, seconds = select(lead)
+    assert asset.name == cands[0]["name"] and state is None and seconds is None
+    assert not any("trial_iou" in c for c in cands)
+    asset, cands, state, seconds = select(lead + 0.01)
+    assert all("trial_iou" in c for c in cands) and state is not None
+    from zooctl.errors import UsageError
+
+    with pytest.raises(UsageError, match="trials.sure"):
+        FitConfig.from_dict({"trials": {"sure": -1.0}})

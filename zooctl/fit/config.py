@@ -279,6 +279,17 @@ class TemplateTrials:
         "times the fit time where the camera turns",
         required=False,
     )
+    # Off by default: leave-one-video-out over 58 videos gained nothing (BENCHMARKS.md, "Forty
+    # more animals nothing was tuned on").
+    sure: float | None = spec(
+        None,
+        help="where retrieval's first candidate scores at least this much better than every other "
+        "(lower, in the fused score's units: each embedder's distances as z-scores across the bank, "
+        "plus the semantic term), it is fitted without trials: retrieval is sure of it. null: the "
+        "trials always run",
+        required=False,
+        minimum=0,
+    )
     # Successive halving: the trials all stop at a checkpoint, and those clearly behind there
     # (their pick score, as the winner's, more than the margin below the best) go no further.
     prune_at: int | None = spec(

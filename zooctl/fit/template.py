@@ -7,7 +7,8 @@ the masked crops of a few frames are embedded with the enabled embedders and the
 (BENCHMARKS.md, Retrieval), and the fit's own mask IoU is a direct check, weighed with what the
 classifier sees, what the template's surface had to move to fit and, where the camera turns
 round the animal, how far the body had to turn in the world to follow it (``trials.margin`` lets
-retrieval's order settle near-ties). A trial is the beginning of the full fit, paused: the
+retrieval's order settle near-ties). Where retrieval's first candidate is far ahead of the rest
+(``trials.sure``), it is fitted without trials: a short fit's silhouettes cannot overrule it. A trial is the beginning of the full fit, paused: the
 winner's fit goes on from its trial, so the trials cost only the losers' fits.
 """
 
@@ -76,7 +77,16 @@ def retrieve(
         if m.semantic is not None:
             c["semantic"] = round(float(m.semantic), 4)
         out.append(c)
+    if len(out) > 1:
+        out[0]["lead"] = round(retrieval_lead(out), 4)
     return out
+
+
+def retrieval_lead(candidates: list[dict[str, Any]]) -> float:
+    """How much better (lower) the first candidate's score is than the best of the others':
+    what ``trials.sure`` is compared with (0 where there is no other)."""
+    others = [float(c["score"]) for c in candidates[1:]]
+    return min(others) - float(candidates[0]["score"]) if others else 0.0
 
 
 def promote_kin(matches: list[Any], trials: int) -> list[Any]:
@@ -121,7 +131,8 @@ def select_template(
 ) -> tuple[RiggedAsset, list[dict[str, Any]], dict[str, Any] | None, float | None]:
     """`choose_template`, then the template trials when the template was retrieved and the config
     asks for them: (template, candidates, the winning trial's state to continue from or None,
-    seconds spent in the trials or None)."""
+    seconds spent in the trials or None). No trials where retrieval's first candidate leads the
+    others by ``cfg.trials.sure`` or more (`retrieval_lead`)."""
     import time
 
     asset, candidates = choose_template(
@@ -134,6 +145,14 @@ def select_template(
         trials=cfg.trials.candidates,
     )
     if len(candidates) < 2 or cfg.trials.candidates < 2 or not cfg.ablation.optimise:
+        return asset, candidates, None, None
+    sure = cfg.trials.sure
+    if sure is not None and retrieval_lead(candidates) >= sure:
+        if reporter is not None:
+            reporter.message(
+                f"template {asset.name}: retrieval is sure of it (ahead by "
+                f"{retrieval_lead(candidates):.2f}, trials.sure {sure:g}); no template trials"
+            )
         return asset, candidates, None, None
     t = time.perf_counter()
     asset, candidates, state = try_candidates(bank, video, candidates, cfg, reporter)
