@@ -457,6 +457,8 @@ def test_a_retrieval_sure_of_its_first_candidate_skips_the_trials(tmp_path, stor
     assert lead == pytest.approx(retrieval_lead(cands), abs=1e-4) and lead >= 0
     assert lead == pytest.approx(cands[1]["score"] - cands[0]["score"], abs=1e-4)  # two assets: the other one
     assert all("trial_iou" in c for c in cands) and state is not None and seconds > 0
+    # a first candidate behind another (the family's best moved first) leads by a negative amount
+    assert retrieval_lead([{"score": -1.0}, {"score": -2.5}, {"score": -0.5}]) == pytest.approx(-1.5)
     asset, cands, state, seconds = select(lead)
     assert asset.name == cands[0]["name"] and state is None and seconds is None
     assert not any("trial_iou" in c for c in cands)

@@ -8,8 +8,9 @@ the masked crops of a few frames are embedded with the enabled embedders and the
 classifier sees, what the template's surface had to move to fit and, where the camera turns
 round the animal, how far the body had to turn in the world to follow it (``trials.margin`` lets
 retrieval's order settle near-ties). Where retrieval's first candidate is far ahead of the rest
-(``trials.sure``), it is fitted without trials: a short fit's silhouettes cannot overrule it. A trial is the beginning of the full fit, paused: the
-winner's fit goes on from its trial, so the trials cost only the losers' fits.
+(``trials.sure``), it is fitted without trials: a short fit's silhouettes cannot overrule it. A
+trial is the beginning of the full fit, paused: the winner's fit goes on from its trial, so the
+trials cost only the losers' fits.
 """
 
 from __future__ import annotations
@@ -84,7 +85,8 @@ def retrieve(
 
 def retrieval_lead(candidates: list[dict[str, Any]]) -> float:
     """How much better (lower) the first candidate's score is than the best of the others':
-    what ``trials.sure`` is compared with (0 where there is no other)."""
+    what ``trials.sure`` is compared with (0 where there is no other; negative where the
+    family's best was moved first from behind it, `promote_kin` with one trial)."""
     others = [float(c["score"]) for c in candidates[1:]]
     return min(others) - float(candidates[0]["score"]) if others else 0.0
 
