@@ -202,3 +202,30 @@ def test_a_world_background_moves_with_the_orbiting_camera_and_a_still_one_does_
     err = np.degrees(np.arccos(np.clip((np.trace(moved.rotations[-1] @ truth.T) - 1) / 2, -1, 1)))
     assert moved.known.all() and err < 0.1 * turn
     assert np.allclose(rest.rotations, np.eye(3), atol=1e-3)
+
+
+def test_a_turning_animal_turns_in_the_world_by_the_angle_asked(tmp_path):
+    """`bench make --turn 90`: the same video's animal, turned steadily about the vertical through
+    its first frame's centre, 90 degrees by the last frame (the sign drawn by the seed); its
+    joints with it; the camera's orbit (its distance framing the whole clip) and the bones' motion
+    unchanged."""
+    from zooctl.benchdata.make import turn_in_world
+
+    asset = build_animal("quadruped", name="quad")
+    held = make_video(asset, tmp_path / "held", frames=9, size=64, seed=2)
+    turned = make_video(asset, tmp_path / "turned", frames=9, size=64, seed=2, turn=90.0)
+    signed = json.loads((turned / "meta.json").read_text())["turn"]
+    assert abs(signed) == 90.0 and "turn" not in json.loads((held / "meta.json").read_text())
+    with np.load(held / "video.npz") as h, np.load(turned / "video.npz") as t:
+        heading = signed * np.arange(9) / 8
+        pivot = 0.5 * (h["gt_vertices"][0].min(0) + h["gt_vertices"][0].max(0))
+        np.testing.assert_allclose(
+            t["gt_vertices"], turn_in_world(h["gt_vertices"], heading, pivot), atol=1e-4
+        )
+        np.testing.assert_allclose(t["gt_joints"], turn_in_world(h["gt_joints"], heading, pivot), atol=1e-4)
+        np.testing.assert_array_equal(t["gt_cam_rotation"], h["gt_cam_rotation"])
+        assert (t["masks"][-1] != h["masks"][-1]).any()  # the animal turned in the frame too
+        # the turn is a rotation about +Y: heights are kept, the first frame untouched
+        np.testing.assert_allclose(t["gt_vertices"][..., 1], h["gt_vertices"][..., 1], atol=1e-5)
+    with pytest.raises(Exception, match="--turn"):
+        make_video(asset, tmp_path / "bad", frames=3, size=32, turn=-5.0)

@@ -8,8 +8,10 @@ artist's motion in which the bones move as the animal does (an asset without cli
 ``random``). The camera orbits the animal, its azimuth moving by 15 to 22.5 degrees every 12
 frames; the light direction, ambient level and background are random. The background is still in
 the frame (``background="still"``, the default) or a distant scene fixed in the world that moves
-in the frame as the camera orbits (``world``). Saved per video, in
-``DIR/<name>/``:
+in the frame as the camera orbits (``world``). With ``turn`` the animal also turns in the world
+about the vertical through its centre, steadily, by that many degrees over the clip (the sign
+drawn by the seed), as an animal walking a bend does; without it the animal holds its heading.
+Saved per video, in ``DIR/<name>/``:
 
 - ``video.npz``: frames (T, H, W, 3) uint8, masks (T, H, W) bool, flow (T-1, H, W, 2) float16
   (exact forward flow of the rendered surface), flow_valid (T-1, H, W) bool, intrinsics (4,)
@@ -25,7 +27,8 @@ in the frame as the camera orbits (``world``). Saved per video, in
   scene instead of flat colours over a gradient) also ``gt_view_frames`` (C, T, H, W, 3) uint8,
   what those cameras see of the animal (black around it);
 - ``meta.json``: asset name, frames, size, fps, seed, the vertical field of view (``fov``), motion
-  (and the clip), ``appearance`` for a textured video, ``background`` for a ``world`` one; ``video.mp4``: the frames as H.264.
+  (and the clip), ``appearance`` for a textured video, ``background`` for a ``world`` one, ``turn``
+  (signed degrees) for a turning one; ``video.mp4``: the frames as H.264.
 """
 
 from __future__ import annotations
@@ -134,6 +137,17 @@ def clip_motion(
 MOTIONS = ("random", "clips")
 
 
+def turn_in_world(points: np.ndarray, degrees: np.ndarray, pivot: np.ndarray) -> np.ndarray:
+    """(T, N, 3) ``points`` (T, N, 3) turned about the vertical (+Y) through ``pivot`` (3,) by
+    frame t's ``degrees[t]``: the animal's heading in the world."""
+    a = np.radians(np.asarray(degrees, np.float64))
+    c, s = np.cos(a), np.sin(a)
+    R = np.zeros((len(a), 3, 3))
+    R[:, 0, 0], R[:, 0, 2], R[:, 1, 1], R[:, 2, 0], R[:, 2, 2] = c, s, 1.0, -s, c
+    p = np.asarray(points, np.float64) - pivot
+    return (np.einsum("tij,tnj->tni", R, p) + pivot).astype(np.asarray(points).dtype)
+
+
 def camera_path(frames: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Azimuth and elevation (T,) in degrees: the azimuth moves 15-22.5 degrees every 12 frames."""
     az0 = rng.uniform(0, 360)
@@ -224,6 +238,7 @@ def make_video(
     appearance: str = "flat",
     fov: float = 40.0,
     background: str = "still",
+    turn: float = 0.0,
 ) -> Path:
     """Render one test video of ``asset`` into ``out_dir/<asset.name>/`` (module docstring);
     ``fov``: the camera's vertical field of view in degrees (the held-out cameras' too);
@@ -233,7 +248,8 @@ def make_video(
     one image fixed in the frame (a gradient, or the natural scene when textured), as if the
     animal turned on a stand before a backdrop; ``world``, a distant natural scene fixed in the
     world (`world_backgrounds`), which moves in the frame as the camera orbits, as a real
-    background does."""
+    background does. ``turn``: degrees the animal turns in the world over the clip (module
+    docstring; 0: none)."""
     from ..io.video import write_mp4
     from ..render.camera import Camera
     from ..render.preview import fit_camera, orbit_camera
@@ -249,6 +265,8 @@ def make_video(
         raise UsageError(f"--appearance {appearance!r} is not one of {', '.join(APPEARANCES)}")
     if background not in BACKGROUNDS:
         raise UsageError(f"--background {background!r} is not one of {', '.join(BACKGROUNDS)}")
+    if not (math.isfinite(turn) and 0.0 <= turn <= 720.0):
+        raise UsageError(f"--turn {turn:g} is not an angle between 0 and 720 degrees")
     rng = np.random.default_rng([seed, sum(asset.name.encode())])
     # 12 more frames than shown: the last one is a held-out novel pose for the re-animation metric.
     played = clip_motion(asset, frames + KEY_EVERY, rng, fps, clip) if motion == "clips" else None
@@ -257,8 +275,15 @@ def make_video(
     from ..asset import lbs
 
     allv = lbs(asset.vertices, asset.skin_joints, asset.skin_weights, mats).astype(np.float32)
-    verts, novel = allv[:frames], allv[-1]  # (T, V, 3), (V, 3)
     joints = asset.joint_transforms(local[:frames])[..., :3, 3].astype(np.float32)
+    signed = 0.0
+    if turn > 0:  # drawn apart: a video without a turn keeps its draws
+        signed = turn * float(np.random.default_rng([seed, sum(asset.name.encode()), 3]).choice([-1.0, 1.0]))
+        heading = signed * np.arange(len(allv)) / max(frames - 1, 1)  # on past the last frame
+        pivot = 0.5 * (allv[0].min(0) + allv[0].max(0))
+        allv = turn_in_world(allv, heading, pivot)
+        joints = turn_in_world(joints, heading[:frames], pivot)
+    verts, novel = allv[:frames], allv[-1]  # (T, V, 3), (V, 3)
     az, el = camera_path(frames, rng)
     lo, hi = verts.reshape(-1, 3).min(0), verts.reshape(-1, 3).max(0)
     centre = 0.5 * (lo + hi)
@@ -374,6 +399,7 @@ def make_video(
             "clip": clip_name,
             **({"appearance": appearance} if coat is not None else {}),
             **({"background": background} if background != "still" else {}),
+            **({"turn": signed} if signed else {}),
         },
     )
     write_mp4(dest / "video.mp4", rgb, fps)

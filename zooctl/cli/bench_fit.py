@@ -79,6 +79,12 @@ def make(
         "world: a distant natural scene fixed in the world, moving in the frame as the camera orbits "
         "(what a real camera sees; the fit's `camera.motion background` reads the camera's turn from it).",
     ),
+    turn: float = typer.Option(
+        0.0,
+        "--turn",
+        help="Degrees the animal turns in the world over the clip, steadily, about the vertical "
+        "(the sign drawn by the seed), as an animal walking a bend does; 0: it holds its heading.",
+    ),
 ) -> None:
     """Render PlanetZoo-style test videos with ground truth (motion, camera, masks, flow)."""
     from ..benchdata.make import make_video
@@ -94,6 +100,7 @@ def make(
             appearance=appearance,
             fov=fov,
             background=background,
+            turn=turn,
         )
         console.print(f"made {dest}", highlight=False, markup=False)
 
