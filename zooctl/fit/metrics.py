@@ -228,17 +228,15 @@ def held_out_silhouettes(
     C, S, H, W = masks.shape
     R, t = gt["cam_rotation"][sel], gt["cam_translation"][sel]  # input cameras (S, 3, 3), (S, 3)
     world = np.einsum("svb,sba->sva", pred_cam * scales[:, None, None] - t[:, None], R)  # R^T (p - t)
-    faces = torch.as_tensor(np.asarray(result.template.faces), dtype=torch.long)
-    world_t = torch.as_tensor(world, dtype=torch.float32)
+    faces = np.asarray(result.template.faces)
 
-    def seen_by(rot: np.ndarray, tr: np.ndarray, verts: torch.Tensor, tris: torch.Tensor) -> np.ndarray:
+    def seen_by(rot: np.ndarray, tr: np.ndarray, verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
         return world_silhouettes(verts, tris, K, rot, tr, H, W)
 
     out: list[tuple[str, np.ndarray, np.ndarray]] = []
     if input_view:
-        truth = torch.as_tensor(np.asarray(gt["vertices"][sel]), dtype=torch.float32)
-        gfaces = torch.as_tensor(np.asarray(gt["faces"]), dtype=torch.long)
-        out.append(("input", seen_by(R, t, world_t, faces), seen_by(R, t, truth, gfaces)))
+        truth = np.asarray(gt["vertices"][sel])
+        out.append(("input", seen_by(R, t, world, faces), seen_by(R, t, truth, np.asarray(gt["faces"]))))
     for c in range(C):
         turn = gt["view_rotation"][c, sel[0]] @ np.asarray(R[0]).T  # from the input camera
         deg = np.degrees(np.arccos(np.clip((np.trace(turn) - 1) / 2, -1.0, 1.0)))
@@ -246,7 +244,7 @@ def held_out_silhouettes(
         out.append(
             (
                 name,
-                seen_by(gt["view_rotation"][c, sel], gt["view_translation"][c, sel], world_t, faces),
+                seen_by(gt["view_rotation"][c, sel], gt["view_translation"][c, sel], world, faces),
                 masks[c],
             )
         )

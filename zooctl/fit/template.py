@@ -148,12 +148,12 @@ def select_template(
     )
     if len(candidates) < 2 or cfg.trials.candidates < 2 or not cfg.ablation.optimise:
         return asset, candidates, None, None
-    sure = cfg.trials.sure
-    if sure is not None and retrieval_lead(candidates) >= sure:
+    sure, lead = cfg.trials.sure, retrieval_lead(candidates)
+    if sure is not None and lead >= sure:
         if reporter is not None:
             reporter.message(
-                f"template {asset.name}: retrieval is sure of it (ahead by "
-                f"{retrieval_lead(candidates):.2f}, trials.sure {sure:g}); no template trials"
+                f"template {asset.name}: retrieval is sure of it (ahead by {lead:.2f}, "
+                f"trials.sure {sure:g}); no template trials"
             )
         return asset, candidates, None, None
     t = time.perf_counter()
