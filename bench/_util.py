@@ -78,3 +78,35 @@ def add_log_parser(sub) -> object:
     a.add_argument("--out", required=True)
     a.add_argument("--part", default="1/1")
     return a
+
+
+def stored_bench_fits(store: Path, names: list[str] | None = None, need: str = "vertices"):
+    """Yield (name, record, result) for each finished fit of ``store`` (``names``, default every
+    fit) whose source is a benchmark video with truth ``need``: the fit reloaded from its
+    ``state.pt`` (`zooctl.fit.run.fit_video` resumed from the finished state runs no iteration)."""
+    from zooctl.fit.config import FitConfig, preset
+    from zooctl.fit.inputs import load_bench_video
+    from zooctl.fit.run import fit_video
+    from zooctl.store.bank import Bank
+    from zooctl.store.fits import FitStore
+
+    fits, bank = FitStore(store), Bank.open(store)
+    for name in names or fits.names():
+        rec = fits.get(name)
+        if rec.get("status") != "done" or not fits.state_path(name).is_file():
+            continue
+        state = fits.load_state(name)
+        cfg = FitConfig.from_dict(state["config"], preset(state["config"].get("preset", "fast")))
+        video = load_bench_video(Path(rec["source"]))
+        if video.gt is None or need not in video.gt:
+            continue
+        yield name, rec, fit_video(video, bank.get(rec["template"]), cfg, resume=state)
+
+
+def finish_lines(lines: list[str], summary: dict, out: Path | None) -> None:
+    """A per-fit benchmark's JSON lines closed by its ``summary``: printed, and written to ``out``
+    when given (one JSON object a line)."""
+    lines.append(json.dumps(summary))
+    print(lines[-1])
+    if out:
+        out.write_text("\n".join(lines) + "\n")

@@ -28,6 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _util import finish_lines, stored_bench_fits  # noqa: E402
+
 
 def similarity(p: np.ndarray, g: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     """(s, R, t) minimising |s R p + t - g|^2 over corresponding points p, g (N, 3)."""
@@ -48,24 +51,10 @@ def main() -> None:
     args = ap.parse_args()
 
     from zooctl.fit import metrics
-    from zooctl.fit.config import FitConfig, preset
-    from zooctl.fit.inputs import load_bench_video
-    from zooctl.fit.run import fit_video
-    from zooctl.store.bank import Bank
-    from zooctl.store.fits import FitStore
 
-    fits, bank = FitStore(args.store), Bank.open(args.store)
     lines, rows = [], []
-    for name in args.fits or fits.names():
-        rec = fits.get(name)
-        if rec.get("status") != "done" or not fits.state_path(name).is_file():
-            continue
-        state = fits.load_state(name)
-        cfg = FitConfig.from_dict(state["config"], preset(state["config"].get("preset", "fast")))
-        video = load_bench_video(Path(rec["source"]))
-        if video.gt is None or "vertices" not in video.gt:
-            continue
-        res = fit_video(video, bank.get(rec["template"]), cfg, resume=state)
+    for name, _, res in stored_bench_fits(args.store, args.fits):
+        video = res.video
         if res.scene.model.num_vertices != video.gt["vertices"].shape[1]:
             print(f"{name}: its template is not the video's own rig; skipped", file=sys.stderr)
             continue
@@ -100,10 +89,7 @@ def main() -> None:
         "frames_over_30_deg": int((errs > 30).sum()),
         "frames": len(errs),
     }
-    lines.append(json.dumps(summary))
-    print(lines[-1])
-    if args.json:
-        args.json.write_text("\n".join(lines) + "\n")
+    finish_lines(lines, summary, args.json)
 
 
 if __name__ == "__main__":
