@@ -1,6 +1,6 @@
-"""How much of a fit's novel view its orientation could cost at most, for any template: each
-stored benchmark fit scored as fitted, with every evaluated frame's body mirrored in depth, and
-turned to the rotation that best matches the truth's surface.
+"""What a fit's novel view would be with its orientation mended, for any template: each stored
+benchmark fit scored as fitted, with every evaluated frame's body mirrored in depth, and turned
+to the rotation that best lays it on the truth's surface.
 
     python bench/orientation_bound.py --store STORE [FIT ...] [--frames 4] [--json OUT]
 
@@ -21,11 +21,12 @@ tell from the fit's. Per frame the mean over the held-out cameras is compared:
 - ``novel_rotated``: each frame's body (at its scale) turned about its centre by the rotation
   that best matches the truth's surface (`best_rotation`: ICP over both ways' nearest points from
   24 starts): orientation given without the point-to-point correspondence an own rig has
-  (`bench/orientation.py`). Another animal's body turned to fit the truth's surface is as well
-  oriented as it can be; what it still misses is its shape and pose.
+  (`bench/orientation.py`). The surfaces' best fit is not the silhouettes', so one fit can score
+  lower turned than as fitted; over many fits it shows what the orientation is worth, and what
+  is left beyond it is the template's shape and pose.
 
-One JSON line a fit, then the means (BENCHMARKS.md, "What a retrieved template's orientation
-could win at most").
+One JSON line a fit, then the means (BENCHMARKS.md, "What fixing the orientation could win at
+most, for any template").
 """
 
 from __future__ import annotations

@@ -166,8 +166,9 @@ def test_bench_statue_scores_the_animal_frozen_at_its_first_frame(bench, tmp_pat
 
 def test_bench_orientation_bound_scores_each_fit_mirrored_and_turned(bench, tmp_path):
     """`bench/orientation_bound.py`: the mirror keeps every projected point where it was and turns the
-    body's depth over (twice is the body again); on a stored fit of a benchmark video it reports
-    the fit's own novel view, the mirror's, and the better of the two per frame."""
+    body's depth over (twice is the body again); `best_rotation` undoes a turn from whichever of its
+    starts; on a stored fit of a benchmark video it reports the fit's own novel view, the mirror's,
+    the better of the two per frame, and the fit turned to the truth's surface."""
     import importlib.util
     import subprocess
     import sys
