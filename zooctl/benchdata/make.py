@@ -42,7 +42,7 @@ import torch
 
 from ..asset import RiggedAsset
 from ..errors import UsageError
-from ..geometry import compose_trs, quat_normalize, quat_slerp
+from ..geometry import compose_trs, quat_normalize, quat_slerp, quat_to_matrix
 from ..store.fs import write_bytes_atomic, write_json_atomic
 from .appearance import APPEARANCES, Coat, natural_background, world_backgrounds
 
@@ -140,10 +140,9 @@ MOTIONS = ("random", "clips")
 def turn_in_world(points: np.ndarray, degrees: np.ndarray, pivot: np.ndarray) -> np.ndarray:
     """(T, N, 3) ``points`` (T, N, 3) turned about the vertical (+Y) through ``pivot`` (3,) by
     frame t's ``degrees[t]``: the animal's heading in the world."""
-    a = np.radians(np.asarray(degrees, np.float64))
-    c, s = np.cos(a), np.sin(a)
-    R = np.zeros((len(a), 3, 3))
-    R[:, 0, 0], R[:, 0, 2], R[:, 1, 1], R[:, 2, 0], R[:, 2, 2] = c, s, 1.0, -s, c
+    half = np.radians(np.asarray(degrees, np.float64)) / 2
+    zero = np.zeros_like(half)
+    R = quat_to_matrix(np.stack([np.cos(half), zero, np.sin(half), zero], -1))
     p = np.asarray(points, np.float64) - pivot
     return (np.einsum("tij,tnj->tni", R, p) + pivot).astype(np.asarray(points).dtype)
 
