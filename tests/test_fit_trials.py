@@ -387,7 +387,8 @@ def test_the_trials_measure_the_body_turn_only_where_the_camera_turns(tmp_path, 
     """Over a scene fixed in the world, seen by the benchmark's orbiting camera, every trial
     records how far its body turned in the world (``trial_world_spread_deg``); over a still
     background (a camera at rest to the read) no trial does, and ``camera.motion`` none reads
-    nothing."""
+    nothing. Where the turn is read, each candidate is tried from two starts (``trials.carried``,
+    the default) or, with it off, from the search's alone."""
     from zooctl.fit.inputs import load_fit_video
     from zooctl.fit.template import trial_score, try_candidates
 
@@ -395,12 +396,18 @@ def test_the_trials_measure_the_body_turn_only_where_the_camera_turns(tmp_path, 
     kw = {"frames": 19, "size": 160, "seed": 1, "appearance": "textured"}
     world = load_fit_video(make_video(thin, tmp_path / "w", background="world", **kw))
     still = load_fit_video(make_video(thin, tmp_path / "s", **kw))
-    for video, motion, measured in ((world, "given", True), (still, "given", False), (world, "none", False)):
+    assert FitConfig().trials.carried  # the default
+    for video, motion, measured, carried in (
+        (world, "given", True, True),
+        (world, "given", True, False),
+        (still, "given", False, True),
+        (world, "none", False, True),
+    ):
         cfg = FitConfig.from_dict(
             {
                 **json.loads(json.dumps(TINY)),
                 "camera": TINY["camera"] | {"motion": motion},
-                "trials": TINY["trials"] | {"carried": True},
+                "trials": TINY["trials"] | {"carried": carried},
             }
         )
         cands = [
@@ -413,9 +420,10 @@ def test_the_trials_measure_the_body_turn_only_where_the_camera_turns(tmp_path, 
         # Where the turn is read, each candidate is also tried from a start carried by it, and
         # keeps the start that scores better: its record says which, and the other's score.
         starts = [c.get("trial_start") for c in out]
-        assert all((s in ("search", "carried")) == measured for s in starts), (motion, starts)
+        assert all((s in ("search", "carried")) == (measured and carried) for s in starts), (motion, starts)
         if measured:
             assert all(0.0 <= s < 180.0 for s in spreads)
+        if measured and carried:
             for c in out:
                 kept = trial_score(
                     c["trial_iou"], c["semantic"], c["trial_displacement"], c["trial_world_spread_deg"]

@@ -271,12 +271,12 @@ class TemplateTrials:
         maximum=3,
     )
     carried: bool = spec(
-        False,
+        True,
         help="where the camera turns round the animal (its turn read from the background, at least "
         "camera.track_step over the trial's frames), each candidate is also tried from a start "
         "carried by the camera's turn (camera.motion background), and its trial is the start that "
-        "scores better. Only there: elsewhere the two starts are one. Off by default: about 1.5 "
-        "times the fit time where the camera turns",
+        "scores better. Only there: elsewhere the two starts are one. About 1.5 times the fit time "
+        "where the camera turns; false: the search's start alone",
         required=False,
     )
     # Off by default: leave-one-video-out over 58 videos gained nothing (BENCHMARKS.md, "Forty
