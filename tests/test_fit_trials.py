@@ -407,14 +407,16 @@ def test_the_trials_measure_the_body_turn_only_where_the_camera_turns(tmp_path, 
             {
                 **json.loads(json.dumps(TINY)),
                 "camera": TINY["camera"] | {"motion": motion},
-                "trials": TINY["trials"] | {"carried": carried},
+                "trials": TINY["trials"] | {"carried": carried, "carried_at": 1},
             }
         )
         cands = [
             {"name": "fat", "score": -2.0, "semantic": 0.0},
             {"name": "thin", "score": -1.0, "semantic": 0.0},
         ]
-        _, out, _ = try_candidates(bank, video, cands, cfg)
+        _, out, state = try_candidates(bank, video, cands, cfg)
+        # Two starts are compared at carried_at, and the better goes on to the trials' end.
+        assert state["iteration"] == cfg.trials.iters == 2 and not any("pruned_at" in c for c in out)
         spreads = [c.get("trial_world_spread_deg") for c in out]
         assert all((s is not None) == measured for s in spreads), (motion, spreads)
         # Where the turn is read, each candidate is also tried from a start carried by it, and

@@ -275,9 +275,17 @@ class TemplateTrials:
         help="where the camera turns round the animal (its turn read from the background, at least "
         "camera.track_step over the trial's frames), each candidate is also tried from a start "
         "carried by the camera's turn (camera.motion background), and its trial is the start that "
-        "scores better. Only there: elsewhere the two starts are one. About 1.5 times the fit time "
-        "where the camera turns; false: the search's start alone",
+        "scores better (compared at carried_at). Only there: elsewhere the two starts are one. About "
+        "1.3 times the fit time where the camera turns; false: the search's start alone",
         required=False,
+    )
+    carried_at: int | None = spec(
+        100,
+        help="with two starts (carried), the stage-2 iteration where each candidate's two trials are "
+        "compared and the one that scores lower stops; the other goes on to iters. null: both run to "
+        "iters. With prune_at too, both happen at the earlier of the two",
+        required=False,
+        minimum=0,
     )
     # Off by default: leave-one-video-out over 58 videos gained nothing (BENCHMARKS.md, "Forty
     # more animals nothing was tuned on").

@@ -184,7 +184,8 @@ def try_candidates(
     each candidate is tried twice, from the search's start and from one carried by the camera's
     turn (``camera.motion`` background), and its trial is the start of the higher `trial_score`
     (``trial_start`` and ``other_start_score`` in its record; `winner_config` carries the rest of
-    the winner's fit the same way)."""
+    the winner's fit the same way). The two are compared at ``cfg.trials.carried_at`` (or at
+    ``prune_at`` where that is earlier), and only the better goes on to ``cfg.trials.iters``."""
     from .run import trial_camera_turn
     from .trial_pool import Trial, run_trials
 
@@ -193,7 +194,6 @@ def try_candidates(
         return bank.get(candidates[0]["name"]), candidates, None
     semantic = [float(c.get("semantic") or 0.0) for c in tried]
     prune_at = cfg.trials.prune_at
-    first = cfg.trials.iters if prune_at is None else min(prune_at, cfg.trials.iters)
     mirror = mirror_wanted(cfg, template_given=False)
     assets = [bank.get(c["name"]) for c in tried]
     turn = trial_camera_turn(video, cfg)
@@ -206,6 +206,10 @@ def try_candidates(
         and cfg.camera.motion != "background"
     ):
         runs += [(i, "background") for i in range(len(tried))]
+    # The trials pause once: where the candidates are pruned, or where each one's two starts are
+    # compared (BENCHMARKS.md, "Each candidate from two starts on 78 more videos").
+    pauses = [prune_at, cfg.trials.carried_at if len(runs) > len(tried) else None]
+    first = min([p for p in pauses if p is not None] + [cfg.trials.iters])
     if reporter is not None:
         reporter.message(
             "trial fits: "
@@ -245,7 +249,8 @@ def try_candidates(
         measure(k)
     on = [record(i) for i in range(len(tried))]  # each candidate's better start: these go on
     if first < cfg.trials.iters:
-        on = [on[j] for j in kept_trials([score(k) for k in on], cfg.trials.prune_margin)]
+        if prune_at is not None:
+            on = [on[j] for j in kept_trials([score(k) for k in on], cfg.trials.prune_margin)]
         for i, cand in enumerate(tried):
             if not any(runs[k][0] == i for k in on):
                 cand["pruned_at"] = first  # its trial_iou is the one at the checkpoint
