@@ -276,7 +276,7 @@ class TemplateTrials:
         "camera.track_step over the trial's frames), each candidate is also tried from a start "
         "carried by the camera's turn (camera.motion background), and its trial is the start that "
         "scores better (compared at carried_at). Only there: elsewhere the two starts are one. About "
-        "1.3 times the fit time where the camera turns; false: the search's start alone",
+        "1.3-1.4 times the fit time where the camera turns; false: the search's start alone",
         required=False,
     )
     carried_at: int | None = spec(
