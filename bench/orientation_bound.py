@@ -107,24 +107,22 @@ def main() -> None:
         scores = metrics.evaluate_fit(res, frames=args.frames, reanimate_iters=1)
         sel = np.asarray(scores["frames_evaluated"])
         pred, _ = metrics._camera_frame_pred(res, sel)
-        # each frame's scale as the metric finds it, so the mirror is placed where the fit is
-        scales = np.array(
-            [
-                metrics.scale_line_search(
-                    metrics.surface_samples(pred[i], res.template.faces),
-                    metrics.surface_samples(metrics._camera_frame_gt(res, int(t))[0], video.gt["faces"]),
-                )[0]
-                for i, t in enumerate(sel)
-            ]
-        )
-        mirrored = np.stack([depth_mirror_points(p * s) / s for p, s in zip(pred, scales, strict=True)])
-        turned = []
+        scales, mirrored, turned = [], [], []
         for i, t in enumerate(sel):
-            body = pred[i] * scales[i]
+            gt = metrics._camera_frame_gt(res, int(t))[0]
+            # the frame's scale as the metric finds it, so the mirror is placed where the fit is
+            scale = metrics.scale_line_search(
+                metrics.surface_samples(pred[i], res.template.faces),
+                metrics.surface_samples(gt, video.gt["faces"]),
+            )[0]
+            body = pred[i] * scale
             samples = metrics.surface_samples(body, res.template.faces, 1500)
-            truth = metrics.surface_samples(metrics._camera_frame_gt(res, int(t))[0], video.gt["faces"], 1500)
+            truth = metrics.surface_samples(gt, video.gt["faces"], 1500)
             centre = samples.mean(0)  # turned where it stands: its place is not at issue here
-            turned.append(((body - centre) @ best_rotation(samples, truth).T + centre) / scales[i])
+            scales.append(scale)
+            mirrored.append(depth_mirror_points(body) / scale)
+            turned.append(((body - centre) @ best_rotation(samples, truth).T + centre) / scale)
+        scales, mirrored = np.array(scales), np.stack(mirrored)
 
         fitted, flipped, rotated = (
             _per_frame(metrics.held_out_silhouettes(res, sel, v, scales))

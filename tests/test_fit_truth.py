@@ -174,6 +174,8 @@ def test_bench_orientation_bound_scores_each_fit_mirrored_and_turned(bench, tmp_
     import sys
     from pathlib import Path
 
+    from zooctl.geometry import quat_to_matrix
+
     script = Path(__file__).resolve().parent.parent / "bench" / "orientation_bound.py"
     spec = importlib.util.spec_from_file_location("orientation_bound", script)
     mod = importlib.util.module_from_spec(spec)
@@ -187,8 +189,7 @@ def test_bench_orientation_bound_scores_each_fit_mirrored_and_turned(bench, tmp_
     # a long lumpy body turned 120 degrees about a slanted axis: the rotation found turns it back
     body = rng.normal(size=(400, 3)) * [1.0, 0.4, 0.15] + [0.3, 0.0, 0.0] * (rng.random((400, 1)) > 0.7)
     axis = np.array([1.0, 2.0, 0.5]) / np.linalg.norm([1.0, 2.0, 0.5])
-    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    turn = np.eye(3) + np.sin(2.1) * K + (1 - np.cos(2.1)) * K @ K
+    turn = quat_to_matrix(np.concatenate([[np.cos(1.05)], np.sin(1.05) * axis]))
     R = mod.best_rotation(body @ turn.T, body)
     np.testing.assert_allclose(R @ turn, np.eye(3), atol=0.05)
 
