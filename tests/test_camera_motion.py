@@ -89,23 +89,32 @@ def test_ransac_finds_the_rotation_among_outliers():
     assert _rotation_error_deg(kabsch(a[80:], b[80:]), R) < 1e-3
 
 
+def _orbited(plan: str, pan: float, view_of=None, T: int = 36, size: int = 96, focal: float = 110.0):
+    """A procedural ``plan`` still in the world, seen from 30 degrees azimuth, 20 above, by a camera
+    orbiting ``pan`` degrees a frame: (asset, camera rotations, the true root rotations, masks).
+    ``view_of(t, follow_t, truth_t)``: the root rotation frame t's mask is drawn with instead."""
+    from zooctl.procedural import build_animal
+
+    asset = build_animal(plan, name=plan)
+    cams = _panning(T, pan, 0.0)
+    follow = [CAMERA_ROTATION.T @ C @ cams[0].T @ CAMERA_ROTATION for C in cams]
+    truth = [f @ view_rotation(30.0, 20.0) for f in follow]
+    scorer = SilhouetteScorer(asset.vertices, asset.faces, np.zeros((T, size, size), bool), size)
+    rest = asset.vertices - 0.5 * (asset.vertices.max(0) + asset.vertices.min(0))
+    depth = 3.0 * float(np.ptp(rest, axis=0).max())
+    views = [view_of(t, follow[t], truth[t]) if view_of else truth[t] for t in range(T)]
+    masks = np.stack([scorer.silhouette(rest @ R.T + [0.0, 0.0, -depth], focal) for R in views])
+    return asset, cams, truth, masks
+
+
 @pytest.mark.parametrize("motion", ["given", "none", "reversed"])
 def test_the_tracker_follows_a_fast_orbit_with_the_cameras_turn_and_loses_it_without(motion):
     """A body still in the world seen by a camera orbiting at 5 degrees a frame (30 between
     keyframes, twice the tracker's step): carried by the camera's turn, every keyframe is found
     (within the quadruped's own ambiguity, about 25 degrees); tracked without it, or carried the
     wrong way, the track is lost."""
-    from zooctl.procedural import build_animal
-
-    asset = build_animal("quadruped", name="quadruped")
-    T, size, focal = 36, 96, 110.0
-    cams = _panning(T, 5.0, 0.0)
-    follow = [CAMERA_ROTATION.T @ C @ cams[0].T @ CAMERA_ROTATION for C in cams]
-    truth = [f @ view_rotation(30.0, 20.0) for f in follow]
-    scorer = SilhouetteScorer(asset.vertices, asset.faces, np.zeros((T, size, size), bool), size)
-    rest = asset.vertices - 0.5 * (asset.vertices.max(0) + asset.vertices.min(0))
-    depth = 3.0 * float(np.ptp(rest, axis=0).max())
-    masks = np.stack([scorer.silhouette(rest @ R.T + [0.0, 0.0, -depth], focal) for R in truth])
+    asset, cams, truth, masks = _orbited("quadruped", 5.0)
+    T, focal = len(masks), 110.0
     cfg = CameraConfig(focal=focal, azimuths=12, elevations=[-15.0, 10.0, 35.0])
     given = {"given": cams, "none": None, "reversed": np.stack([cams[0] @ C.T @ cams[0] for C in cams])}[
         motion
@@ -117,6 +126,27 @@ def test_the_tracker_follows_a_fast_orbit_with_the_cameras_turn_and_loses_it_wit
         assert worst < 30.0 and min(init.keyframe_iou) > 0.75
     else:
         assert worst > 45.0
+
+
+def test_starts_ranked_over_the_whole_clip_recover_a_view_the_first_frames_mislead():
+    """A bird still in the world, the camera orbiting at 3 degrees a frame, its first six frames'
+    masks of another view (the body seen 90 degrees round, as a first pose unlike the rest pose
+    shows the template another outline): the head's starts all follow the wrong view, while
+    ``search_over = "both"`` also tracks the starts that match keyframes spread over the clip,
+    and keeps one within the tracker's step of the truth from frame 6 on."""
+    asset, cams, truth, masks = _orbited(
+        "bird", 3.0, lambda t, follow, true: true if t >= 6 else follow @ view_rotation(120.0, 20.0)
+    )
+    T, focal = len(masks), 110.0
+    worst, kept = {}, {}
+    for over in ("head", "both"):
+        cfg = CameraConfig(focal=focal, azimuths=12, elevations=[-15.0, 10.0, 35.0], search_over=over)
+        init = initialise_camera(asset.vertices, asset.faces, masks, cfg, 1.0, camera_motion=cams)
+        fitted = [quat_to_matrix(q) for q in init.root_rotation]
+        worst[over] = max(_rotation_error_deg(fitted[t], truth[t]) for t in range(6, T, 6))
+        kept[over] = float(np.mean(init.keyframe_iou))
+    assert worst["head"] > 30.0
+    assert worst["both"] < cfg.track_step + 5.0 and kept["both"] > kept["head"]
 
 
 def test_a_fit_records_the_cameras_turn_and_a_camera_at_rest_changes_nothing(tmp_path):

@@ -29,6 +29,7 @@ camera over the video, only one of them keeps fitting).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -329,7 +330,9 @@ def initialise_camera(
     step = 360.0 / cfg.azimuths / 2
     fsteps = [1.0] if cfg.focal is not None else [0.85, 1.0, 1.18]
 
-    def refine(c: tuple[float, float, float, float]) -> tuple[tuple[float, float, float, float], float]:
+    def refine(
+        c: tuple[float, float, float, float], by: Callable | None = None
+    ) -> tuple[tuple[float, float, float, float], float]:
         local = [
             (c[0] + da, c[1] + de, c[2] + dr, c[3] * fs)
             for da in (-step, 0.0, step)
@@ -337,16 +340,28 @@ def initialise_camera(
             for dr in (-step / 2, 0.0, step / 2)
             for fs in fsteps
         ]
-        lscores = score([view_rotation(*x[:3]) for x in local], [x[3] for x in local])
+        lscores = (by or score)([view_rotation(*x[:3]) for x in local], [x[3] for x in local])
         return local[int(np.argmax(lscores))], float(lscores.max())
 
     if follow is not None and cfg.track != "steady":
         # The first frames cannot tell a view from its mirror turning the other way; the camera's
         # turn over the whole video can: each distinct good start is tracked, the best track kept.
-        starts = _distinct_starts([cands[i] for i in order])
+        starts = [(c, score) for c in _distinct_starts([cands[i] for i in order])]
+        if cfg.search_over == "both":
+            keys = _spread_keyframes(present, cfg)
+            whole = lambda rots, fs: _score_followed(scorer, follow, rots, keys, fs)  # noqa: E731
+            ws = whole([view_rotation(*c[:3]) for c in cands], [c[3] for c in cands])
+            seen = [view_rotation(*c[:3]) for c, _ in starts]
+            for c in _distinct_starts([cands[i] for i in np.argsort(-ws)]):
+                R = view_rotation(*c[:3])
+                if all(rotation_angle_deg(R @ Q.T) >= cfg.track_step for Q in seen):
+                    starts.append((c, whole))
+                    seen.append(R)
         tracks = []
-        for c in starts:
-            b, i = refine(c)
+        for c, by in starts:
+            b, i = refine(c, by)
+            if by is not score:  # every track's start scored alike, on the search's frames
+                i = float(score([view_rotation(*b[:3])], [b[3]])[0])
             tracks.append(track(view_rotation(*b[:3]), b[3], i, top, place=False))
         kept = max(tracks, key=lambda x: float(np.mean(x.keyframe_iou)))
         focal = kept.focal / fit_scale

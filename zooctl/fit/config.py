@@ -26,6 +26,7 @@ FOCAL_GUESSES = ("normal", "search")
 TRACKERS = ("greedy", "steady")
 START_TRIALS = ("none", "steady")
 CAMERA_MOTIONS = ("given", "background", "none")
+SEARCH_OVER = ("head", "both")
 PRESET_NAMES = ("fast", "quality")
 _RATE = {"exclusiveMinimum": 0}
 _WEIGHT = {"minimum": 0}
@@ -64,6 +65,15 @@ class CameraConfig:
     rolls: list[float] = spec(factory=lambda: [0.0], help="degrees", minItems=1)
     search_size: int = spec(64, help="image size (px, longest side) of the search renders", minimum=8)
     search_frames: int = spec(3, help="frames scored per candidate", minimum=1)
+    search_over: str = spec(
+        "head",
+        help="where the camera's turn is read (camera.motion), which frames rank the distinct starts the "
+        "tracker follows: head (search_frames of the first track_every frames) or both (those, and as many "
+        "more ranked over keyframes spread over the whole clip, each view carried there by the camera's "
+        "turn); the track that matches its keyframes best is kept",
+        required=False,
+        enum=SEARCH_OVER,
+    )
     track_every: int = spec(6, help="keyframes for the per-frame root rotation tracking", minimum=1)
     track_step: float = spec(15.0, help="degrees of the local tracking grid", minimum=0)
     track: str = spec(
