@@ -2,9 +2,9 @@
 chosen leave-one-video-out (issue 50: the novel view with retrieved templates).
 
     python bench/trial_pick.py log DIR --store STORE --out LOG.jsonl [--part I/N] [--own-template] [--turned]
-        [--candidates N --skip-logged LOG.jsonl ...]
+        [--carried] [--candidates N --skip-logged LOG.jsonl ...]
     python bench/trial_pick.py choose LOG.jsonl [LOG2.jsonl ...] [--finished RUN.json] [--candidates N]
-        [--displacement W]
+        [--displacement W] [--best-start]
 
 ``log`` runs, for every benchmark video of DIR (`zooctl bench make`; its own asset excluded from
 retrieval, as `zooctl bench run` does), the template trials of ``--preset fast`` as
@@ -18,7 +18,10 @@ the camera's turn is read from the background, how the root turns in the world (
 ``--own-template``: each video's own asset the only candidate (fitted as a named template is,
 from the search's start or its depth mirror: `trial_with_mirror`);
 ``--turned``: each candidate also tried from the camera search's best view at least 90 degrees of
-azimuth from its pick (`fit_video`'s ``start="turned"``). ``--candidates N``: retrieval's first N
+azimuth from its pick (`fit_video`'s ``start="turned"``). ``--carried``: where the camera's turn is
+read, each candidate also tried from the start carried by it (``camera.motion`` background), as
+the fit's trials do by default (``trials.carried``; both starts logged to the trials' end, as
+``trials.carried_at`` null compares them). ``--candidates N``: retrieval's first N
 (the family's best moved up to the N-th place, as the fit does), less those ``--skip-logged``
 logs hold.
 
@@ -27,6 +30,9 @@ logs hold.
 default; 1.5 today's), the oracle (the best novel view among the tried), and that score less
 lambda x one feature, with lambda chosen on all videos (in-sample) and leave-one-video-out (chosen
 on the others, scored on the held-out one), by the mean novel view at the trials' end.
+``--best-start`` keeps, of each candidate's logged starts, the one the fit's trials keep: the
+highest `zooctl.fit.template.trial_score` (the displacement at ``--displacement``, the turn in the
+world at the shipped weight; the first logged on a tie).
 ``--finished`` (a `zooctl bench run --json` of the same videos) checks how well the trial's novel
 view predicts the finished fit's. Logs of the same videos are merged, their candidates in the
 logs' order; ``--candidates N`` keeps each video's first N.
@@ -159,6 +165,8 @@ def log(args) -> None:
             )
             cands = [c for c in cands[: cfg.trials.candidates] if c["name"] not in logged.get(v.name, ())]
         starts = ("search", "turned") if args.turned else ("search",)
+        if args.carried and follow is not None and not args.own_template:
+            starts += ("carried",)
         rows = []
         for cand, start in ((c, s) for c in cands for s in starts):
             asset = bank.get(cand["name"])
@@ -168,6 +176,9 @@ def log(args) -> None:
                 # as `zooctl fit --template` starts: the search's start or its depth mirror
                 kept = trial_with_mirror(video, asset, cfg, pause_at=cfg.trials.iters)
                 res = fit_video(video, asset, cfg, resume=kept.state, pause_at=cfg.trials.iters)
+            elif start == "carried":  # as the trials' Trial(motion="background")
+                carried = cfg.with_camera_motion("background")
+                res = fit_video(video, asset, carried, pause_at=cfg.trials.iters)
             else:
                 res = fit_video(video, asset, cfg, pause_at=cfg.trials.iters, start=start)
             wall, cpu = time.perf_counter() - t, time.process_time() - c
@@ -204,6 +215,23 @@ def log(args) -> None:
             [(r["name"], r["iou"], round(r["novel_view_iou"], 3)) for r in rows],
             flush=True,
         )
+
+
+def _best_starts(candidates: list[dict]) -> list[dict]:
+    """Each candidate's logged start that the fit's trials keep (module docstring, ``--best-start``),
+    named as the candidate, in the order the candidates were first logged."""
+    from zooctl.fit.view_trial import TRIAL_WORLD_SPREAD_WEIGHT
+
+    def shipped(c: dict) -> float:
+        spread = c["features"].get("world_spread_deg", float("nan"))
+        return c["score"] - TRIAL_WORLD_SPREAD_WEIGHT * (spread if np.isfinite(spread) else 0.0)
+
+    best: dict[str, dict] = {}
+    for c in candidates:  # c["score"] has the displacement term at --displacement already
+        base = c["name"].split(" (")[0]
+        if base not in best or shipped(c) > shipped(best[base]) + 1e-12:
+            best[base] = c | {"name": base, "logged_as": c["name"]}
+    return list(best.values())
 
 
 def _pick(video: dict, feature: str | None, lam: float) -> dict:
@@ -246,6 +274,9 @@ def choose(args) -> None:
     for v in videos:  # the base rule: today's trial score, the displacement term at its weight
         for c in v["candidates"]:
             c["score"] -= args.displacement * c["features"]["displacement"]
+    if args.best_start:
+        for v in videos:
+            v["candidates"] = _best_starts(v["candidates"])
     if args.candidates:
         for v in videos:
             v["candidates"] = v["candidates"][: args.candidates]
@@ -326,6 +357,11 @@ def main() -> None:
         action="store_true",
         help="each candidate also from the best view 90+ degrees of azimuth away",
     )
+    a.add_argument(
+        "--carried",
+        action="store_true",
+        help="each candidate also from the start carried by the camera's turn, where it is read (as the fit's trials)",
+    )
     a.set_defaults(func=log)
     b = sub.add_parser("choose")
     b.add_argument("logs", nargs="+")
@@ -336,6 +372,11 @@ def main() -> None:
         type=float,
         default=0.0,
         help="the base rule's displacement weight (1.5: the trials' rule since 2026-11-29; 0: the rule before)",
+    )
+    b.add_argument(
+        "--best-start",
+        action="store_true",
+        help="of each candidate's logged starts, only the one the fit's trials keep (the shipped trial score)",
     )
     b.set_defaults(func=choose)
     args = ap.parse_args()
