@@ -136,7 +136,7 @@ def log(args) -> None:
     from zooctl.fit.job import load_source
     from zooctl.fit.metrics import evaluate_fit
     from zooctl.fit.run import fit_video, trial_camera_turn
-    from zooctl.fit.template import choose_template, trial_score
+    from zooctl.fit.template import carried_start_wanted, choose_template, trial_score
     from zooctl.fit.view_trial import trial_iou, trial_with_mirror
     from zooctl.store.bank import Bank
 
@@ -165,7 +165,7 @@ def log(args) -> None:
             )
             cands = [c for c in cands[: cfg.trials.candidates] if c["name"] not in logged.get(v.name, ())]
         starts = ("search", "turned") if args.turned else ("search",)
-        if args.carried and follow is not None and not args.own_template:
+        if args.carried and not args.own_template and carried_start_wanted(video, cfg, follow):
             starts += ("carried",)
         rows = []
         for cand, start in ((c, s) for c in cands for s in starts):

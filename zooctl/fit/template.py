@@ -199,12 +199,7 @@ def try_candidates(
     turn = trial_camera_turn(video, cfg)
     # Each run: (candidate, its start's camera.motion or None for the config's own).
     runs: list[tuple[int, str | None]] = [(i, None) for i in range(len(tried))]
-    if (
-        cfg.trials.carried
-        and turn is not None
-        and video.camera_rotations is None
-        and cfg.camera.motion != "background"
-    ):
+    if carried_start_wanted(video, cfg, turn):
         runs += [(i, "background") for i in range(len(tried))]
     # The trials pause once: where the candidates are pruned, or where each one's two starts are
     # compared (BENCHMARKS.md, "Each candidate from two starts on 78 more videos").
@@ -282,6 +277,19 @@ def try_candidates(
     if best_state is not None:
         best_state["timings"] = {}  # the trials are timed as a whole by the caller
     return best, candidates, best_state
+
+
+def carried_start_wanted(video: FitVideo, cfg: FitConfig, turn: np.ndarray | None) -> bool:
+    """Whether each candidate is also tried from a start carried by the camera's turn
+    (`try_candidates`): ``cfg.trials.carried``, a turn read from the background (``turn``:
+    `trial_camera_turn`; not the given camera rotations) and a config that does not carry every
+    start already (``camera.motion`` background)."""
+    return (
+        cfg.trials.carried
+        and turn is not None
+        and video.camera_rotations is None
+        and cfg.camera.motion != "background"
+    )
 
 
 def winner_config(cfg: FitConfig, candidates: list[dict[str, Any]], chosen: str) -> FitConfig:
