@@ -4,7 +4,7 @@ chosen leave-one-video-out (issue 50: the novel view with retrieved templates).
     python bench/trial_pick.py log DIR --store STORE --out LOG.jsonl [--part I/N] [--own-template] [--turned]
         [--carried] [--candidates N --skip-logged LOG.jsonl ...]
     python bench/trial_pick.py choose LOG.jsonl [LOG2.jsonl ...] [--finished RUN.json] [--candidates N]
-        [--displacement W] [--best-start]
+        [--displacement W] [--spread W] [--best-start]
 
 ``log`` runs, for every benchmark video of DIR (`zooctl bench make`; its own asset excluded from
 retrieval, as `zooctl bench run` does), the template trials of ``--preset fast`` as
@@ -14,7 +14,9 @@ benchmark's 3D metrics at the pause (`zooctl.fit.metrics.evaluate_fit`: novel vi
 and what the trial did to the template to get there: its joints' mean and 90th-percentile angle
 from the rest pose, their frame-to-frame angle, the bones' stretch, the skinning weights' drift
 (the KL of the skin prior), the displacement, every loss term over the last 25 steps, and, where
-the camera's turn is read from the background, how the root turns in the world (`world_turn`).
+the camera's turn is read from the background, how the root turns in the world (`world_turn`) and
+how its body, kept as posed at one frame, matches the masks of the frames the camera saw from 20
+(``view_consistency``) or 45 degrees (``view_consistency_45``) away.
 ``--own-template``: each video's own asset the only candidate (fitted as a named template is,
 from the search's start or its depth mirror: `trial_with_mirror`);
 ``--turned``: each candidate also tried from the camera search's best view at least 90 degrees of
@@ -27,8 +29,10 @@ logs hold.
 
 ``choose`` scores pick rules on the logged videos: the base rule (trial IoU + 0.1 x semantic, less
 ``--displacement`` W times the displacement: 0, the rule before the displacement term, by
-default; 1.5 today's), the oracle (the best novel view among the tried), and that score less
-lambda x one feature, with lambda chosen on all videos (in-sample) and leave-one-video-out (chosen
+default; 1.5 today's; less ``--spread`` W times the body's turn in the world, 0.016 today's),
+the oracle (the best novel view among the tried), and that score less lambda x one feature
+(``view_consistency``, `zooctl.fit.view_trial.trial_view_consistency`, is added: its lambdas are
+negative), with lambda chosen on all videos (in-sample) and leave-one-video-out (chosen
 on the others, scored on the held-out one), by the mean novel view at the trials' end.
 ``--best-start`` keeps, of each candidate's logged starts, the one the fit's trials keep: the
 highest `zooctl.fit.template.trial_score` (the displacement at ``--displacement``, the turn in the
@@ -63,6 +67,7 @@ FEATURES = (
     "loss_prior",
     "world_step_deg",
     "world_spread_deg",
+    "view_consistency",
 )
 # a geometric grid per feature, from about a tenth to about ten times what a typical spread of the
 # feature between candidates is worth in trial IoU (0.01)
@@ -77,6 +82,8 @@ LAMBDAS = {
     "loss_prior": tuple(0.01 / 0.003 * 2.0**k for k in range(-3, 5)),
     "world_step_deg": tuple(0.01 / 0.5 * 2.0**k for k in range(-3, 5)),
     "world_spread_deg": tuple(0.01 / 5.0 * 2.0**k for k in range(-3, 5)),
+    # higher is better: a negative lambda adds it
+    "view_consistency": tuple(-0.25 * 2.0**k for k in range(6)),
 }
 PRIOR_TERMS = ("smooth", "symmetry", "bone_length", "skin", "displacement", "pose", "root_smooth", "scale")
 
@@ -137,7 +144,7 @@ def log(args) -> None:
     from zooctl.fit.metrics import evaluate_fit
     from zooctl.fit.run import fit_video, trial_camera_turn
     from zooctl.fit.template import carried_start_wanted, choose_template, trial_score
-    from zooctl.fit.view_trial import trial_iou, trial_with_mirror
+    from zooctl.fit.view_trial import trial_iou, trial_view_consistency, trial_with_mirror
     from zooctl.store.bank import Bank
 
     store = Path(args.store)
@@ -195,7 +202,12 @@ def log(args) -> None:
                     "novel_view_iou": m["novel_view_iou"],
                     "miou": m["miou"],
                     "joint": m["joint"],
-                    "features": features(res) | world_turn(res, follow),
+                    "features": features(res)
+                    | world_turn(res, follow)
+                    | {
+                        "view_consistency": trial_view_consistency(res, follow),
+                        "view_consistency_45": trial_view_consistency(res, follow, min_turn_deg=45.0),
+                    },
                     "wall": round(wall, 2),
                     "cpu": round(cpu, 2),
                 }
@@ -234,12 +246,18 @@ def _best_starts(candidates: list[dict]) -> list[dict]:
     return list(best.values())
 
 
+def _feature(c: dict, name: str) -> float:
+    """A logged trial's feature, NaN where it was not measured (no camera turn read)."""
+    x = c["features"].get(name)
+    return float("nan") if x is None else float(x)
+
+
 def _pick(video: dict, feature: str | None, lam: float) -> dict:
     """The candidate a rule picks: the highest trial IoU + 0.1 semantic - lam x feature (ties: the
     first in retrieval order, as `pick_trial`)."""
 
     def score(c: dict) -> float:
-        x = c["features"][feature] if feature else 0.0
+        x = _feature(c, feature) if feature else 0.0
         return c["score"] - (lam * x if np.isfinite(x) else 0.0)
 
     scores = [score(c) for c in video["candidates"]]
@@ -277,6 +295,10 @@ def choose(args) -> None:
     if args.best_start:
         for v in videos:
             v["candidates"] = _best_starts(v["candidates"])
+    for v in videos:  # after the starts are kept: `_best_starts` weighs the spread itself
+        for c in v["candidates"]:
+            spread = _feature(c, "world_spread_deg")
+            c["score"] -= args.spread * spread if np.isfinite(spread) else 0.0
     if args.candidates:
         for v in videos:
             v["candidates"] = v["candidates"][: args.candidates]
@@ -288,7 +310,7 @@ def choose(args) -> None:
     today = [_pick(v, None, 0.0) for v in videos]
     f = lambda picks, k: np.mean([p[k] for p in picks])  # noqa: E731
     print(
-        f"| base (trial IoU + 0.1 semantic - {args.displacement:g} displacement) | {f(today, 'novel_view_iou'):.3f} | {f(today, 'novel_view_iou'):.3f} | {f(today, 'miou'):.3f} | {f(today, 'joint'):.3f} | 0 |"
+        f"| base (trial IoU + 0.1 semantic - {args.displacement:g} displacement - {args.spread:g} spread) | {f(today, 'novel_view_iou'):.3f} | {f(today, 'novel_view_iou'):.3f} | {f(today, 'miou'):.3f} | {f(today, 'joint'):.3f} | 0 |"
     )
     print(
         f"| oracle (best novel view of the 3) | {f(oracle, 'novel_view_iou'):.3f} | | {f(oracle, 'miou'):.3f} | {f(oracle, 'joint'):.3f} | {sum(o is not t for o, t in zip(oracle, today))} |"
@@ -326,10 +348,9 @@ def choose(args) -> None:
     for v, t in zip(videos, today):
         print(f"{v['video']}: pick {t['name']} ({t['novel_view_iou']:.3f})")
         for c in v["candidates"]:
-            fe = c["features"]
             print(
                 f"   {c['name']:<16} iou {c['iou']:.3f} sem {c['semantic']:.3f} nv {c['novel_view_iou']:.3f} "
-                + " ".join(f"{k} {fe[k]:.4g}" for k in FEATURES)
+                + " ".join(f"{k} {_feature(c, k):.4g}" for k in FEATURES)
             )
     if args.finished:
         rows = {r["video"]: r for r in json.loads(Path(args.finished).read_text())["rows"]}
@@ -372,6 +393,12 @@ def main() -> None:
         type=float,
         default=0.0,
         help="the base rule's displacement weight (1.5: the trials' rule since 2026-11-29; 0: the rule before)",
+    )
+    b.add_argument(
+        "--spread",
+        type=float,
+        default=0.0,
+        help="the base rule's weight on the body's turn in the world (0.016: the trials' rule since 2026-12-05)",
     )
     b.add_argument(
         "--best-start",

@@ -478,3 +478,82 @@ def test_a_retrieval_sure_of_its_first_candidate_skips_the_trials(tmp_path, stor
 
     with pytest.raises(UsageError, match="trials.sure"):
         FitConfig.from_dict({"trials": {"sure": -1.0}})
+
+
+def test_a_trials_body_seen_from_the_videos_other_views(tmp_path):
+    """`trial_view_consistency`: two fits that match every frame's mask exactly, one whose body
+    holds still in the world while the camera orbits, one whose body turns with the camera (so
+    it spins in the world): the first, posed at one frame and turned by the camera's turn, covers
+    the other frames' masks exactly; the second does not. Without a turn, nothing is measured."""
+    import torch
+
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.run import fit_video
+    from zooctl.fit.view_trial import trial_view_consistency
+    from zooctl.geometry import matrix_to_quat, quat_to_matrix
+    from zooctl.render.raster import rasterize
+
+    def about(axis, deg):  # (T, 3, 3) rotations about a unit axis (Rodrigues)
+        k = np.asarray(axis, float) / np.linalg.norm(axis)
+        K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+        a = np.radians(np.asarray(deg, float))[:, None, None]
+        return np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * (K @ K)
+
+    asset = tube_asset(bones=3)
+    video = load_fit_video(make_video(asset, tmp_path / "v", frames=9, size=48, seed=0))
+    cfg = FitConfig.from_dict({**json.loads(json.dumps(TINY)), "ablation": {"optimise": False}})
+    res = fit_video(video, asset, cfg)
+    T = res.scene.num_frames
+    turn = about([0.3, 1.0, 0.2], 10.0 * np.arange(T))  # the camera orbits 80 degrees
+    start = quat_to_matrix(res.scene.root_rotation[0].detach().numpy().astype(np.float64))
+
+    def posed(R):  # the scene's roots set to R (T, 3, 3), the masks made its own silhouettes
+        with torch.no_grad():
+            res.scene.root_rotation.copy_(torch.as_tensor(matrix_to_quat(R), dtype=torch.float32))
+            res.scene.root_translation.copy_(res.scene.root_translation[:1].expand(T, -1).clone())
+            v = res.scene.pose().vertices
+            cam = res.input_camera()
+            res.video.masks = rasterize(v, res.scene.faces, cam.expand(T)).mask.numpy()
+        return res
+
+    still = trial_view_consistency(posed(turn @ start), turn, sources=3, step=1)
+    spinning = trial_view_consistency(posed(np.repeat(start[None], T, 0)), turn, sources=3, step=1)
+    assert still > 0.98
+    assert spinning < still - 0.1
+    assert trial_view_consistency(res, None) is None
+
+
+def test_the_trials_score_a_bodys_other_views_where_asked(tmp_path, store):
+    """``trials.view_consistency``: where the camera turns round the animal, every candidate's
+    record gets its `trial_view_consistency` and the score adds the weight times it; at 0 (the
+    default) nothing is measured."""
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.template import trial_score, try_candidates
+
+    bank, thin = _bank_with_views(store)
+    video = load_fit_video(make_video(thin, tmp_path / "v", frames=6, size=32, seed=0))
+    a = np.radians(10.0 * np.arange(6))  # the camera orbits 50 degrees about the vertical
+    orbit = np.zeros((6, 3, 3))
+    orbit[:, 0, 0], orbit[:, 0, 2], orbit[:, 1, 1], orbit[:, 2, 0], orbit[:, 2, 2] = (
+        np.cos(a),
+        np.sin(a),
+        1,
+        -np.sin(a),
+        np.cos(a),
+    )
+    video.camera_rotations = np.asarray(video.gt["cam_rotation"][0]) @ orbit
+    for weight in (0.0, 0.5):
+        cfg = FitConfig.from_dict(
+            {
+                **json.loads(json.dumps(TINY)),
+                "trials": {"candidates": 2, "iters": 2, "view_consistency": weight},
+            }
+        )
+        cands = [{"name": "fat", "score": -2.0}, {"name": "thin", "score": -1.0}]
+        _, out, _ = try_candidates(bank, video, cands, cfg)
+        for c in out:
+            assert ("trial_view_consistency" in c) is (weight > 0)
+            if weight > 0:
+                assert 0.0 <= c["trial_view_consistency"] <= 1.0
+    assert trial_score(0.8, 0.0, 0.0, None, 0.5, 0.2) == pytest.approx(0.9)
+    assert trial_score(0.8, 0.0, 0.0, None, None, 0.2) == pytest.approx(0.8)

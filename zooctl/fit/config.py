@@ -297,6 +297,15 @@ class TemplateTrials:
         required=False,
         minimum=0,
     )
+    view_consistency: float = spec(
+        0.0,
+        help="where the camera turns round the animal, the trial score adds this much times the "
+        "trial's view consistency (zooctl.fit.view_trial.trial_view_consistency: its body posed at "
+        "one frame and turned by the camera's turn, against the masks of frames seen from 20 or more "
+        "degrees away; 0..1). 0: not scored",
+        required=False,
+        minimum=0,
+    )
     # Off by default: leave-one-video-out over 58 videos gained nothing (BENCHMARKS.md, "Forty
     # more animals nothing was tuned on").
     sure: float | None = spec(

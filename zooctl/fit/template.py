@@ -220,7 +220,10 @@ def try_candidates(
 
     def score(k: int) -> float:
         i = runs[k][0]
-        return trial_score(results[k].iou, semantic[i], results[k].displacement, spread[k])
+        res = results[k]
+        return trial_score(
+            res.iou, semantic[i], res.displacement, spread[k], res.consistency, cfg.trials.view_consistency
+        )
 
     def record(i: int, k: int | None = None) -> int:
         """Candidate ``i``'s trial into its record: run ``k``, or the best-scoring of its starts
@@ -238,6 +241,9 @@ def try_candidates(
         cand.pop("trial_world_spread_deg", None)
         if spread[k] is not None:
             cand["trial_world_spread_deg"] = round(spread[k], 2)
+        cand.pop("trial_view_consistency", None)
+        if res.consistency is not None:
+            cand["trial_view_consistency"] = round(res.consistency, 4)
         return k
 
     for k in range(len(runs)):
@@ -328,7 +334,11 @@ def _try_longer(
     )
     cand["longer_trial_iou"] = round(res.iou, 4)
     cand["longer_trial_displacement"] = round(res.displacement, 4)
-    if trial_score(res.iou, semantic, res.displacement, trial_world_spread(res.state, turn)) <= score:
+    spread = trial_world_spread(res.state, turn)
+    if (
+        trial_score(res.iou, semantic, res.displacement, spread, res.consistency, cfg.trials.view_consistency)
+        <= score
+    ):
         return None
     cand["length"] = factor
     return res.state
@@ -346,7 +356,12 @@ TRIAL_NOISE = 0.01  # about what a trial's IoU moves between seeds (BENCHMARKS.m
 
 
 def trial_score(
-    iou: float, semantic: float = 0.0, displacement: float = 0.0, world_spread: float | None = None
+    iou: float,
+    semantic: float = 0.0,
+    displacement: float = 0.0,
+    world_spread: float | None = None,
+    consistency: float | None = None,
+    consistency_weight: float = 0.0,
 ) -> float:
     """What the template trials rank by: the trial's input-view mask IoU, plus
     `TRIAL_SEMANTIC_WEIGHT` times its candidate's semantic score (0..1: how surely the classifier
@@ -359,9 +374,12 @@ def trial_score(
     Where the camera turns round the animal (``world_spread``, degrees: `trial_world_spread`),
     less `TRIAL_WORLD_SPREAD_WEIGHT` times how far the trial's body turns in the world: a
     template of the wrong shape matches the outlines of an orbiting camera by turning its body
-    frame by frame."""
+    frame by frame. There too, plus ``consistency_weight`` (``trials.view_consistency``) times
+    the trial's ``consistency`` (`trial_view_consistency`): its body kept as it is at one frame
+    and seen from where the camera went, against the masks there."""
     spread = 0.0 if world_spread is None else TRIAL_WORLD_SPREAD_WEIGHT * world_spread
-    return iou + TRIAL_SEMANTIC_WEIGHT * semantic - TRIAL_DISPLACEMENT_WEIGHT * displacement - spread
+    views = 0.0 if consistency is None else consistency_weight * consistency
+    return iou + TRIAL_SEMANTIC_WEIGHT * semantic - TRIAL_DISPLACEMENT_WEIGHT * displacement - spread + views
 
 
 def close_trials_note(candidates: list[dict[str, Any]], chosen: str, source: str) -> str | None:

@@ -57,13 +57,15 @@ def mirror_wanted(cfg: FitConfig, template_given: bool) -> bool:
 @dataclass
 class TrialResult:
     """A trial's mask IoU at its pause (`trial_iou`), how far its template's surface moved to get
-    there (`trial_displacement`), its paused state, and what `trial_with_mirror` tried (None for
-    a continued trial)."""
+    there (`trial_displacement`), its paused state, what `trial_with_mirror` tried (None for
+    a continued trial), and, where ``trials.view_consistency`` asks for it and the camera turns,
+    its `trial_view_consistency`."""
 
     iou: float
     displacement: float
     state: dict[str, Any] | None
     view: dict[str, Any] | None = None
+    consistency: float | None = None
 
 
 def trial_iou(result: FitResult) -> float:
@@ -99,6 +101,57 @@ def trial_world_spread(state: dict[str, Any] | None, turn: np.ndarray | None) ->
     U, _, Vt = np.linalg.svd(world.sum(0))  # the chordal mean rotation
     mean = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
     return float(np.mean([rotation_angle_deg(w @ mean.T) for w in world]))
+
+
+def trial_view_consistency(
+    result: FitResult,
+    turn: np.ndarray | None,
+    sources: int = 4,
+    step: int = 3,
+    min_turn_deg: float = 20.0,
+) -> float | None:
+    """How well a trial's body, seen from the video's other views, matches the masks there: the
+    body posed at each of ``sources`` frames t0, turned by the camera's turn from t0 to t
+    (``turn`` (T, 3, 3), `zooctl.fit.run.trial_camera_turn`) about its centre and placed on frame
+    t's fitted centre, against frame t's mask (every ``step``-th frame), mean IoU at the input
+    resolution over the pairs whose camera turned at least ``min_turn_deg`` degrees. The video's
+    own frames as held-out views: a template of the animal's shape keeps matching when the camera
+    has gone round it; one of another shape matches each outline only as posed for it. None
+    without a turn or such pairs. The animal's own motion between t0 and t lowers every
+    candidate's figure (BENCHMARKS.md, "The video's own other views score the trials")."""
+    import torch
+
+    from ..geometry import rotation_angle_deg, silhouette_iou
+    from ..render.raster import rasterize
+
+    scene = result.scene
+    T = scene.num_frames
+    if turn is None or len(turn) != T or T < 2:
+        return None
+    masks = np.asarray(result.video.masks[:T]).astype(bool)
+    cam = result.input_camera().to(scene.rotations.device)
+    with torch.no_grad():
+        verts = scene.pose().vertices.detach()  # (T, V, 3) in the fit's world frame
+    centre = verts.mean(1, keepdim=True)
+    turn_t = torch.as_tensor(turn, dtype=verts.dtype, device=verts.device)
+    targets = np.arange(0, T, step)
+    ious: list[float] = []
+    for t0 in np.unique(np.linspace(0, T - 1, sources).round().astype(int)):
+        rel = turn_t[targets] @ turn_t[int(t0)].T  # (S, 3, 3): t0's view turned to each t's
+        far = np.array([rotation_angle_deg(r) >= min_turn_deg for r in rel.cpu().numpy()])
+        if not far.any():
+            continue
+        sel = torch.as_tensor(targets[far], device=verts.device)
+        body = (verts[int(t0)] - centre[int(t0)])[None] @ rel[
+            torch.as_tensor(far, device=rel.device)
+        ].transpose(1, 2)
+        body = body + centre[sel]
+        for s in range(0, len(sel), 8):
+            part = body[s : s + 8]
+            sil = rasterize(part, scene.faces, cam.expand(len(part))).mask.cpu().numpy()
+            ious.extend(silhouette_iou(sil, masks[sel[s : s + 8].cpu().numpy()]).tolist())
+    ious = [x for x in ious if np.isfinite(x)]
+    return float(np.mean(ious)) if ious else None
 
 
 def trial_with_mirror(
@@ -154,7 +207,14 @@ def trial_with_mirror(
     state = kept.paused
     if state is not None:
         state["camera_init"] = dict(state["camera_init"], view_trial=info)
-    return TrialResult(iou, trial_displacement(kept), state, info)
+    return TrialResult(iou, trial_displacement(kept), state, info, _consistency(kept, video, cfg))
+
+
+def _consistency(result: FitResult, video: FitVideo, cfg: FitConfig) -> float | None:
+    """The trial's `trial_view_consistency` where the trial score weighs it, else None."""
+    if cfg.trials.view_consistency <= 0:
+        return None
+    return trial_view_consistency(result, trial_camera_turn(video, cfg))
 
 
 def continue_trial(
@@ -168,7 +228,9 @@ def continue_trial(
     """A paused trial (``state``) fitted on to ``pause_at`` stage-2 iterations and paused again.
     The same fit as a trial paused there in one go."""
     res = fit_video(video, template, cfg, reporter, resume=state, pause_at=pause_at)
-    return TrialResult(trial_iou(res), trial_displacement(res), res.paused)
+    return TrialResult(
+        trial_iou(res), trial_displacement(res), res.paused, None, _consistency(res, video, cfg)
+    )
 
 
 def trial_loss(state: dict[str, Any] | None, last: int = 50) -> float:
@@ -210,7 +272,7 @@ def start_trial(
     view["extra_seconds"] = round(float((kept.view or {}).get("extra_seconds") or 0.0) + extra, 2)
     if kept.state is not None:
         kept.state["camera_init"] = dict(kept.state["camera_init"], view_trial=view)
-    return TrialResult(kept.iou, kept.displacement, kept.state, view)
+    return TrialResult(kept.iou, kept.displacement, kept.state, view, kept.consistency)
 
 
 def template_start(
