@@ -229,27 +229,31 @@ def log(args) -> None:
         )
 
 
+def _feature(c: dict, name: str) -> float:
+    """A logged trial's feature, NaN where it was not measured (no camera turn read)."""
+    x = c["features"].get(name)
+    return float("nan") if x is None else float(x)
+
+
+def _less_spread(c: dict, weight: float) -> float:
+    """A logged trial's score less ``weight`` times its body's turn in the world, where measured."""
+    spread = _feature(c, "world_spread_deg")
+    return c["score"] - (weight * spread if np.isfinite(spread) else 0.0)
+
+
 def _best_starts(candidates: list[dict]) -> list[dict]:
     """Each candidate's logged start that the fit's trials keep (module docstring, ``--best-start``),
     named as the candidate, in the order the candidates were first logged."""
     from zooctl.fit.view_trial import TRIAL_WORLD_SPREAD_WEIGHT
 
-    def shipped(c: dict) -> float:
-        spread = c["features"].get("world_spread_deg", float("nan"))
-        return c["score"] - TRIAL_WORLD_SPREAD_WEIGHT * (spread if np.isfinite(spread) else 0.0)
-
     best: dict[str, dict] = {}
     for c in candidates:  # c["score"] has the displacement term at --displacement already
         base = c["name"].split(" (")[0]
-        if base not in best or shipped(c) > shipped(best[base]) + 1e-12:
+        if base not in best or _less_spread(c, TRIAL_WORLD_SPREAD_WEIGHT) > (
+            _less_spread(best[base], TRIAL_WORLD_SPREAD_WEIGHT) + 1e-12
+        ):
             best[base] = c | {"name": base, "logged_as": c["name"]}
     return list(best.values())
-
-
-def _feature(c: dict, name: str) -> float:
-    """A logged trial's feature, NaN where it was not measured (no camera turn read)."""
-    x = c["features"].get(name)
-    return float("nan") if x is None else float(x)
 
 
 def _pick(video: dict, feature: str | None, lam: float) -> dict:
@@ -297,8 +301,7 @@ def choose(args) -> None:
             v["candidates"] = _best_starts(v["candidates"])
     for v in videos:  # after the starts are kept: `_best_starts` weighs the spread itself
         for c in v["candidates"]:
-            spread = _feature(c, "world_spread_deg")
-            c["score"] -= args.spread * spread if np.isfinite(spread) else 0.0
+            c["score"] = _less_spread(c, args.spread)
     if args.candidates:
         for v in videos:
             v["candidates"] = v["candidates"][: args.candidates]

@@ -121,7 +121,7 @@ def trial_view_consistency(
     candidate's figure (BENCHMARKS.md, "The video's own other views score the trials")."""
     import torch
 
-    from ..geometry import rotation_angle_deg, silhouette_iou
+    from ..geometry import silhouette_iou
     from ..render.raster import rasterize
 
     scene = result.scene
@@ -136,16 +136,15 @@ def trial_view_consistency(
     turn_t = torch.as_tensor(turn, dtype=verts.dtype, device=verts.device)
     targets = np.arange(0, T, step)
     ious: list[float] = []
+    targets = torch.as_tensor(targets, device=verts.device)
     for t0 in np.unique(np.linspace(0, T - 1, sources).round().astype(int)):
         rel = turn_t[targets] @ turn_t[int(t0)].T  # (S, 3, 3): t0's view turned to each t's
-        far = np.array([rotation_angle_deg(r) >= min_turn_deg for r in rel.cpu().numpy()])
-        if not far.any():
+        cos = ((rel.diagonal(dim1=-2, dim2=-1).sum(-1) - 1.0) / 2.0).clamp(-1.0, 1.0)
+        far = torch.rad2deg(torch.arccos(cos)) >= min_turn_deg  # each turn's angle
+        if not bool(far.any()):
             continue
-        sel = torch.as_tensor(targets[far], device=verts.device)
-        body = (verts[int(t0)] - centre[int(t0)])[None] @ rel[
-            torch.as_tensor(far, device=rel.device)
-        ].transpose(1, 2)
-        body = body + centre[sel]
+        sel = targets[far]
+        body = (verts[int(t0)] - centre[int(t0)])[None] @ rel[far].transpose(1, 2) + centre[sel]
         for s in range(0, len(sel), 8):
             part = body[s : s + 8]
             sil = rasterize(part, scene.faces, cam.expand(len(part))).mask.cpu().numpy()
