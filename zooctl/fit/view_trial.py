@@ -131,12 +131,11 @@ def trial_view_consistency(
     masks = np.asarray(result.video.masks[:T]).astype(bool)
     cam = result.input_camera().to(scene.rotations.device)
     with torch.no_grad():
-        verts = scene.pose().vertices.detach()  # (T, V, 3) in the fit's world frame
+        verts = scene.pose().vertices  # (T, V, 3) in the fit's world frame
     centre = verts.mean(1, keepdim=True)
     turn_t = torch.as_tensor(turn, dtype=verts.dtype, device=verts.device)
-    targets = np.arange(0, T, step)
+    targets = torch.arange(0, T, step, device=verts.device)
     ious: list[float] = []
-    targets = torch.as_tensor(targets, device=verts.device)
     for t0 in np.unique(np.linspace(0, T - 1, sources).round().astype(int)):
         rel = turn_t[targets] @ turn_t[int(t0)].T  # (S, 3, 3): t0's view turned to each t's
         cos = ((rel.diagonal(dim1=-2, dim2=-1).sum(-1) - 1.0) / 2.0).clamp(-1.0, 1.0)
@@ -145,10 +144,11 @@ def trial_view_consistency(
             continue
         sel = targets[far]
         body = (verts[int(t0)] - centre[int(t0)])[None] @ rel[far].transpose(1, 2) + centre[sel]
+        seen = masks[sel.cpu().numpy()]
         for s in range(0, len(sel), 8):
             part = body[s : s + 8]
             sil = rasterize(part, scene.faces, cam.expand(len(part))).mask.cpu().numpy()
-            ious.extend(silhouette_iou(sil, masks[sel[s : s + 8].cpu().numpy()]).tolist())
+            ious.extend(silhouette_iou(sil, seen[s : s + 8]).tolist())
     ious = [x for x in ious if np.isfinite(x)]
     return float(np.mean(ious)) if ious else None
 
