@@ -149,6 +149,7 @@ def test_fit_cli_with_known_cameras(orbit_video, tmp_path, monkeypatch, capsys):
     b = json.loads((store / "fits" / "b" / "record.json").read_text())
     assert a["cameras"] == "gt" and b["cameras"] == str((tmp_path / "cams.npz").resolve())
     assert a["camera"] == b["camera"] and a["metrics"]["mask_iou"] == b["metrics"]["mask_iou"]
+    assert "start_trial" not in a["camera"]["search"].get("view_trial", {})  # no track to choose
     from test_fit_e2e import validate_record
 
     validate_record(a)

@@ -187,6 +187,7 @@ def test_interrupt_then_resume(tube_video, store, tmp_path):
     cfg.stage2.iters = 6
     cfg.checkpoint_every = 2
     cfg.weights.smooth_start, cfg.weights.smooth_until = 1000.0, 1.0
+    cfg.camera.start_trial = "none"  # stage 2 itself interrupted (`start_trial`: a test of its own)
 
     interrupt_at_stage2_step_4(folder, store, cfg, "t")
     fits = FitStore(store)
@@ -273,6 +274,7 @@ def test_a_state_paused_before_girths_existed_resumes_as_it_started(tube_video, 
     cfg.stage2.iters = 6
     cfg.checkpoint_every = 2
     cfg.ablation.girth = False
+    cfg.camera.start_trial = "none"
 
     interrupt_at_stage2_step_4(folder, store, cfg, "old")
     fits = FitStore(store)

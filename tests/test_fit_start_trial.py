@@ -102,5 +102,40 @@ def test_fit_with_a_named_template_records_the_start_trial(tmp_path, store, caps
     assert rec["losses"]["stage2"]["steps"] == TINY["stage2"]["iters"]
 
 
-def test_the_default_is_the_greedy_track_alone():
-    assert CameraConfig().track == "greedy" and CameraConfig().start_trial == "none"
+def _tiny_without_start_trial(**camera) -> dict:
+    return dict(TINY, camera=dict({k: v for k, v in TINY["camera"].items() if k != "start_trial"}, **camera))
+
+
+def test_a_named_template_tries_both_starts_by_default(tmp_path, store, capsys):
+    from test_fit_view_trial import fit_named_tube
+
+    assert CameraConfig().track == "greedy" and CameraConfig().start_trial == "steady"
+    rec = fit_named_tube(tmp_path, store, capsys, _tiny_without_start_trial(), frames=6)
+    assert rec["config"]["camera"]["start_trial"] == "steady"
+    assert rec["camera"]["search"]["view_trial"]["start_trial"]["kept"] in ("greedy", "steady")
+
+
+def test_start_trial_none_keeps_the_greedy_track_alone(tmp_path, store, capsys):
+    from test_fit_view_trial import fit_named_tube
+
+    rec = fit_named_tube(tmp_path, store, capsys, _tiny_without_start_trial(start_trial="none"), frames=6)
+    assert "start_trial" not in rec["camera"]["search"]["view_trial"]
+
+
+def test_the_saved_state_is_the_kept_starts(tmp_path, store):
+    """Both starts run to the pause saving their states as they go (the steady one last); the
+    state a fit leaves for --resume and the benchmarks is the kept start's."""
+    from zooctl.fit.job import fit_job
+    from zooctl.store.bank import Bank
+    from zooctl.store.fits import FitStore
+
+    thin = tube_asset(bones=3, name="thin")
+    Bank(store).add(thin)
+    folder = make_video(thin, tmp_path / "v", frames=6, size=32, seed=0)
+    cfg = FitConfig.from_dict(_tiny_without_start_trial())
+    cfg.trials.iters = cfg.stage2.iters  # the trials are the whole of stage 2
+    cfg.checkpoint_every = 1
+    rec = fit_job(str(folder), store, cfg, name="k", template="thin", outputs=())
+    kept = rec["camera"]["search"]["view_trial"]["start_trial"]["kept"]
+    assert kept == "greedy"  # this video's: the case where the last state saved was the other's
+    assert FitStore(store).load_state("k")["config"]["camera"]["track"] == kept

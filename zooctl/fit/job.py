@@ -514,6 +514,8 @@ def _run_and_write(
             kept = template_start(video, asset, cfg, template is not None, reporter, checkpoint)
             if kept is not None:
                 state, mirror_s = kept.state, kept.view.get("extra_seconds")
+                if state is not None and checkpoint is not None and cfg.checkpoint_every:
+                    checkpoint(state)  # the saved state is the kept start's, not the last one tried
         result = fit_video(video, asset, cfg, reporter, checkpoint, state)
     except KeyboardInterrupt:
         record["status"] = "interrupted"

@@ -283,11 +283,14 @@ def template_start(
     checkpoint: Callable[[dict[str, Any]], None] | None = None,
 ) -> TrialResult | None:
     """Where a fit with no template trials behind it starts: the kept trial of `start_trial` (a
-    named template with ``camera.start_trial = "steady"``) or of `trial_with_mirror` (when
-    `mirror_wanted`), or None (the fit starts from the camera search as it is)."""
+    named template with ``camera.start_trial = "steady"``, the default, and no known camera
+    rotations) or of `trial_with_mirror` (when `mirror_wanted`), or None (the fit starts from the
+    camera search as it is). ``checkpoint`` saves each trial as it runs (a fit interrupted inside
+    them resumes the trial it was in, without the comparison); `fit_job` saves the kept one after."""
     if not cfg.ablation.optimise:
         return None
-    if template_given and cfg.camera.start_trial == "steady":
+    # known camera rotations leave one orientation in the world to find: no track to choose
+    if template_given and cfg.camera.start_trial == "steady" and video.camera_rotations is None:
         return start_trial(video, template, cfg, reporter, checkpoint)
     if mirror_wanted(cfg, template_given):
         # the fit goes on from the trial kept (as if never paused when nothing was tried)
