@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -38,18 +39,36 @@ def flaky(item, report):
 
 def holds_scratch(folder, report):
     """Makes a scratch folder, says so, and waits with it (removed in `finally`, as fit_task's)."""
-    folder.mkdir()
     try:
+        folder.mkdir()
         report("working")
         time.sleep(120)
     finally:
-        shutil.rmtree(folder)
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def holds_scratch_with_pid(folder, report):
     """`holds_scratch`, leaving its process id beside the folder."""
     folder.with_suffix(".pid").write_text(str(os.getpid()))
     holds_scratch(folder, report)
+
+
+def cleans_up_slowly(item, report):
+    """Holds ``folder`` until ended, then takes a second to clean up, logging when it has; a task
+    tried again returns at once."""
+    folder, log = item
+    if folder.with_suffix(".pid").exists():
+        return None
+    folder.with_suffix(".pid").write_text(str(os.getpid()))
+    try:
+        folder.mkdir()
+        report("working")
+        time.sleep(120)
+    finally:
+        time.sleep(1)
+        shutil.rmtree(folder, ignore_errors=True)
+        with log.open("a") as f:
+            f.write(f"cleaned {os.getpid()}\n")
 
 
 def test_pool_retries_a_dead_worker_and_reports_bad_input(tmp_path):
@@ -340,6 +359,45 @@ def test_workers_of_a_killed_driver_end_and_remove_their_scratch_folders(tmp_pat
     while any(f.exists() for f in folders) or any(_alive(p) for p in pids):
         assert time.monotonic() < deadline, "the workers outlived their driver"
         time.sleep(0.2)
+
+
+def test_a_second_sigterm_does_not_cut_a_task_s_cleanup_short(tmp_path):
+    """Linux sends the parent-death signal once for each driver thread that ends holding the worker,
+    so a killed driver's workers can get SIGTERM twice in quick succession. The first unwinds the
+    task; the second must neither cut its cleanup short nor leave the worker waiting for work."""
+    folders, log = [tmp_path / "a", tmp_path / "b"], tmp_path / "cleaned.log"
+    driver = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import sys; from pathlib import Path; sys.path.insert(0, sys.argv[1]);"
+            f"from test_batch_local import {cleans_up_slowly.__name__} as task;"
+            "from zooctl.executors import get_executor;"
+            "log = Path(sys.argv[2]); items = [(Path(p), log) for p in sys.argv[3:]];"
+            "print([o.error for o in get_executor('local', jobs=2).map(task, items)])",
+            str(Path(__file__).parent),
+            str(log),
+            *map(str, folders),
+        ]
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while not all(f.exists() for f in folders):
+            assert time.monotonic() < deadline and driver.poll() is None, "the workers never started"
+            time.sleep(0.2)
+        pid = int(folders[0].with_suffix(".pid").read_text())
+        os.kill(pid, signal.SIGTERM)
+        time.sleep(0.3)  # inside the task's cleanup, which takes a second
+        os.kill(pid, signal.SIGTERM)
+        deadline = time.monotonic() + 30
+        while _alive(pid):
+            assert time.monotonic() < deadline, "a worker whose task was ended went on living"
+            time.sleep(0.2)
+        assert f"cleaned {pid}" in log.read_text().split("\n")
+        assert driver.wait(timeout=60) == 0  # the task was tried again (a worker died) and finished
+    finally:
+        driver.kill()
+        driver.wait()
 
 
 def _alive(pid: int) -> bool:

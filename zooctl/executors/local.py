@@ -10,7 +10,9 @@ each worker n GPUs of its own; without ``--jobs`` there are as many workers as t
 Worker processes are started with ``spawn`` (a fresh interpreter: forking a process that has
 torch's thread pools running is unsafe). A worker that dies (killed, out of memory) breaks
 Python's pool; the pool is then rebuilt and the tasks that were running are retried, each such
-event counting as an attempt of every task that was in flight.
+event counting as an attempt of every task that was in flight. A worker sent SIGTERM (by the
+driver ending its pool, by Linux when the driver dies, by hand) unwinds its running task, so the
+task's cleanup runs whole, and exits: to the pool, a worker that died.
 """
 
 from __future__ import annotations
@@ -29,15 +31,21 @@ from .base import ExecutorBase, StageCallback, Task, TaskOutcome, call_task, cra
 
 _STAGES: Any = None  # the worker's end of the driver's stage queue (set by _init_worker)
 _IN_TASK = False
+_ENDING = False  # a SIGTERM is unwinding this worker's task: the worker goes once it has unwound
 _DRIVER: int | None = None  # the driver's process id, where a worker ends with it (Linux)
 
 
 def _on_sigterm(signum: int, frame: Any) -> None:
-    # The driver ends its workers with SIGTERM on Ctrl-C or its own SIGTERM: a task unwinds, so its
-    # `finally` removes its scratch folder; an idle worker just goes.
-    if _IN_TASK:
+    # The driver ends its workers with SIGTERM on Ctrl-C or its own SIGTERM, and Linux sends one
+    # when the driver dies, once for each driver thread that ends holding the worker. The first
+    # unwinds a running task, so its `finally` removes its scratch folder; later ones must not cut
+    # that short. An idle worker just goes.
+    global _ENDING
+    if not _IN_TASK:
+        os._exit(128 + signum)
+    if not _ENDING:
+        _ENDING = True
         raise Terminated()
-    os._exit(128 + signum)
 
 
 def _end_with_driver(driver: int) -> None:
@@ -117,15 +125,19 @@ def _report_to_queue(index: int):
 
 def _pool_task(fn: Task, item: Any, index: int, env: dict[str, str], threads: int):
     global _IN_TASK
-    _IN_TASK = True
     try:
+        _IN_TASK = True  # inside the try: a SIGTERM right after it still reaches the exit below
         return call_task(fn, item, _report_to_queue(index), env, threads)
     finally:
-        _IN_TASK = False
-        # A driver gone: nobody reads the result, and the queue's write end, which every worker
-        # holds too, never closes, so the pool's loop would wait for work forever.
-        if _DRIVER is not None and os.getppid() != _DRIVER:
-            os._exit(128 + signal.SIGTERM)
+        try:
+            _IN_TASK = False
+        finally:  # reached even where a SIGTERM lands on the line above
+            # A task ended by SIGTERM: nobody waits for its result (the driver ends its pool, or is
+            # gone while one of its threads still lives, so the parent's pid has not changed yet).
+            # A driver gone: nobody reads the result, and the queue's write end, which every worker
+            # holds too, never closes, so the pool's loop would wait for work forever.
+            if _ENDING or (_DRIVER is not None and os.getppid() != _DRIVER):
+                os._exit(128 + signal.SIGTERM)
 
 
 class LocalExecutor(ExecutorBase):

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import glob
 import json
+import secrets
 import shlex
 import shutil
 import tempfile
@@ -163,8 +164,11 @@ def fit_task(task: FitTask, report) -> dict[str, Any]:
     from ..store.fits import FitStore
 
     cfg = FitConfig.from_dict(task.config, preset(task.config.get("preset", "fast")))
-    scratch = Path(tempfile.mkdtemp(prefix=f"zooctl-fit-{task.name}-"))
+    # Named before it is made, so that a SIGTERM landing just after the folder appears still
+    # reaches the `finally` that removes it.
+    scratch = Path(tempfile.gettempdir()) / f"zooctl-fit-{task.name}-{secrets.token_hex(8)}"
     try:
+        scratch.mkdir(mode=0o700)
         store = Path(task.store)
         source, src_root, video = task.source, store, None
         if task.ingest is not None:  # streamed into a store of its own: a few frames in memory
