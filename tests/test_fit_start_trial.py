@@ -139,3 +139,39 @@ def test_the_saved_state_is_the_kept_starts(tmp_path, store):
     kept = rec["camera"]["search"]["view_trial"]["start_trial"]["kept"]
     assert kept == "greedy"  # this video's: the case where the last state saved was the other's
     assert FitStore(store).load_state("k")["config"]["camera"]["track"] == kept
+
+
+@pytest.mark.parametrize("stop_in", ["greedy", "steady"])
+def test_a_fit_stopped_inside_the_start_trials_tries_them_again_on_resume(tmp_path, store, stop_in):
+    """Ctrl-C inside either start's trial leaves a state that --resume does not just finish: the
+    trials run again, so the resumed fit keeps the start, config and fit an uninterrupted one does."""
+    from test_fit_robustness import StopAt
+
+    from zooctl.fit.job import START_TRIALS, fit_job
+    from zooctl.store.bank import Bank
+    from zooctl.store.fits import FitStore
+
+    thin = tube_asset(bones=3, name="thin")
+    Bank(store).add(thin)
+    folder = make_video(thin, tmp_path / "v", frames=6, size=32, seed=0)
+    cfg = FitConfig.from_dict(_tiny_without_start_trial())
+    cfg.checkpoint_every = 1
+    whole = fit_job(str(folder), store, cfg, name="whole", template="thin", outputs=("loss",))
+    # the 2nd stage-2 step of the first trial (greedy), or of the second (steady): stage 1 and
+    # the trial's stage-2 steps before it
+    per_trial = cfg.stage1.iters + cfg.trials.iters
+    at = cfg.stage1.iters + 2 + (per_trial if stop_in == "steady" else 0)
+    with pytest.raises(KeyboardInterrupt):
+        fit_job(str(folder), store, cfg, name="cut", template="thin", reporter=StopAt(at), outputs=("loss",))
+    fits = FitStore(store)
+    saved = fits.load_state("cut")
+    assert saved[START_TRIALS] == {"template_given": True} and saved["config"] == whole["config"]
+    rec = fit_job(str(folder), store, name="cut", resume=True, outputs=("loss",))
+    assert rec["status"] == "done" and rec["config"] == whole["config"]
+    view, whole_view = rec["camera"]["search"]["view_trial"], whole["camera"]["search"]["view_trial"]
+    assert view["start_trial"]["loss"] == whole_view["start_trial"]["loss"]
+    assert view["start_trial"]["kept"] == whole_view["start_trial"]["kept"]
+    assert rec["losses"]["stage2"]["last"]["total"] == pytest.approx(
+        whole["losses"]["stage2"]["last"]["total"], rel=1e-4
+    )
+    assert START_TRIALS not in fits.load_state("cut")  # the finished fit's state: no trial to redo

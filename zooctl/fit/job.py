@@ -33,6 +33,10 @@ from .focal import guessed_note, lens_note, resolve_focal
 from .inputs import FitVideo, load_camera_rotations, load_fit_video
 from .run import FitResult, Reporter, fit_video
 
+# Marks a state saved inside a named template's start trials (`template_start`): --resume tries
+# them again rather than finishing the one trial it was in.
+START_TRIALS = "start_trials"
+
 
 def attach_truth(video: FitVideo, folder: Path) -> None:
     """Give ``video`` the ground truth of the benchmark video in ``folder`` (`fit_job`'s
@@ -508,12 +512,22 @@ def _run_and_write(
 
     mirror_s = None
     try:
-        if state is None:
+        if state is None or START_TRIALS in state:
             # no template trial ran: a named template's start is tried here (its depth mirror,
-            # and with `camera.start_trial` its steady track)
-            kept = template_start(video, asset, cfg, template is not None, reporter, checkpoint)
+            # and with `camera.start_trial` its steady track). A fit stopped inside these trials
+            # tries them all again on --resume: a trial's state alone cannot say which start the
+            # comparison would have kept.
+            given = template is not None if state is None else bool(state[START_TRIALS]["template_given"])
+            marked = None
+            if checkpoint is not None:
+
+                def marked(st: dict[str, Any]) -> None:  # resumed with the fit's config, not the trial's
+                    checkpoint({**st, "config": cfg.to_dict(), START_TRIALS: {"template_given": given}})
+
+            kept = template_start(video, asset, cfg, given, reporter, marked)
+            state = None if kept is None else kept.state
             if kept is not None:
-                state, mirror_s = kept.state, kept.view.get("extra_seconds")
+                mirror_s = kept.view.get("extra_seconds")
                 if state is not None and checkpoint is not None and cfg.checkpoint_every:
                     checkpoint(state)  # the saved state is the kept start's, not the last one tried
         result = fit_video(video, asset, cfg, reporter, checkpoint, state)

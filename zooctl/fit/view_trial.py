@@ -285,8 +285,9 @@ def template_start(
     """Where a fit with no template trials behind it starts: the kept trial of `start_trial` (a
     named template with ``camera.start_trial = "steady"``, the default, and no known camera
     rotations) or of `trial_with_mirror` (when `mirror_wanted`), or None (the fit starts from the
-    camera search as it is). ``checkpoint`` saves each trial as it runs (a fit interrupted inside
-    them resumes the trial it was in, without the comparison); `fit_job` saves the kept one after."""
+    camera search as it is). ``checkpoint`` saves each trial as it runs; `fit_job` marks those
+    states, so that a fit stopped inside the trials tries them all again on --resume, and saves the
+    kept one after."""
     if not cfg.ablation.optimise:
         return None
     # known camera rotations leave one orientation in the world to find: no track to choose
