@@ -26,7 +26,13 @@ TINY = {
     "fit_size": 32,
     "stage1": {"iters": 4, "batch": 4},
     "stage2": {"iters": 6, "batch": 3},
-    "camera": {"azimuths": 4, "elevations": [10.0], "search_size": 32, "start_trial": "steady"},
+    "camera": {
+        "azimuths": 4,
+        "elevations": [10.0],
+        "search_size": 32,
+        "start_trial": "steady",
+        "start_trial_at": 5,
+    },
     "trials": {"iters": 3},
 }
 
@@ -81,7 +87,9 @@ def test_the_start_trial_keeps_the_start_of_lower_loss_and_the_fit_goes_on_from_
     losses = info["loss"]
     assert set(losses) == {"greedy", "steady"} and all(np.isfinite(list(losses.values())))
     assert info["kept"] == min(losses, key=losses.get) and info["extra_seconds"] > 0
-    assert kept.state["iteration"] == cfg.trials.iters
+    # compared past the trials' pause (where each start's mirror check is), as configured
+    assert cfg.trials.iters < cfg.camera.start_trial_at < cfg.stage2.iters
+    assert kept.state["iteration"] == info["at"] == cfg.camera.start_trial_at
     assert trial_loss(kept.state) == pytest.approx(losses[info["kept"]], abs=1e-5)
     assert kept.state["camera_init"]["view_trial"]["start_trial"] == info
     done = fit_video(video, thin, cfg, resume=kept.state)
@@ -158,8 +166,8 @@ def test_a_fit_stopped_inside_the_start_trials_tries_them_again_on_resume(tmp_pa
     cfg.checkpoint_every = 1
     whole = fit_job(str(folder), store, cfg, name="whole", template="thin", outputs=("loss",))
     # the 2nd stage-2 step of the first trial (greedy), or of the second (steady): stage 1 and
-    # the trial's stage-2 steps before it
-    per_trial = cfg.stage1.iters + cfg.trials.iters
+    # the first start's stage-2 steps (to start_trial_at) before it
+    per_trial = cfg.stage1.iters + cfg.camera.start_trial_at
     at = cfg.stage1.iters + 2 + (per_trial if stop_in == "steady" else 0)
     with pytest.raises(KeyboardInterrupt):
         fit_job(str(folder), store, cfg, name="cut", template="thin", reporter=StopAt(at), outputs=("loss",))

@@ -100,9 +100,18 @@ class CameraConfig:
     start_trial: str = spec(
         "steady",
         help="for a template the user named: steady (the fit also starts from the steady track, both "
-        "paused at trials.iters, and goes on from the one with the lower mean loss over its last 50 "
-        "iterations) or none (the greedy track alone)",
+        "fitted to stage-2 iteration start_trial_at, and goes on from the one with the lower mean loss "
+        "over its last 50 iterations) or none (the greedy track alone)",
         enum=START_TRIALS,
+    )
+    # 400 since 2026-12-06: chosen in every leave-one-video-out fold of 58 over 200-1000, where the
+    # losses pick the better start more often than at the trials' pause (BENCHMARKS.md, "The start
+    # trial compared later").
+    start_trial_at: int = spec(
+        400,
+        help="the stage-2 iteration at which the start trial compares its two starts (each start's "
+        "depth-mirror check stays at trials.iters; at least that, at most the stage's length)",
+        minimum=1,
     )
     # A start seeing the animal from below is tried against its depth mirror (zooctl.fit.view_trial),
     # kept unless its trial IoU is more than the margin (the trials' noise) lower: retrieved

@@ -21,7 +21,7 @@ tell the better view (BENCHMARKS.md, Fit); ``always`` for retrieval's candidates
 
 ``camera.start_trial = "steady"`` (`start_trial`, a named template only) tries two starts the same
 way: the camera search's greedy track and its steady turn (`zooctl.fit.camera_init`), kept by the
-fit's loss at the pause rather than by IoU.
+fit's loss at ``camera.start_trial_at`` rather than by IoU.
 """
 
 from __future__ import annotations
@@ -247,27 +247,30 @@ def start_trial(
     checkpoint: Callable[[dict[str, Any]], None] | None = None,
 ) -> TrialResult:
     """The template's trial from the camera search's greedy track and from its steady track
-    (``camera.track``), each with its depth-mirror check (`trial_with_mirror`); the one whose
-    loss (`trial_loss`) is lower at the pause is kept. Silhouette IoU does not tell which start
-    is right (the rest pose fits a wrongly turned animal as well), the fit's whole loss mostly does
-    (BENCHMARKS.md, "Where the own rig's novel view is lost now"). The kept trial's view records
-    both losses under ``start_trial``."""
-    greedy_cfg = replace(cfg, camera=replace(cfg.camera, track="greedy"))
-    steady_cfg = replace(cfg, camera=replace(cfg.camera, track="steady"))
-    mirror = mirror_wanted(cfg, True)
-    t = time.perf_counter()
-    greedy = trial_with_mirror(video, template, greedy_cfg, reporter, checkpoint, mirror)
-    greedy_s = time.perf_counter() - t
-    if reporter is not None:
-        reporter.message(f"trying {template.name} from a steady turn too")
-    t = time.perf_counter()
-    steady = trial_with_mirror(video, template, steady_cfg, reporter, checkpoint, mirror)
-    steady_s = time.perf_counter() - t
-    losses = {"greedy": round(trial_loss(greedy.state), 6), "steady": round(trial_loss(steady.state), 6)}
-    kept, name, extra = (
-        (steady, "steady", greedy_s) if losses["steady"] < losses["greedy"] else (greedy, "greedy", steady_s)
-    )
-    view = dict(kept.view or {}, start_trial={"loss": losses, "kept": name, "extra_seconds": round(extra, 2)})
+    (``camera.track``), each with its depth-mirror check (`trial_with_mirror`) and fitted on to
+    stage-2 iteration ``camera.start_trial_at``; the one whose loss (`trial_loss`) is lower there
+    is kept. Silhouette IoU does not tell which start is right (the rest pose fits a wrongly
+    turned animal as well), the fit's whole loss mostly does, and more often a few hundred
+    iterations after the trials' pause (BENCHMARKS.md, "Where the own rig's novel view is lost
+    now", "The start trial compared later"). The kept trial's view records both losses under
+    ``start_trial``."""
+    at = max(cfg.camera.start_trial_at, cfg.trials.iters)
+    tracks, times = {}, {}
+    for track in ("greedy", "steady"):
+        if track == "steady" and reporter is not None:
+            reporter.message(f"trying {template.name} from a steady turn too")
+        t = time.perf_counter()
+        track_cfg = replace(cfg, camera=replace(cfg.camera, track=track))
+        tried = trial_with_mirror(video, template, track_cfg, reporter, checkpoint, mirror_wanted(cfg, True))
+        if at > cfg.trials.iters and tried.state is not None:
+            on = continue_trial(video, template, track_cfg, tried.state, at, reporter)
+            tried = replace(on, view=tried.view)
+        tracks[track], times[track] = tried, time.perf_counter() - t
+    losses = {k: round(trial_loss(r.state), 6) for k, r in tracks.items()}
+    name = "steady" if losses["steady"] < losses["greedy"] else "greedy"
+    kept, extra = tracks[name], times["greedy" if name == "steady" else "steady"]
+    info = {"loss": losses, "at": at, "kept": name, "extra_seconds": round(extra, 2)}
+    view = dict(kept.view or {}, start_trial=info)
     view["extra_seconds"] = round(float((kept.view or {}).get("extra_seconds") or 0.0) + extra, 2)
     if kept.state is not None:
         kept.state["camera_init"] = dict(kept.state["camera_init"], view_trial=view)
