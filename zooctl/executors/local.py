@@ -197,6 +197,7 @@ class LocalExecutor(ExecutorBase):
                     attempts[i] += 1
                     fut = self._pool.submit(_pool_task, fn, items[i], i, self.env, self.threads)
                     running[fut] = i
+                    _wake_manager(self._pool)
                 done, _ = wait(list(running), timeout=0.25, return_when=FIRST_COMPLETED)
                 _drain(stages, on_stage)
                 broken = False
@@ -248,6 +249,22 @@ class LocalExecutor(ExecutorBase):
 
     def close(self) -> None:
         self._stop_pool()
+
+
+def _wake_manager(pool: ProcessPoolExecutor) -> None:
+    """Wake the pool's manager thread once more after a submit. Python's pool (3.11) wakes it
+    before it starts the worker that submit needs, so the manager can go on waiting on the workers
+    it knew before and miss the new one's death until some other worker returns a result: a batch
+    whose last task's worker was killed waited forever."""
+    wakeup, lock = (
+        getattr(pool, "_executor_manager_thread_wakeup", None),
+        getattr(pool, "_shutdown_lock", None),
+    )
+    if wakeup is None or lock is None:
+        return
+    with lock:
+        if not getattr(wakeup, "_closed", False):
+            wakeup.wakeup()
 
 
 def _drain(stages: Any, on_stage: StageCallback | None) -> None:
