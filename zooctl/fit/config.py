@@ -95,8 +95,8 @@ class CameraConfig:
         enum=CAMERA_MOTIONS,
     )
     # On since 2026-12-06: a truer 3D on the still and world-background own rigs and on 30 held-out
-    # ones, on in every leave-one-video-out fold, for about 1.2x a named template's fit
-    # (BENCHMARKS.md, "The start trial out of sample").
+    # ones, on in every leave-one-video-out fold, for one more trial's time (BENCHMARKS.md, "The
+    # start trial out of sample", "The start trial compared later").
     start_trial: str = spec(
         "steady",
         help="for a template the user named: steady (the fit also starts from the steady track, both "
