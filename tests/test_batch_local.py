@@ -112,6 +112,21 @@ def test_local_jobs2_fits_each_video_once_then_resume_skips_them(tmp_path, store
     assert again.count("skipped") == 4 and again.count("done") == 0
 
 
+def test_a_fit_task_removes_the_scratch_folders_of_workers_killed_before_it(tmp_path, store, monkeypatch):
+    import tempfile
+
+    from test_worker_scratch import claimed_by_a_process_that_dies
+
+    scratch_root = tmp_path / "tmp"
+    scratch_root.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch_root))
+    dead = claimed_by_a_process_that_dies(scratch_root, "kill")  # as the OOM killer leaves one
+    videos = fit_inputs(tmp_path, store, 1)
+    items = plan_fits(videos, store, tiny_config(), template="a0", out_root=tmp_path / "out")
+    assert run_batch(get_executor("local"), fit_task, items, commit_fit).count("done") == 1
+    assert not dead.exists() and not list(scratch_root.glob("zooctl-fit-*"))  # its own removed too
+
+
 def test_interrupted_batch_resumes_and_stores_every_fit_once(tmp_path, store):
     videos = fit_inputs(tmp_path, store, 3)
     items = plan_fits(videos, store, tiny_config(), template="a0", out_root=tmp_path / "out")

@@ -16,10 +16,8 @@ from __future__ import annotations
 
 import glob
 import json
-import secrets
 import shlex
 import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,6 +25,7 @@ from typing import Any
 from ..errors import InputError, UsageError, ZooctlError
 from ..names import check_name, sanitize_name
 from .batch import BatchItem
+from .worker_scratch import claim, release, scratch_path, sweep_orphans
 
 _GLOB_CHARS = set("*?[")
 
@@ -164,11 +163,12 @@ def fit_task(task: FitTask, report) -> dict[str, Any]:
     from ..store.fits import FitStore
 
     cfg = FitConfig.from_dict(task.config, preset(task.config.get("preset", "fast")))
+    sweep_orphans()  # the folders of workers killed outright, here before
     # Named before it is made, so that a SIGTERM landing just after the folder appears still
     # reaches the `finally` that removes it.
-    scratch = Path(tempfile.gettempdir()) / f"zooctl-fit-{task.name}-{secrets.token_hex(8)}"
+    scratch, owner = scratch_path(task.name), None
     try:
-        scratch.mkdir(mode=0o700)
+        owner = claim(scratch)
         store = Path(task.store)
         source, src_root, video = task.source, store, None
         if task.ingest is not None:  # streamed into a store of its own: a few frames in memory
@@ -206,6 +206,7 @@ def fit_task(task: FitTask, report) -> dict[str, Any]:
         }
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
+        release(owner)
 
 
 def _read_tree(folder: Path) -> dict[str, bytes]:
