@@ -439,6 +439,26 @@ def test_gpu_places_fill_every_gpu_in_turn():
         gpu_places(2, ["0"])
 
 
+def test_fits_share_a_gpu_by_default_as_far_as_the_host_s_cores_go(monkeypatch):
+    from zooctl.cli import batch_opts
+    from zooctl.cli.batch_opts import BatchOptions, tasks_per_gpu
+    from zooctl.executors import local
+
+    assert tasks_per_gpu(4, 1.0, 1, 16) == 4
+    assert tasks_per_gpu(4, 1.0, 1, 2) == 2  # one fit a host core
+    assert tasks_per_gpu(4, 1.0, 8, 16) == 2
+    assert tasks_per_gpu(4, 3.0, 1, 2) == 1
+    monkeypatch.setattr(local, "visible_gpus", lambda: ["0"])
+    monkeypatch.setattr(batch_opts.os, "cpu_count", lambda: 16)
+    assert BatchOptions().make_executor("cuda", share_gpu=4).gpus == 0.25
+    assert BatchOptions(cpus=8.0).make_executor("cuda", share_gpu=4).gpus == 0.5
+    assert BatchOptions().make_executor("cuda").gpus == 1.0  # other tasks: a GPU each
+    assert BatchOptions(gpus=1.0).make_executor("cuda", share_gpu=4).gpus == 1.0  # the user's word
+    assert BatchOptions().make_executor("cuda:0", share_gpu=4).gpus == 0.0
+    assert BatchOptions().make_executor("cpu", share_gpu=4).gpus == 0.0
+    assert local.gpu_places(BatchOptions().make_executor("cuda", share_gpu=4).gpus, ["0"]) == ["0"] * 4
+
+
 def seen_gpus(item, report):
     return os.environ.get("CUDA_VISIBLE_DEVICES")
 

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import functools
 import inspect
+import math
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -35,8 +37,9 @@ CpusOpt = typer.Option(1.0, "--cpus-per-task", help="CPUs each task asks for (an
 GpusOpt = typer.Option(
     None,
     "--gpus-per-task",
-    help="GPUs each task asks for (default: 1 with --device cuda; 0.25 runs four tasks on one GPU). "
-    "Locally, without --jobs, as many tasks at once as the machine's GPUs hold.",
+    help="GPUs each task asks for (default with --device cuda: 1, or for fits run here a share of one, "
+    "up to four fits a GPU and one a host core; 0.25 runs four tasks on one GPU). Locally, without "
+    "--jobs, as many tasks at once as the machine's GPUs hold.",
 )
 
 
@@ -50,15 +53,23 @@ class BatchOptions:
     cpus: float = 1.0
     gpus: float | None = None
 
-    def make_executor(self, device: str | None):
-        """The executor these options name (default local); --gpus-per-task defaults to 1 on CUDA."""
+    def make_executor(self, device: str | None, share_gpu: int = 1):
+        """The executor these options name (default local). --gpus-per-task defaults to 1 on
+        CUDA; locally, tasks that leave a GPU mostly idle (``share_gpu`` > 1: fits) share one, as
+        many a GPU as `tasks_per_gpu` allows."""
         from ..executors import get_executor
 
         gpus = self.gpus
         if gpus is None:
-            gpus = 1.0 if (device or "cpu").startswith("cuda") else 0.0
-            if (self.executor or "local") == "local" and ":" in (device or ""):
+            cuda = (device or "cpu").startswith("cuda")
+            local = (self.executor or "local") == "local"
+            gpus = 1.0 if cuda else 0.0
+            if local and ":" in (device or ""):
                 gpus = 0.0  # `cuda:N` names the GPU: every task on it, none placed elsewhere
+            elif local and cuda and share_gpu > 1:
+                from ..executors.local import visible_gpus
+
+                gpus = 1.0 / tasks_per_gpu(share_gpu, self.cpus, len(visible_gpus()), os.cpu_count() or 1)
         return get_executor(
             self.executor or "local",
             jobs=self.jobs,
@@ -66,6 +77,13 @@ class BatchOptions:
             cpus_per_task=self.cpus,
             gpus_per_task=gpus,
         )
+
+
+def tasks_per_gpu(most: int, cpus_per_task: float, gpus: int, cores: int) -> int:
+    """How many tasks of ``cpus_per_task`` host cores each share one of ``gpus`` GPUs by default:
+    ``most``, or fewer where the host has fewer cores a GPU for them (at least 1)."""
+    fit = math.floor(cores / max(gpus, 1) / cpus_per_task + 1e-9)
+    return max(1, min(most, fit))
 
 
 # The default of a command's ``batch: BatchOptions`` parameter: `with_batch_options` puts the

@@ -32,6 +32,7 @@ def fit_many(
     batch: BatchOptions,
 ) -> None:
     from ..pipelines.batch_fit import (
+        FITS_PER_GPU,
         commit_fit,
         expand_inputs,
         fit_task,
@@ -56,7 +57,7 @@ def fit_many(
     )
     if template is None:
         refresh_search_packs(store_root())
-    ex = batch.make_executor(cfg.device)
+    ex = batch.make_executor(cfg.device, share_gpu=FITS_PER_GPU)
     report = run_cli_batch(ex, fit_task, items, commit_fit, skip_finished if resume else None, json_out)
 
     def row(r):

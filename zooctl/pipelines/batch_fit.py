@@ -28,6 +28,10 @@ from .batch import BatchItem
 from .worker_scratch import claim, release, scratch_path, sweep_orphans
 
 _GLOB_CHARS = set("*?[")
+# Fits that share one GPU when the user does not say (--gpus-per-task): a fit leaves the device
+# idle most of each step, and four on one H100 took about the time of one (BENCHMARKS.md, CUDA:
+# "Several fits on one GPU").
+FITS_PER_GPU = 4
 
 
 @dataclass
