@@ -152,9 +152,9 @@ def davis(args) -> None:
     from zooctl.fit.config import load_config
     from zooctl.fit.focal import resolve_focal
     from zooctl.fit.job import load_source
+    from zooctl.fit.named_start import template_start
     from zooctl.fit.run import fit_video, input_mask_iou
     from zooctl.fit.template import select_template
-    from zooctl.fit.view_trial import template_start
     from zooctl.store.bank import Bank
 
     store = Path(args.store) if args.store else Path(tempfile.mkdtemp()) / "store"

@@ -15,8 +15,9 @@ from test_fit_known_camera import _rotation_error_deg
 from zooctl.benchdata.make import make_video
 from zooctl.fit.camera_init import SilhouetteScorer, initialise_camera, view_rotation
 from zooctl.fit.config import CameraConfig, FitConfig
+from zooctl.fit.named_start import start_trial
 from zooctl.fit.scene import CAMERA_ROTATION
-from zooctl.fit.view_trial import start_trial, trial_loss
+from zooctl.fit.view_trial import trial_loss
 from zooctl.geometry import quat_to_matrix
 from zooctl.rig.synthetic import tube_asset
 
@@ -98,6 +99,36 @@ def test_the_start_trial_keeps_the_start_of_lower_loss_and_the_fit_goes_on_from_
     track = dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, track=info["kept"]))
     whole = fit_video(video, thin, track)
     np.testing.assert_allclose(done.iou, whole.iou, atol=1e-6)
+
+
+def test_the_two_starts_side_by_side_are_the_two_one_after_another(tmp_path):
+    """With two torch threads the two starts run at once, one process of one thread each
+    (`zooctl.fit.trial_pool`): the same losses, the same start kept and the same paused state as
+    one after another on one thread."""
+    import torch
+    from test_fit_trial_pool import _Recorder, _threads
+
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.trial_pool import trial_threads
+
+    thin = tube_asset(bones=3, name="thin")
+    video = load_fit_video(make_video(thin, tmp_path / "v", frames=6, size=32, seed=0))
+    cfg = FitConfig.from_dict(json.loads(json.dumps(TINY)))
+    runs = []
+    for threads in (1, 2):
+        assert bool(trial_threads(cfg, 2, threads=threads)) == (threads == 2)
+        rep = _Recorder()
+        with _threads(threads):
+            runs.append((start_trial(video, thin, cfg, rep), rep))
+    (one, _), (two, rep) = runs
+    a, b = one.view["start_trial"], two.view["start_trial"]
+    assert a["kept"] == b["kept"] and a["at"] == b["at"] and b["extra_seconds"] > 0
+    for k in ("greedy", "steady"):
+        assert a["loss"][k] == pytest.approx(b["loss"][k], abs=1e-5)
+    assert one.state["iteration"] == two.state["iteration"] == cfg.camera.start_trial_at
+    for k, v in one.state["scene"].items():
+        assert torch.allclose(v, two.state["scene"][k], atol=1e-5), k
+    assert rep.stages and any("(steady turn)" in s for s in rep.stages + rep.messages)
 
 
 def test_fit_with_a_named_template_records_the_start_trial(tmp_path, store, capsys):

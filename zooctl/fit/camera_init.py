@@ -432,7 +432,7 @@ def _steady_turn(
     search's best view (azimuth, elevation, roll); turns over the video of up to one full circle
     either way, in steps of ``track_step``, then a finer grid around the best (the start's azimuth
     too). Alone it loses more fits than it mends (BENCHMARKS.md, "Where the own rig's novel view is
-    lost now"): `zooctl.fit.view_trial.start_trial` tries it beside the greedy track. ``follow``
+    lost now"): `zooctl.fit.named_start.start_trial` tries it beside the greedy track. ``follow``
     (`camera_follow` of the camera's estimated motion): the turn is the animal's own, the camera's
     carried on top."""
     keys = _spread_keyframes(present, cfg)

@@ -508,7 +508,7 @@ def _run_and_write(
     t_trials: float | None,
     t_start: float,
 ) -> dict[str, Any]:
-    from .view_trial import template_start
+    from .named_start import template_start
 
     mirror_s = None
     try:

@@ -1,4 +1,5 @@
-"""The template trials side by side: each candidate's short fit in its own process.
+"""The template trials side by side: each candidate's short fit (or each of a named template's
+two starts, `zooctl.fit.named_start.start_trial`) in its own process.
 
 A trial is a fit of a few thousand vertices at a fit resolution of about a hundred pixels: too
 small a job to keep more than one core busy through torch's own threads (on two cores a fit runs
@@ -23,9 +24,11 @@ import io
 import multiprocessing
 import queue as queue_mod
 import threading
+import time
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -40,8 +43,10 @@ if TYPE_CHECKING:
 class Trial:
     """One trial to run: ``asset``'s fit paused after ``pause_at`` stage-2 iterations, from the
     start (``state`` None; ``mirror``: with `trial_with_mirror`'s depth-mirror check; ``length``:
-    the template's body made that much longer first; ``motion``: the fit's ``camera.motion`` for
-    this trial, when not None) or on from a paused ``state``."""
+    the template's body made that much longer first; ``motion`` and ``track``: the fit's
+    ``camera.motion`` and ``camera.track`` for this trial, when not None; ``then``: fitted on from
+    that pause to this iteration and paused again) or on from a paused ``state``. ``label``
+    names it in progress reports (default: its template's name)."""
 
     asset: RiggedAsset
     pause_at: int
@@ -49,6 +54,13 @@ class Trial:
     state: dict[str, Any] | None = None
     length: float = 1.0
     motion: str | None = None
+    track: str | None = None
+    then: int | None = None
+    label: str | None = None
+
+    @property
+    def name(self) -> str:
+        return self.label or self.asset.name
 
 
 def trial_threads(cfg: FitConfig, n: int, threads: int | None = None) -> list[int]:
@@ -85,50 +97,75 @@ def _plugins_in_process() -> bool:
 
 
 def run_trials(
-    video: FitVideo, trials: list[Trial], cfg: FitConfig, reporter: Reporter | None = None
+    video: FitVideo,
+    trials: list[Trial],
+    cfg: FitConfig,
+    reporter: Reporter | None = None,
+    checkpoint: Callable[[dict[str, Any]], None] | None = None,
 ) -> list[TrialResult]:
     """Run ``trials`` (in this order, side by side where `trial_threads` says so) and return
     their results in the same order. A pool that breaks (a worker killed: out of memory, say)
     falls back to running them all here, one after another; a trial's own error is raised here
-    as it was raised there."""
+    as it was raised there. ``checkpoint`` saves the trials' states as they run here; side by
+    side they save none (a fit stopped inside them runs them again)."""
     shares = trial_threads(cfg, len(trials))
     if not shares:
-        return _one_by_one(video, trials, cfg, reporter)
+        return _one_by_one(video, trials, cfg, reporter, checkpoint)
     try:
         return _side_by_side(video, trials, cfg, reporter, shares)
     except BrokenProcessPool as exc:
         if reporter is not None:
             reporter.message(f"the trials' processes stopped ({exc}): running the trials one after another")
-        return _one_by_one(video, trials, cfg, reporter)
+        return _one_by_one(video, trials, cfg, reporter, checkpoint)
 
 
 def _one_by_one(
-    video: FitVideo, trials: list[Trial], cfg: FitConfig, reporter: Reporter | None
+    video: FitVideo,
+    trials: list[Trial],
+    cfg: FitConfig,
+    reporter: Reporter | None,
+    checkpoint: Callable[[dict[str, Any]], None] | None = None,
 ) -> list[TrialResult]:
     out = []
     for i, t in enumerate(trials):
         if reporter is not None and len(trials) > 1:
-            reporter.message(f"trial fit {i + 1}/{len(trials)}: template {t.asset.name}")
-        out.append(_run(video, t, cfg, reporter))
+            what = t.label if t.label else f"template {t.asset.name}"
+            reporter.message(f"trial fit {i + 1}/{len(trials)}: {what}")
+        out.append(_run(video, t, cfg, reporter, checkpoint))
     return out
 
 
-def _run(video: FitVideo, trial: Trial, cfg: FitConfig, reporter: Reporter | None) -> TrialResult:
+def _run(
+    video: FitVideo,
+    trial: Trial,
+    cfg: FitConfig,
+    reporter: Reporter | None,
+    checkpoint: Callable[[dict[str, Any]], None] | None = None,
+) -> TrialResult:
     from .view_trial import continue_trial, trial_with_mirror
 
+    start = time.perf_counter()
     if trial.motion is not None:
         cfg = cfg.with_camera_motion(trial.motion)
+    if trial.track is not None:
+        cfg = replace(cfg, camera=replace(cfg.camera, track=trial.track))
     if trial.state is None:
-        return trial_with_mirror(
+        res = trial_with_mirror(
             video,
             trial.asset,
             cfg,
             reporter,
+            checkpoint,
             mirror=trial.mirror,
             pause_at=trial.pause_at,
             length=trial.length,
         )
-    return continue_trial(video, trial.asset, cfg, trial.state, trial.pause_at, reporter)
+        if trial.then is not None and trial.then > trial.pause_at and res.state is not None:
+            on = continue_trial(video, trial.asset, cfg, res.state, trial.then, reporter)
+            res = replace(on, view=res.view)
+    else:
+        res = continue_trial(video, trial.asset, cfg, trial.state, trial.pause_at, reporter)
+    return replace(res, seconds=time.perf_counter() - start)
 
 
 def _side_by_side(
@@ -136,7 +173,7 @@ def _side_by_side(
 ) -> list[TrialResult]:
     ctx = multiprocessing.get_context("spawn")  # fork would copy torch's thread pools
     events = ctx.Queue()
-    forward = _Forwarder(events, reporter, [t.asset.name for t in trials])
+    forward = _Forwarder(events, reporter, [t.name for t in trials])
     forward.start()
     pool = ProcessPoolExecutor(
         max_workers=len(shares), mp_context=ctx, initializer=_start_worker, initargs=(events,)

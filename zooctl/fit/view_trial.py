@@ -19,16 +19,17 @@ applies them at its start).
 user named (``--template``), as a retrieved template is another animal, whose trial IoU does not
 tell the better view (BENCHMARKS.md, Fit); ``always`` for retrieval's candidates too; ``never``.
 
-``camera.start_trial = "steady"`` (`start_trial`, a named template only) tries two starts the same
-way: the camera search's greedy track and its steady turn (`zooctl.fit.camera_init`), kept by the
-fit's loss at ``camera.start_trial_at`` rather than by IoU.
+``camera.start_trial = "steady"`` (`zooctl.fit.named_start.start_trial`, a named template only)
+tries two starts the same way: the camera search's greedy track and its steady turn
+(`zooctl.fit.camera_init`), kept by the fit's loss (`trial_loss`) at ``camera.start_trial_at``
+rather than by IoU.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -66,6 +67,7 @@ class TrialResult:
     state: dict[str, Any] | None
     view: dict[str, Any] | None = None
     consistency: float | None = None
+    seconds: float | None = None  # its wall, where `zooctl.fit.trial_pool` ran it
 
 
 def trial_iou(result: FitResult) -> float:
@@ -237,66 +239,3 @@ def trial_loss(state: dict[str, Any] | None, last: int = 50) -> float:
     each iteration sees another batch of frames, so one iteration's loss is noisy."""
     totals = [h["total"] for h in (state or {}).get("history", {}).get("stage2", [])[-last:]]
     return float(np.mean(totals)) if totals else float("inf")
-
-
-def start_trial(
-    video: FitVideo,
-    template: RiggedAsset,
-    cfg: FitConfig,
-    reporter: Reporter | None = None,
-    checkpoint: Callable[[dict[str, Any]], None] | None = None,
-) -> TrialResult:
-    """The template's trial from the camera search's greedy track and from its steady track
-    (``camera.track``), each with its depth-mirror check (`trial_with_mirror`) and fitted on to
-    stage-2 iteration ``camera.start_trial_at``; the one whose loss (`trial_loss`) is lower there
-    is kept. Silhouette IoU does not tell which start is right (the rest pose fits a wrongly
-    turned animal as well), the fit's whole loss mostly does, and more often a few hundred
-    iterations after the trials' pause (BENCHMARKS.md, "Where the own rig's novel view is lost
-    now", "The start trial compared later"). The kept trial's view records both losses under
-    ``start_trial``."""
-    at = max(cfg.camera.start_trial_at, cfg.trials.iters)
-    tracks, times = {}, {}
-    for track in ("greedy", "steady"):
-        if track == "steady" and reporter is not None:
-            reporter.message(f"trying {template.name} from a steady turn too")
-        t = time.perf_counter()
-        track_cfg = replace(cfg, camera=replace(cfg.camera, track=track))
-        tried = trial_with_mirror(video, template, track_cfg, reporter, checkpoint, mirror_wanted(cfg, True))
-        if at > cfg.trials.iters and tried.state is not None:
-            on = continue_trial(video, template, track_cfg, tried.state, at, reporter)
-            tried = replace(on, view=tried.view)
-        tracks[track], times[track] = tried, time.perf_counter() - t
-    losses = {k: round(trial_loss(r.state), 6) for k, r in tracks.items()}
-    name = "steady" if losses["steady"] < losses["greedy"] else "greedy"
-    kept, extra = tracks[name], times["greedy" if name == "steady" else "steady"]
-    info = {"loss": losses, "at": at, "kept": name, "extra_seconds": round(extra, 2)}
-    view = dict(kept.view or {}, start_trial=info)
-    view["extra_seconds"] = round(float((kept.view or {}).get("extra_seconds") or 0.0) + extra, 2)
-    if kept.state is not None:
-        kept.state["camera_init"] = dict(kept.state["camera_init"], view_trial=view)
-    return TrialResult(kept.iou, kept.displacement, kept.state, view, kept.consistency)
-
-
-def template_start(
-    video: FitVideo,
-    template: RiggedAsset,
-    cfg: FitConfig,
-    template_given: bool,
-    reporter: Reporter | None = None,
-    checkpoint: Callable[[dict[str, Any]], None] | None = None,
-) -> TrialResult | None:
-    """Where a fit with no template trials behind it starts: the kept trial of `start_trial` (a
-    named template with ``camera.start_trial = "steady"``, the default, and no known camera
-    rotations) or of `trial_with_mirror` (when `mirror_wanted`), or None (the fit starts from the
-    camera search as it is). ``checkpoint`` saves each trial as it runs; `fit_job` marks those
-    states, so that a fit stopped inside the trials tries them all again on --resume, and saves the
-    kept one after."""
-    if not cfg.ablation.optimise:
-        return None
-    # known camera rotations leave one orientation in the world to find: no track to choose
-    if template_given and cfg.camera.start_trial == "steady" and video.camera_rotations is None:
-        return start_trial(video, template, cfg, reporter, checkpoint)
-    if mirror_wanted(cfg, template_given):
-        # the fit goes on from the trial kept (as if never paused when nothing was tried)
-        return trial_with_mirror(video, template, cfg, reporter, checkpoint)
-    return None
