@@ -449,14 +449,38 @@ def test_fits_share_a_gpu_by_default_as_far_as_the_host_s_cores_go(monkeypatch):
     assert tasks_per_gpu(4, 1.0, 8, 16) == 2
     assert tasks_per_gpu(4, 3.0, 1, 2) == 1
     monkeypatch.setattr(local, "visible_gpus", lambda: ["0"])
-    monkeypatch.setattr(batch_opts.os, "cpu_count", lambda: 16)
-    assert BatchOptions().make_executor("cuda", share_gpu=4).gpus == 0.25
-    assert BatchOptions(cpus=8.0).make_executor("cuda", share_gpu=4).gpus == 0.5
+    monkeypatch.setattr(batch_opts, "usable_cores", lambda: 16)
+    assert BatchOptions().make_executor("cuda", fits=9).gpus == 0.25
+    assert BatchOptions(cpus=8.0).make_executor("cuda", fits=9).gpus == 0.5
     assert BatchOptions().make_executor("cuda").gpus == 1.0  # other tasks: a GPU each
-    assert BatchOptions(gpus=1.0).make_executor("cuda", share_gpu=4).gpus == 1.0  # the user's word
-    assert BatchOptions().make_executor("cuda:0", share_gpu=4).gpus == 0.0
-    assert BatchOptions().make_executor("cpu", share_gpu=4).gpus == 0.0
-    assert local.gpu_places(BatchOptions().make_executor("cuda", share_gpu=4).gpus, ["0"]) == ["0"] * 4
+    assert BatchOptions(gpus=1.0).make_executor("cuda", fits=9).gpus == 1.0  # the user's word
+    assert BatchOptions().make_executor("cuda:0", fits=9).gpus == 0.0
+    assert local.gpu_places(BatchOptions().make_executor("cuda", fits=9).gpus, ["0"]) == ["0"] * 4
+
+
+def test_fits_on_the_cpu_fill_the_cores_and_memory_by_default(monkeypatch):
+    from zooctl.cli import batch_opts
+    from zooctl.cli.batch_opts import BatchOptions, fits_at_once
+
+    assert fits_at_once(28, 1.0, 2, 64.0) == 2
+    assert fits_at_once(3, 1.0, 16, 64.0) == 3  # no more than there are videos
+    assert fits_at_once(28, 1.0, 64, 30.0) == 20  # 1.5 GB a fit
+    assert fits_at_once(28, 4.0, 16, None) == 4
+    assert fits_at_once(28, 1.0, 8, 0.5) == 1
+    monkeypatch.setattr(batch_opts, "usable_cores", lambda: 16)
+    monkeypatch.setattr(batch_opts, "available_memory_gb", lambda: 64.0)
+    ex = BatchOptions().make_executor("cpu", fits=28)
+    assert (ex.jobs, ex.threads) == (16, 1)
+    ex = BatchOptions().make_executor(None, fits=3)
+    assert (ex.jobs, ex.threads) == (3, 5)  # the cores shared out: their trials side by side
+    ex = BatchOptions(jobs=2).make_executor("cpu", fits=28)
+    assert (ex.jobs, ex.threads) == (2, 8)
+    ex = BatchOptions(cpus=1.0).make_executor("cpu", fits=3)
+    assert (ex.jobs, ex.threads) == (3, 1)
+    ex = BatchOptions(jobs=1, cpus=1.0).make_executor("cpu", fits=28)  # the user's word
+    assert (ex.jobs, ex.threads) == (1, 1)
+    ex = BatchOptions().make_executor("cpu")  # other tasks: one at a time, one core, as before
+    assert (ex.jobs, ex.threads) == (None, 1)
 
 
 def seen_gpus(item, report):

@@ -12,6 +12,7 @@ import math
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import typer
@@ -28,12 +29,18 @@ ExecutorOpt = typer.Option(
 JobsOpt = typer.Option(
     None,
     "--jobs",
-    help="Tasks at once (local: worker processes, default 1; ray: default the cluster's CPUs / --cpus-per-task).",
+    help="Tasks at once (local: worker processes; default for fits on the CPU as many as the cores and "
+    "memory hold, at most one a video, else 1; ray: default the cluster's CPUs / --cpus-per-task).",
 )
 AddressOpt = typer.Option(
     None, "--address", help="Ray cluster to join (HOST:PORT; or RAY_ADDRESS). Default: start Ray here."
 )
-CpusOpt = typer.Option(1.0, "--cpus-per-task", help="CPUs each task asks for (and its torch threads).")
+CpusOpt = typer.Option(
+    None,
+    "--cpus-per-task",
+    help="CPUs each task asks for (and its torch threads; default 1, or for fits run here on the CPU "
+    "the cores shared out between the fits at once).",
+)
 GpusOpt = typer.Option(
     None,
     "--gpus-per-task",
@@ -50,33 +57,74 @@ class BatchOptions:
     executor: str | None = None
     jobs: int | None = None
     address: str | None = None
-    cpus: float = 1.0
+    cpus: float | None = None
     gpus: float | None = None
 
-    def make_executor(self, device: str | None, share_gpu: int = 1):
-        """The executor these options name (default local). --gpus-per-task defaults to 1 on
-        CUDA; locally, tasks that leave a GPU mostly idle (``share_gpu`` > 1: fits) share one, as
-        many a GPU as `tasks_per_gpu` allows."""
+    def make_executor(self, device: str | None, fits: int | None = None):
+        """The executor these options name (default local), for ``fits`` fits (None: other tasks).
+        --gpus-per-task defaults to 1 on CUDA and --cpus-per-task to 1. Run here, fits fill the
+        machine unless the options say otherwise: on CUDA they share each GPU (`tasks_per_gpu`),
+        on the CPU as many run at once as the cores and memory hold (`fits_at_once`), and the
+        cores are shared out between them."""
         from ..executors import get_executor
 
-        gpus = self.gpus
+        gpus, jobs, cpus = self.gpus, self.jobs, self.cpus
+        cuda = (device or "cpu").startswith("cuda")
+        local = (self.executor or "local") == "local"
+        here = local and fits is not None
         if gpus is None:
-            cuda = (device or "cpu").startswith("cuda")
-            local = (self.executor or "local") == "local"
             gpus = 1.0 if cuda else 0.0
             if local and ":" in (device or ""):
                 gpus = 0.0  # `cuda:N` names the GPU: every task on it, none placed elsewhere
-            elif local and cuda and share_gpu > 1:
+            elif here and cuda:
                 from ..executors.local import visible_gpus
+                from ..pipelines.batch_fit import FITS_PER_GPU
 
-                gpus = 1.0 / tasks_per_gpu(share_gpu, self.cpus, len(visible_gpus()), os.cpu_count() or 1)
+                share = tasks_per_gpu(FITS_PER_GPU, cpus or 1.0, len(visible_gpus()), usable_cores())
+                gpus = 1.0 / share
+        if here and not cuda:
+            cores = usable_cores()
+            if jobs is None:
+                jobs = fits_at_once(fits, cpus or 1.0, cores, available_memory_gb())
+            if cpus is None:
+                cpus = float(max(1, cores // jobs))
         return get_executor(
             self.executor or "local",
-            jobs=self.jobs,
+            jobs=jobs,
             address=self.address,
-            cpus_per_task=self.cpus,
+            cpus_per_task=cpus or 1.0,
             gpus_per_task=gpus,
         )
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system says, else all)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def available_memory_gb() -> float | None:
+    """Memory available to new processes (Linux's MemAvailable), or None where unknown."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) / 2**20
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def fits_at_once(fits: int, cpus_per_task: float, cores: int, memory_gb: float | None) -> int:
+    """How many of ``fits`` fits run at once on the CPU by default: one a ``cpus_per_task``
+    cores, no more than ``memory_gb`` holds at `FIT_MEMORY_GB` each (unknown: no bound), at least 1."""
+    from ..pipelines.batch_fit import FIT_MEMORY_GB
+
+    n = min(fits, math.floor(cores / cpus_per_task + 1e-9))
+    if memory_gb is not None:
+        n = min(n, math.floor(memory_gb / FIT_MEMORY_GB))
+    return max(1, n)
 
 
 def tasks_per_gpu(most: int, cpus_per_task: float, gpus: int, cores: int) -> int:

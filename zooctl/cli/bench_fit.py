@@ -148,7 +148,6 @@ def run(
     how many templates have the video's body plan. Each fit's folder in the store (`zooctl fits
     show NAME`) gets novel_view.png: the fit against the truth from the cameras it never saw."""
     from ..benchdata.run import markdown_table, run_benchmark
-    from ..pipelines.batch_fit import FITS_PER_GPU
     from ..store.fs import write_bytes_atomic
 
     def progress(row):
@@ -175,7 +174,10 @@ def run(
         overrides=config_overrides(config, component_overrides(renderer, articulation, pose_prior, device)),
     )
     if batch.executor is not None or resume:  # a batch: each fit one task
-        ex = batch.make_executor(device, share_gpu=FITS_PER_GPU)
+        from ..benchdata.run import bench_videos
+
+        fits = len(bench_videos(Path(folder))[: limit or None]) * max(1, len(ablation or ()))
+        ex = batch.make_executor(device, fits=fits)
         from ..pipelines.batch import BatchInterrupted
 
         try:

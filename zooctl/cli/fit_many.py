@@ -32,7 +32,6 @@ def fit_many(
     batch: BatchOptions,
 ) -> None:
     from ..pipelines.batch_fit import (
-        FITS_PER_GPU,
         commit_fit,
         expand_inputs,
         fit_task,
@@ -57,7 +56,7 @@ def fit_many(
     )
     if template is None:
         refresh_search_packs(store_root())
-    ex = batch.make_executor(cfg.device, share_gpu=FITS_PER_GPU)
+    ex = batch.make_executor(cfg.device, fits=len(items))
     report = run_cli_batch(ex, fit_task, items, commit_fit, skip_finished if resume else None, json_out)
 
     def row(r):

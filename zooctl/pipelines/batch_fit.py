@@ -32,6 +32,9 @@ _GLOB_CHARS = set("*?[")
 # idle most of each step, and four on one H100 took about the time of one (BENCHMARKS.md, CUDA:
 # "Several fits on one GPU").
 FITS_PER_GPU = 4
+# Memory a fit at once takes by default on the CPU (GB): its peak RSS is about 0.9 GB for a
+# 60-frame 320 px video and 1.1 GB for a 60 s 1080p clip fitted in windows (BENCHMARKS.md, Fit).
+FIT_MEMORY_GB = 1.5
 
 
 @dataclass
