@@ -345,9 +345,10 @@ class TemplateTrials:
     workers: int = spec(
         0,
         help="processes the trials (and a named template's two starts, camera.start_trial) run in "
-        "side by side on the CPU, sharing the torch threads (zooctl.fit.trial_pool). 0: one per trial while they are at most twice the threads, "
-        "else one per thread; 1: one after another in the fit's own process (always so on CUDA, "
-        "with one thread, or with a plugin registered in that process alone)",
+        "side by side on the CPU, sharing the torch threads (zooctl.fit.trial_pool). 0: one per "
+        "trial while they are at most twice the threads, else one per thread; 1: one after another "
+        "in the fit's own process (always so on CUDA, with one thread, or with a plugin registered "
+        "in that process alone)",
         required=False,
         minimum=0,
     )
