@@ -18,7 +18,7 @@
 # unpacked packages, so `bench/fit.py` finds the `zooctl` beside its python.
 # The checks stop at the first one that runs out of $BUDGET seconds (default 500) and say so;
 # CHECKS="step speed_default" runs only those.
-# At most eight files come back: summary, install and one or two per check.
+# At most eight files come back: summary, one or two per check, and install.txt when the install failed.
 set -u
 OUT=${OUT:-/tmp/gpu_check}
 BUDGET=${BUDGET:-500}
@@ -78,10 +78,13 @@ throughput() {
 { nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader
   nproc; $PY --version
   $PY -c "import torch; print('torch', torch.__version__, 'cuda', torch.version.cuda)"; cat "$OUT/setup_time"; } >"$OUT/summary.txt" 2>&1
-rm -f "$OUT/setup_time"
+rm -f "$OUT/setup_time" "$OUT/install.txt"  # the install worked: its log would take a file's place
 check test_cuda $PY -m pytest -q -p no:cacheprovider tests/test_cuda.py
 check step $PY bench/step.py --device cuda --steps 50 --profile 10
 check speed_default $PY bench/fit.py speed --device cuda --repeat 1
+# the named template's two starts side by side, two processes on the one GPU, against the above
+echo '{"trials": {"workers": 2}}' >/tmp/starts_side_by_side.json
+check speed_sbs $PY bench/fit.py speed --device cuda --repeat 1 --config /tmp/starts_side_by_side.json
 export -f throughput
 export OUT TP_LEFT=$((BUDGET - (SECONDS - start)))
 check throughput bash -c throughput

@@ -64,3 +64,33 @@ def test_motion_train_and_animate_on_cuda(store_and_video, capsys, monkeypatch, 
     assert r.code == 0, r.err
     files = r.json()["files"]
     assert len(files["usd"]) == 2 and all(Path(p).stat().st_size > 0 for p in files["glb"])
+
+
+def test_the_two_starts_side_by_side_on_cuda_are_the_two_one_after_another(tmp_path):
+    """``trials.workers`` 2 on CUDA: the two starts run in two processes on the one GPU and agree
+    with the two one after another in this process (the default on CUDA) within float order."""
+    from test_fit_start_trial import TINY
+
+    from zooctl.benchdata.make import make_video
+    from zooctl.fit.config import FitConfig
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.named_start import start_trial
+    from zooctl.fit.trial_pool import trial_threads
+    from zooctl.rig.synthetic import tube_asset
+
+    thin = tube_asset(bones=3, name="thin")
+    video = load_fit_video(make_video(thin, tmp_path / "v", frames=6, size=32, seed=0))
+    runs = []
+    for workers in (0, 2):
+        cfg = FitConfig.from_dict(
+            {**TINY, "device": "cuda", "trials": {**TINY["trials"], "workers": workers}}
+        )
+        assert bool(trial_threads(cfg, 2)) == (workers == 2)
+        runs.append(start_trial(video, thin, cfg, None))
+    one, two = runs
+    a, b = one.view["start_trial"], two.view["start_trial"]
+    assert a["kept"] == b["kept"]
+    for k in ("greedy", "steady"):
+        assert a["loss"][k] == pytest.approx(b["loss"][k], abs=1e-4)
+    for k, v in one.state["scene"].items():
+        assert torch.allclose(v.cpu(), two.state["scene"][k].cpu(), atol=1e-4), k

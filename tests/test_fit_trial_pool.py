@@ -60,7 +60,11 @@ def test_the_threads_are_shared_out_between_the_trials():
     assert trial_threads(cfg, 1, threads=8) == []
     assert trial_threads(_cfg(workers=1), 3, threads=8) == []
     cuda = dataclasses.replace(cfg, device="cuda")
-    assert trial_threads(cuda, 3, threads=8) == []  # the trials share one device
+    assert trial_threads(cuda, 3, threads=8) == []  # by default one after another on the device
+    cuda_sbs = dataclasses.replace(_cfg(workers=3), device="cuda:1")
+    assert trial_threads(cuda_sbs, 3, threads=8) == [3, 3, 2]  # asked for: side by side on the GPU
+    assert trial_threads(cuda_sbs, 6, threads=1) == [1, 1, 1]  # each its own host core for launches
+    assert trial_threads(dataclasses.replace(cuda_sbs, device="cpu"), 3, threads=1) == []
 
 
 def test_a_plugin_registered_in_this_process_keeps_the_trials_here(monkeypatch):

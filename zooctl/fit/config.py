@@ -347,8 +347,9 @@ class TemplateTrials:
         help="processes the trials (and a named template's two starts, camera.start_trial) run in "
         "side by side on the CPU, sharing the torch threads (zooctl.fit.trial_pool). 0: one per "
         "trial while they are at most twice the threads, else one per thread; 1: one after another "
-        "in the fit's own process (always so on CUDA, with one thread, or with a plugin registered "
-        "in that process alone)",
+        "in the fit's own process (so with one CPU thread, or with a plugin registered in that "
+        "process alone). On CUDA 0 is one after another too; 2 or more: that many processes side "
+        "by side on the fit's GPU",
         required=False,
         minimum=0,
     )

@@ -8,8 +8,11 @@ more torch threads they run at once, in spawned processes that split the threads
 each trial's paused state comes back to continue the winner's fit exactly where it stopped.
 
 ``cfg.trials.workers`` sets how many processes (0: one per trial, while they are at most twice
-the torch threads, else one per thread; 1: one after another in this process, as on CUDA, where
-the trials share one device, or with a plugin registered in this process alone).
+the torch threads, else one per thread; 1: one after another in this process, as with a plugin
+registered in this process alone). On CUDA the default (0) runs them one after another in this
+process; a number of two or more runs that many processes side by side on the fit's GPU, each
+with its own host core for the launches a step is bound by (not yet measured on a GPU:
+BENCHMARKS.md, "The two starts side by side").
 The trials are the same fits either way: side by side they agree with one after another within
 float summation order (`torch` threads differ), not bit for bit.
 
@@ -72,7 +75,8 @@ def trial_threads(cfg: FitConfig, n: int, threads: int | None = None) -> list[in
 
     threads = torch.get_num_threads() if threads is None else threads
     workers = cfg.trials.workers
-    if n < 2 or workers == 1 or str(cfg.device).startswith("cuda") or threads < 2:
+    cuda = str(cfg.device).startswith("cuda")
+    if n < 2 or workers == 1 or (cuda and workers == 0) or (threads < 2 and not cuda):
         return []
     if multiprocessing.current_process().daemon:  # a pool's worker may not start processes
         return []
