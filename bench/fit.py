@@ -192,7 +192,10 @@ def davis(args) -> None:
                 view = {} if kept is None else kept.view or {}
                 start = view.get("start_trial", {}).get("kept", "greedy") + "/" + view.get("start", "search")
             else:
-                start = "trials"
+                picked = [c for c in cands if c.get("name") == asset.name]
+                start, view = "trials", (picked[0].get("view_trial") or {}) if picked else {}
+            if view.get("elevation_deg") is not None:  # the search's view of the animal, degrees above it
+                start += f" {view['elevation_deg']:+.0f} deg"
             res = fit_video(video, asset, cfg, resume=trial)
             wall = time.perf_counter() - t
             H, W = video.size
