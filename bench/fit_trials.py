@@ -54,7 +54,7 @@ def log(args) -> None:
     out = Path(args.out)
     vids = videos_to_log(args.folder, args.part, out)
     for v in vids:
-        cfg = preset("fast")
+        cfg = preset("fast").for_trials()  # the trials' own shape rate, as try_candidates
         stops = sorted({a for a in args.at if a < cfg.trials.iters} | {cfg.trials.iters})
         video = load_source(str(v), store, None, cfg.max_frames)
         own = _own_asset(v)

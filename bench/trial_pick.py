@@ -167,6 +167,7 @@ def log(args) -> None:
             cands = [{"name": own}]
         else:
             cfg.trials.candidates = args.candidates or cfg.trials.candidates
+            cfg = cfg.for_trials()  # the trials' own shape rate, as try_candidates
             _, cands = choose_template(
                 bank, None, video.frames, video.masks, exclude={own}, trials=cfg.trials.candidates
             )

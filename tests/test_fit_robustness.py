@@ -128,6 +128,26 @@ def test_a_named_template_steps_its_joints_at_the_given_rate(tube_video, store):
         FitConfig.from_dict({"stage2": {"lr_joints_given": -0.01}})
 
 
+def test_the_shape_rate_of_a_named_template_a_retrieved_one_and_the_trials():
+    """A retrieved template's fit frees its shape after the trials (BENCHMARKS.md, "The shape
+    freer for the winner only"); a named one and the trials keep 1e-3."""
+    for name in ("fast", "quality"):
+        cfg = preset(name)
+        assert (cfg.stage2.lr_shape, cfg.stage2.lr_shape_given, cfg.trials.lr_shape) == (5e-3, 1e-3, 1e-3)
+        assert cfg.for_named_template().stage2.lr_shape == 1e-3 and cfg.for_trials().stage2.lr_shape == 1e-3
+        assert cfg.stage2.lr_shape == 5e-3  # copies
+    # A config that sets the shape's rate alone sets it for named templates and the trials too.
+    alone = FitConfig.from_dict({"stage2": {"lr_shape": 0.002}})
+    assert alone.for_named_template().stage2.lr_shape == alone.for_trials().stage2.lr_shape == 0.002
+    given = FitConfig.from_dict(
+        {"stage2": {"lr_shape": 0.002, "lr_shape_given": 0.0005}, "trials": {"lr_shape": 0.003}}
+    )
+    assert (given.for_named_template().stage2.lr_shape, given.for_trials().stage2.lr_shape) == (0.0005, 0.003)
+    assert given.for_trials().stage2.lr_joints == given.stage2.lr_joints  # the shape's rate alone
+    with pytest.raises(UsageError, match=r"trials.lr_shape 0 must be > 0"):
+        FitConfig.from_dict({"trials": {"lr_shape": 0}})
+
+
 def test_cli_errors_are_one_line(tube_video, store, capsys, tmp_path):
     _, _, folder = tube_video
     r = run_inprocess(capsys, "fit", str(folder), "--template", "nope")

@@ -91,12 +91,14 @@ def test_the_full_fit_continues_the_winning_trial(tmp_path, store):
 
     bank, thin = _bank_with_views(store)
     video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
-    cfg = FitConfig.from_dict(json.loads(json.dumps(TINY)))
+    tiny = json.loads(json.dumps(TINY))
+    tiny["trials"]["lr_shape"] = None  # the trials at stage 2's own shape rate: the fit's start
+    cfg = FitConfig.from_dict(tiny)
     cands = [{"name": "fat", "score": -2.0}, {"name": "thin", "score": -1.0}]
     asset, _, state = try_candidates(bank, video, cands, cfg)
     trial_steps = list(state["history"]["stage2"])
     continued = fit_video(video, asset, cfg, resume=state)
-    scratch = fit_video(video, asset, FitConfig.from_dict(json.loads(json.dumps(TINY))))
+    scratch = fit_video(video, asset, FitConfig.from_dict(tiny))
     assert len(trial_steps) == 2 and continued.history["stage2"][:2] == trial_steps
     view = continued.camera_init.pop("view_trial")  # what the trial tried: its start only here
     assert view["start"] == "search" and "trial_iou" not in view
@@ -104,6 +106,37 @@ def test_the_full_fit_continues_the_winning_trial(tmp_path, store):
     a, b = continued.scene.state_dict(), scratch.scene.state_dict()
     assert all(torch.equal(a[k], b[k]) for k in a)
     assert "camera" not in continued.timings and "stage1" not in continued.timings  # not run again
+
+
+def test_the_trials_fit_the_shape_at_their_own_rate_and_the_winner_goes_on_at_stage_twos(tmp_path, store):
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.run import fit_video
+    from zooctl.fit.template import try_candidates
+
+    bank, thin = _bank_with_views(store)
+    video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
+
+    def trials(stage2_rate: float, trial_rate: float | None):
+        data = json.loads(json.dumps(TINY))
+        data["stage2"]["lr_shape"] = stage2_rate
+        data["trials"] |= {"lr_shape": trial_rate, "workers": 1}
+        cfg = FitConfig.from_dict(data)
+        cands = [{"name": "fat", "score": -2.0}, {"name": "thin", "score": -1.0}]
+        asset, tried, state = try_candidates(bank, video, cands, cfg)
+        return cfg, asset, [c["trial_iou"] for c in tried], state
+
+    slow_cfg, slow_asset, slow_ious, slow_state = trials(1e-3, 1e-3)
+    free_cfg, free_asset, free_ious, free_state = trials(0.2, 1e-3)
+    assert free_asset.name == slow_asset.name and free_ious == slow_ious  # stage 2's rate: not in the trials
+    assert free_state["history"]["stage2"] == slow_state["history"]["stage2"]
+    assert trials(0.2, None)[2] != slow_ious  # the trials' own rate is what they ran at
+
+    def last_step(cfg, asset, state) -> float:
+        before = state["scene"]["model.log_scale"].clone()
+        after = fit_video(video, asset, cfg, resume=state).scene.state_dict()["model.log_scale"]
+        return float((after - before).abs().max())
+
+    assert last_step(free_cfg, free_asset, free_state) > 10 * last_step(slow_cfg, slow_asset, slow_state)
 
 
 def test_a_trial_as_long_as_the_fit_is_the_fit(tmp_path, store):

@@ -69,7 +69,7 @@ def fit(
     template: str = typer.Option(
         None,
         "--template",
-        help="Bank asset to fit, as a rule the animal's own rig (its joints step at stage2.lr_joints_given; default: template retrieval).",
+        help="Bank asset to fit, as a rule the animal's own rig (its joints and shape step at stage2.lr_joints_given and lr_shape_given; default: template retrieval).",
     ),
     keep_shape: bool = typer.Option(
         False,

@@ -150,6 +150,15 @@ class StageConfig:
         required=False,
         **_RATE,
     )
+    # A retrieved template's shape moves further after its trials than in them: a freer shape in
+    # the trials flatters wrong templates (BENCHMARKS.md, "The shape freer for the winner only").
+    lr_shape_given: float | None = spec(
+        None,
+        help="stage 2's shape rate (lr_shape) when the template was named (--template), not retrieved; "
+        "null: lr_shape",
+        required=False,
+        **_RATE,
+    )
     batch: int = spec(
         8, help="frames per step (stage 2: a contiguous window, so flow sees frame pairs)", minimum=1
     )
@@ -273,6 +282,13 @@ class TemplateTrials:
         "winner's fit goes on from its trial",
         required=False,
         minimum=0,
+    )
+    lr_shape: float | None = spec(
+        1e-3,
+        help="stage 2's shape rate (stage2.lr_shape) in the trials; the winner's fit goes on from its "
+        "trial at stage2.lr_shape. null: stage2.lr_shape throughout",
+        required=False,
+        **_RATE,
     )
     margin: float = spec(
         0.0,
@@ -466,7 +482,14 @@ class FitConfig:
     )
     stage2: StageConfig = spec(
         factory=lambda: StageConfig(
-            iters=1000, lr=3e-2, lr_shape=1e-3, batch=12, lr_final=0.05, lr_joints=2e-2, lr_joints_given=1e-2
+            iters=1000,
+            lr=3e-2,
+            lr_shape=5e-3,
+            lr_shape_given=1e-3,
+            batch=12,
+            lr_final=0.05,
+            lr_joints=2e-2,
+            lr_joints_given=1e-2,
         ),
         help="stage 2 (articulation) runs at least one iteration",
         only={"iters": {"minimum": 1}},
@@ -494,12 +517,18 @@ class FitConfig:
     def from_dict(cls, data: dict[str, Any], base: FitConfig | None = None) -> FitConfig:
         """Apply ``data`` (any subset of the fields) on top of ``base`` (default: the fast preset).
         ``data`` setting stage 2's ``lr_joints`` without ``lr_joints_given`` sets the joints' rate
-        for every template, named ones too."""
+        for every template, named ones too; ``lr_shape`` without ``lr_shape_given`` sets the
+        shape's for named templates and for the trials (``trials.lr_shape``) too."""
         cfg = base if base is not None else preset("fast")
         _merge(cfg, data, "config")
         stage2 = data.get("stage2") if isinstance(data, dict) else None
         if isinstance(stage2, dict) and "lr_joints" in stage2 and "lr_joints_given" not in stage2:
             cfg.stage2.lr_joints_given = None
+        if isinstance(stage2, dict) and "lr_shape" in stage2 and "lr_shape_given" not in stage2:
+            cfg.stage2.lr_shape_given = None
+            trials = data.get("trials")
+            if not (isinstance(trials, dict) and "lr_shape" in trials):
+                cfg.trials.lr_shape = None
         return cfg.validate()
 
     def stage(self, stage: int, num_frames: int | None = None) -> StageConfig:
@@ -522,15 +551,28 @@ class FitConfig:
         return list(zip(bounds[:-1], bounds[1:], strict=True))
 
     def for_named_template(self) -> FitConfig:
-        """This config for a template the user named: stage 2's joints at ``lr_joints_given``
-        (when set) instead of ``lr_joints``, and ``camera.motion`` ``given`` as ``background``. A
-        copy; the fit's record keeps what it used."""
+        """This config for a template the user named: stage 2's joints at ``lr_joints_given`` and
+        its shape at ``lr_shape_given`` (each when set) instead of ``lr_joints`` and ``lr_shape``,
+        and ``camera.motion`` ``given`` as ``background``. A copy; the fit's record keeps what it
+        used."""
         out, st = self, self.stage2
         if st.lr_joints_given is not None:
-            out = dataclasses.replace(out, stage2=dataclasses.replace(st, lr_joints=st.lr_joints_given))
+            st = dataclasses.replace(st, lr_joints=st.lr_joints_given)
+        if st.lr_shape_given is not None:
+            st = dataclasses.replace(st, lr_shape=st.lr_shape_given)
+        if st is not self.stage2:
+            out = dataclasses.replace(out, stage2=st)
         if out.camera.motion == "given":
             out = out.with_camera_motion("background")
         return out
+
+    def for_trials(self) -> FitConfig:
+        """This config for the template trials: stage 2's shape at ``trials.lr_shape`` (when set).
+        The winner's fit goes on from its trial with this config's own rate."""
+        rate = self.trials.lr_shape
+        if rate is None or rate == self.stage2.lr_shape:
+            return self
+        return dataclasses.replace(self, stage2=dataclasses.replace(self.stage2, lr_shape=rate))
 
     def with_camera_motion(self, motion: str) -> FitConfig:
         """A copy of this config with ``camera.motion`` set to ``motion``."""
@@ -613,7 +655,15 @@ def _quality() -> FitConfig:
         hidden=128,
         camera=CameraConfig(azimuths=16, elevations=[-20.0, 0.0, 20.0, 40.0], search_frames=4),
         stage1=StageConfig(iters=100, lr=5e-2, lr_shape=5e-2, batch=32, renderer="soft", lr_final=0.1),
-        stage2=StageConfig(iters=2400, lr=3e-2, lr_shape=1e-3, batch=12, lr_final=0.05, lr_joints_given=1e-2),
+        stage2=StageConfig(
+            iters=2400,
+            lr=3e-2,
+            lr_shape=5e-3,
+            lr_shape_given=1e-3,
+            batch=12,
+            lr_final=0.05,
+            lr_joints_given=1e-2,
+        ),
     )
 
 

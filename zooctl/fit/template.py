@@ -185,10 +185,14 @@ def try_candidates(
     turn (``camera.motion`` background), and its trial is the start of the higher `trial_score`
     (``trial_start`` and ``other_start_score`` in its record; `winner_config` carries the rest of
     the winner's fit the same way). The two are compared at ``cfg.trials.carried_at`` (or at
-    ``prune_at`` where that is earlier), and only the better goes on to ``cfg.trials.iters``."""
+    ``prune_at`` where that is earlier), and only the better goes on to ``cfg.trials.iters``.
+
+    The trials fit the shape at ``cfg.trials.lr_shape`` (`FitConfig.for_trials`); the winner's
+    fit goes on from its trial's state at ``cfg``'s own rate."""
     from .run import trial_camera_turn
     from .trial_pool import Trial, run_trials
 
+    cfg = cfg.for_trials()
     tried = candidates[: cfg.trials.candidates]
     if len(tried) < 2:
         return bank.get(candidates[0]["name"]), candidates, None
