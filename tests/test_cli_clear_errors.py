@@ -198,6 +198,33 @@ def test_fit_with_zero_iterations_is_refused(tmp_path, capsys):
     assert not (tmp_path / "store" / "fits").exists()
 
 
+# -- a fit the bank cannot serve ----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("batch", [False, True])
+@pytest.mark.parametrize("template", [None, "Nope"])
+def test_a_fit_the_bank_cannot_serve_stops_before_the_video_is_read(tmp_path, capsys, template, batch):
+    """An empty bank, or a template it lacks, is said before decoding, flow and masks (minutes on
+    a long clip): the video store stays empty."""
+    import cv2
+    import numpy as np
+
+    root = tmp_path / "store"
+    if template is not None:
+        Bank(root).add(load_gltf(write_tiny_glb(tmp_path / "a.glb"), "a"))
+    clip = tmp_path / "clip.mp4"
+    w = cv2.VideoWriter(str(clip), cv2.VideoWriter_fourcc(*"mp4v"), 10, (64, 48))
+    for i in range(4):
+        frame = np.zeros((48, 64, 3), np.uint8)
+        frame[10:30, 8 + 4 * i : 40 + 4 * i] = 200
+        w.write(frame)
+    w.release()
+    args = ["--store", str(root), "fit", str(clip)] + ([str(clip), "--executor", "local"] if batch else [])
+    r = run_inprocess(capsys, *args, *(["--template", template] if template else []))
+    one_clear_line(r, "no asset named 'Nope'" if template else "the bank is empty", code=2)
+    assert not (root / "videos").exists() or not list((root / "videos").glob("*.h5"))
+
+
 # -- repair output ----------------------------------------------------------------------------------
 
 

@@ -44,6 +44,11 @@ def fit_many(
         raise UsageError("--name and --box are for one video", hint="a batch names each fit after its video")
     if cameras not in (None, "gt"):
         raise UsageError("--cameras FILE is for one video", hint="a batch takes --cameras gt only")
+    from ..fit.template import check_bank_ready
+    from ..store.bank import Bank
+
+    if not resume:  # before any worker decodes a video
+        check_bank_ready(Bank.open(store_root()), template)
     items = plan_fits(
         expand_inputs(videos),
         store_root(),

@@ -110,6 +110,41 @@ class FitVideo:
         )
 
 
+# The side (px) of the square an animal's mask fills below which the fit's outputs carry a note:
+# a quarter of the fast preset's 128 px fit image, where a leg is a pixel or two wide.
+SMALL_ANIMAL_SIDE = 32
+
+
+def mask_areas(masks: Any) -> np.ndarray:
+    """(T,) int64 pixels of each frame's mask, for (T, H, W) masks (an array or a `FrameArray`,
+    read a chunk at a time)."""
+    found = [np.zeros(0, np.int64)] + [b.reshape(len(b), -1).sum(1) for b in mask_chunks(masks)]
+    return np.concatenate(found).astype(np.int64)
+
+
+def mask_notes(masks: Any, side: int = SMALL_ANIMAL_SIDE) -> list[str]:
+    """The fit record's notes on its masks: frames where they hold no animal, and an animal that
+    fills less than a ``side`` x ``side`` square on average where they hold one (too few pixels to
+    tell its shape, or specks a segmenter took for an animal)."""
+    area = mask_areas(masks)
+    held = area[area > 0]
+    notes = []
+    if 0 < len(held) < len(area):
+        notes.append(
+            f"the masks hold no animal on {len(area) - len(held)} of {len(area)} frames: only the "
+            "smoothness terms pose the character there; check overlay.mp4, and give --box around "
+            "the animal or your own --masks where it was in view"
+        )
+    if len(held) and held.mean() < side * side:
+        notes.append(
+            f"the masks cover {held.mean():.0f} pixels a frame on average (a square of "
+            f"{held.mean() ** 0.5:.0f} px): too few to tell the animal's shape, or specks the "
+            "segmenter took for an animal; check overlay.mp4, and film the animal closer, give --box "
+            "around it or your own --masks"
+        )
+    return notes
+
+
 def _part(a: Any, start: int, stop: int) -> Any:
     """Frames ``start`` to ``stop`` of an array, or of a stored video's `FrameArray` (left unread)."""
     return a.part(start, stop) if hasattr(a, "part") else a[start:stop]

@@ -30,7 +30,7 @@ from ..names import check_name, sanitize_name
 from ..store.fits import FitStore
 from .config import FitConfig, preset
 from .focal import guessed_note, lens_note, resolve_focal
-from .inputs import FitVideo, load_camera_rotations, load_fit_video
+from .inputs import FitVideo, load_camera_rotations, load_fit_video, mask_notes
 from .run import FitResult, Reporter, fit_video
 
 # Marks a state saved inside a named template's start trials (`template_start`): --resume tries
@@ -298,7 +298,7 @@ def fit_job(
     folder in the store. ``fits``: where the record goes instead of ``store_root``'s fits (a batch
     worker's private folder; the batch driver commits it, `zooctl.pipelines.batch_fit`)."""
     from ..store.bank import Bank
-    from .template import select_template, winner_config
+    from .template import check_bank_ready, select_template, winner_config
 
     fits = fits if fits is not None else FitStore(store_root)
     bank = bank if bank is not None else Bank.open(store_root)
@@ -324,6 +324,8 @@ def fit_job(
         cameras = old.get("cameras")
         truth = old.get("truth")
     cfg = (cfg or preset("fast")).validate()
+    if not resume:
+        check_bank_ready(bank, template)
     if template is not None and not resume:  # a resumed fit's config has the rate it started with
         cfg = cfg.for_named_template()
     if cfg.pose_prior.kind == "motion":  # the prior's folder, so the record says which one
@@ -558,6 +560,7 @@ def _run_and_write(
     focal_line = lens_note(record["focal"]) or guessed_note(record["focal"], video.size[0])
     if focal_line:
         record["notes"] = [focal_line] + record["notes"]
+    record["notes"] = mask_notes(video.truncated(cfg.max_frames).masks) + record["notes"]
     record["timings"]["total_wall"] = time.perf_counter() - t_start
     record["status"] = "done"
     from .outputs import write_fit_json

@@ -101,6 +101,19 @@ def promote_kin(matches: list[Any], trials: int) -> list[Any]:
     return ranked
 
 
+def check_bank_ready(bank: Bank, name: str | None) -> None:
+    """Refuse a fit the bank cannot serve before any video work (decoding, flow and masks take
+    minutes on a long clip): ``NotFoundError`` for a named template the bank lacks, `UsageError`
+    when retrieval would have nothing to retrieve."""
+    if name is not None:
+        bank.summary(name)
+    elif len(bank) == 0:
+        raise UsageError(
+            "the bank is empty: there is no template to fit",
+            hint="run `zooctl bank seed`, or add assets with `zooctl bank add`",
+        )
+
+
 def choose_template(
     bank: Bank,
     name: str | None,
@@ -114,11 +127,7 @@ def choose_template(
     ``trials``: how many candidates the template trials try (`retrieve`)."""
     if name is not None:
         return bank.get(name), []
-    if len(bank) == 0:
-        raise UsageError(
-            "the bank is empty: there is no template to fit",
-            hint="run `zooctl bank seed`, or add assets with `zooctl bank add`",
-        )
+    check_bank_ready(bank, None)
     cands = retrieve(bank, frames, masks, exclude=exclude, device=device, trials=trials)
     return bank.get(cands[0]["name"]), cands
 
