@@ -93,8 +93,8 @@ ConfigDeviceOpt = typer.Option(
 PresetOpt = typer.Option(
     "fast",
     "--preset",
-    help="fast or quality (2.4x the iterations at a higher resolution: a closer input view, not a truer 3D; "
-    "BENCHMARKS.md).",
+    help="fast or quality (fast fitted 2.4 times as long: a closer input view, not a truer 3D; about 1.7 "
+    "times the time with retrieval; BENCHMARKS.md).",
 )
 FitConfigOpt = typer.Option(
     None,

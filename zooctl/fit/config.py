@@ -648,23 +648,12 @@ def _fast() -> FitConfig:
 
 
 def _quality() -> FitConfig:
-    return FitConfig(
-        preset="quality",
-        fit_size=160,
-        soft_sigma=0.05,
-        hidden=128,
-        camera=CameraConfig(azimuths=16, elevations=[-20.0, 0.0, 20.0, 40.0], search_frames=4),
-        stage1=StageConfig(iters=100, lr=5e-2, lr_shape=5e-2, batch=32, renderer="soft", lr_final=0.1),
-        stage2=StageConfig(
-            iters=2400,
-            lr=3e-2,
-            lr_shape=5e-3,
-            lr_shape_given=1e-3,
-            batch=12,
-            lr_final=0.05,
-            lr_joints_given=1e-2,
-        ),
-    )
+    # The fast preset fitted 2.4 times as long. Its camera search, template trials, fit image and
+    # displacement field stay fast's: quality's own (160 px, a 16 x 4 grid, a wider field) picked
+    # worse templates and posed them worse in 3D (BENCHMARKS.md, "The quality preset").
+    cfg = FitConfig(preset="quality")
+    cfg.stage2.iters = 2400
+    return cfg
 
 
 PRESETS = {"fast": _fast, "quality": _quality}  # PRESET_NAMES, in this order (a test checks)
