@@ -19,9 +19,8 @@ DEMO_PRIOR_STEPS = 1600
 
 
 def main(argv: list[str] | None = None) -> int:
-    from rich.console import Console
-
     from .benchdata.make import make_video
+    from .cli._common import LineConsole
     from .errors import ZooctlError
     from .fit.config import preset
     from .fit.job import fit_job
@@ -45,7 +44,7 @@ def main(argv: list[str] | None = None) -> int:
         "--seed", type=int, default=int(time.time()) % 10000, help="motion seed (default: new each run)"
     )
     args = ap.parse_args(argv)
-    con = Console()
+    con = LineConsole()
     try:
         store = default_store()
         bank = Bank.open(store)

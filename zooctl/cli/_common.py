@@ -28,8 +28,18 @@ def _own_suggestions() -> dict[str, Any]:
 
 APP_OPTS = _own_suggestions()
 
-console = Console()
-err_console = Console(stderr=True)
+
+class LineConsole(Console):
+    """A rich console that, off a terminal (a log, a pipe, a test's runner), leaves each message one
+    line: rich would break it at 80 columns there, paths and one-line errors included. Tables pass
+    ``soft_wrap=False`` to keep their layout."""
+
+    def print(self, *objects: Any, soft_wrap: bool | None = None, **kwargs: Any) -> None:
+        super().print(*objects, soft_wrap=not self.is_terminal if soft_wrap is None else soft_wrap, **kwargs)
+
+
+console = LineConsole()
+err_console = LineConsole(stderr=True)
 
 
 class State:

@@ -31,6 +31,6 @@ def plugins(json_out: bool = JsonOpt) -> None:
         if i.error:
             status += f"\n[dim]{escape(i.error)}[/]"
         table.add_row(i.name, i.distribution, i.version, status, escape(regs))
-    console.print(table)
+    console.print(table, soft_wrap=False)
     for p in registry.problems:
         console.print(f"[yellow]warning:[/] {escape(p)}")
