@@ -256,6 +256,29 @@ def test_bench_run_counts_the_right_body_plans(tmp_path, store, monkeypatch):
     assert ("(right plan)" if plan["right"] else "(other plan)") in table
     own = run_benchmark(tmp_path / "v", store, own_template=True, overrides=TINY)
     assert "plan" not in own["rows"][0] and "plan" not in own["summary"]["full"]
+    # the summary by the video's body plan, with or without retrieval
+    assert json.loads(next((tmp_path / "v").glob("*/meta.json")).read_text())["body_plan"] == "snake"
+    assert row["video_plan"] == "snake" and own["rows"][0]["video_plan"] == "snake"
+    assert res["summary"]["full"]["by_plan"] == {
+        "snake": {
+            "videos": 1,
+            "mask_iou": row["mask_iou"],
+            "novel_view_iou": row["novel_view_iou"],
+            "miou": row["miou"],
+            "template_right": int(plan["right"]),
+        }
+    }
+    assert "template_right" not in own["summary"]["full"]["by_plan"]["snake"]
+    assert "By the video's body plan (full):" in table and "| snake | 1 | " in table
+    assert f"| {int(plan['right'])} of 1 |" in table
+    # a held-out animal (its asset not in the bank): the plan its video recorded
+    ghost = tube_asset(bones=2, name="ghost")
+    ghost.meta["body_plan"] = "fish"
+    make_video(ghost, tmp_path / "h", frames=3, size=32, seed=0)
+    held = run_benchmark(tmp_path / "h", store, overrides=TINY)
+    (hrow,) = held["rows"]
+    assert hrow["video_plan"] == "fish" and hrow["plan"]["video"] == "fish" and hrow["plan"]["answerable"]
+    assert held["summary"]["full"]["plan"]["labelled"] == 1
 
 
 def test_kept_trials_are_those_within_the_margin_of_the_best_score():

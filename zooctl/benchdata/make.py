@@ -43,6 +43,7 @@ import torch
 from ..asset import RiggedAsset
 from ..errors import UsageError
 from ..geometry import compose_trs, quat_normalize, quat_slerp, quat_to_matrix
+from ..retrieval.evaluate import plan_label
 from ..store.fs import write_bytes_atomic, write_json_atomic
 from .appearance import APPEARANCES, Coat, natural_background, world_backgrounds
 
@@ -394,6 +395,7 @@ def make_video(
             "seed": seed,
             "fov": fov,
             "asset": asset.name,
+            **({"body_plan": plan} if (plan := plan_label(asset.name, asset.meta)) else {}),
             "motion": "clips" if clip_name else "random",
             "clip": clip_name,
             **({"appearance": appearance} if coat is not None else {}),

@@ -104,10 +104,14 @@ def run_benchmark(
         rows = _run_batch(*args, executor, resume, batch_progress)
     else:
         rows = _run_inline(*args, bank, progress)
+    in_bank = set(bank)
+    video_plans = {v.name: _video_plan(v, bank, in_bank) for v in vids}
     if template is None and not own_template:
-        _add_body_plans(rows, {v.name: _own_asset(v) for v in vids}, bank)
+        _add_body_plans(rows, {v.name: _own_asset(v) for v in vids}, bank, video_plans)
     for r in rows:
         r.pop("candidates", None)
+        if "error" not in r and video_plans.get(r["video"]):
+            r["video_plan"] = video_plans[r["video"]]
     summary = {}
     for a in abl:
         rs = [r for r in rows if r["ablation"] == a and "error" not in r]
@@ -115,6 +119,8 @@ def run_benchmark(
         summary[a]["videos"] = len(rs)
         if any("plan" in r for r in rs):
             summary[a]["plan"] = plan_counts(rs)
+        if any("video_plan" in r for r in rs):
+            summary[a]["by_plan"] = plan_means(rs)
     return {
         "rows": rows,
         "summary": summary,
@@ -131,8 +137,28 @@ def _config(a: str, preset_name: str, overrides: dict[str, Any] | None) -> FitCo
 
 
 def _own_asset(v: Path) -> str:
-    meta = json.loads((v / "meta.json").read_text()) if (v / "meta.json").is_file() else {}
-    return meta.get("asset", v.name)
+    return _meta(v).get("asset", v.name)
+
+
+def _meta(v: Path) -> dict[str, Any]:
+    return json.loads((v / "meta.json").read_text()) if (v / "meta.json").is_file() else {}
+
+
+def _video_plan(v: Path, bank, in_bank: set[str]) -> str | None:
+    """The body plan of the animal in benchmark video ``v``: its bank card's where its asset is in
+    the bank (``in_bank``: the bank's names), else the one `make_video` recorded (held-out animals
+    made from another bank)."""
+    from ..errors import ZooctlError
+    from ..retrieval.evaluate import plan_label
+
+    meta, asset = _meta(v), _own_asset(v)
+    if asset in in_bank:
+        try:
+            return plan_label(asset, bank.card(asset).get("meta"))
+        except ZooctlError:
+            pass
+    plan = meta.get("body_plan")
+    return plan if isinstance(plan, str) and plan else None
 
 
 def _run_inline(
@@ -246,10 +272,13 @@ def _colour_error(store_root: Path, name: str, video: str | Path) -> dict[str, A
     return {"view_psnr": res["view_psnr"], "input_psnr": res["input_psnr"]}
 
 
-def _add_body_plans(rows: list[dict[str, Any]], own: dict[str, str], bank) -> None:
+def _add_body_plans(
+    rows: list[dict[str, Any]], own: dict[str, str], bank, video_plans: dict[str, str | None]
+) -> None:
     """Each fitted row gets ``plan``: the body plans of its video and template, and whether the
     template, retrieval's top-1 and any candidate the trials tried have the video's plan
-    (None where the video's asset has no label); ``answerable``: another bank asset has it."""
+    (None where the video's asset has no label); ``answerable``: another bank asset has it.
+    The video's plan is its asset's bank card's, else ``video_plans``' (`_video_plan`)."""
     from ..errors import ZooctlError
     from ..retrieval.evaluate import plan_label
 
@@ -264,7 +293,7 @@ def _add_body_plans(rows: list[dict[str, Any]], own: dict[str, str], bank) -> No
         if "error" in r:
             continue
         asset = own.get(r["video"], r["video"])
-        want = plans.get(asset)
+        want = plans.get(asset) or video_plans.get(r["video"])
         cands = r.pop("candidates", None) or []
         tried = [c["name"] for c in cands if c.get("trial_iou") is not None] or [r["template"]]
 
@@ -292,6 +321,21 @@ def plan_counts(rows: list[dict[str, Any]]) -> dict[str, int]:
         "tried": sum(bool(p["tried_right"]) for p in ps),
         "template": sum(bool(p["right"]) for p in ps),
     }
+
+
+PLAN_COLUMNS = ("mask_iou", "novel_view_iou", "miou")
+
+
+def plan_means(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Per body plan of the videos (``video_plan``): how many, the means of `PLAN_COLUMNS`, and
+    where the rows have ``plan`` (retrieved templates) how many templates share it."""
+    out: dict[str, dict[str, Any]] = {}
+    for plan in sorted({r["video_plan"] for r in rows if r.get("video_plan")}):
+        rs = [r for r in rows if r.get("video_plan") == plan]
+        out[plan] = {"videos": len(rs), **{k: _mean([r.get(k) for r in rs]) for k in PLAN_COLUMNS}}
+        if any("plan" in r for r in rs):
+            out[plan]["template_right"] = sum(bool(r.get("plan", {}).get("right")) for r in rs)
+    return out
 
 
 def _mean(vals: list) -> float | None:
@@ -339,6 +383,9 @@ def markdown_table(res: dict[str, Any]) -> str:
                 f"candidates tried, {p['template']} after the trials, of {p['labelled']} labelled videos "
                 f"({p['answerable']} with another asset of their plan in the bank)."
             )
+    for a, s in res["summary"].items():
+        if s.get("by_plan"):
+            lines += _plan_table(a, s["by_plan"], f)
     lines += [
         "",
         "| video | ablation | template | 2D mask IoU | novel-view IoU | held-out PSNR | mIoU | mCham | Joint "
@@ -357,3 +404,22 @@ def markdown_table(res: dict[str, Any]) -> str:
                 + " |"
             )
     return "\n".join(lines) + "\n"
+
+
+def _plan_table(ablation: str, by_plan: dict[str, dict[str, Any]], f) -> list[str]:
+    """Markdown lines: the summary by the videos' body plan, the lowest novel view first."""
+    retrieved = any("template_right" in p for p in by_plan.values())
+    head = "| body plan | videos | 2D mask IoU | novel-view IoU | mIoU |" + (
+        " template of that plan |" if retrieved else ""
+    )
+    lines = ["", f"By the video's body plan ({ablation}):", "", head, "|" + "---|" * (6 if retrieved else 5)]
+    order = sorted(
+        by_plan, key=lambda k: (by_plan[k]["novel_view_iou"] is None, by_plan[k]["novel_view_iou"] or 0, k)
+    )
+    for plan in order:
+        p = by_plan[plan]
+        cells = [plan, str(p["videos"])] + [f(p[k], k) for k in PLAN_COLUMNS]
+        if retrieved:
+            cells.append(f"{p.get('template_right', 0)} of {p['videos']}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines

@@ -144,9 +144,10 @@ def run(
         False, "--resume", help="Keep the fits a previous run of this benchmark finished (runs as a batch)."
     ),
 ) -> None:
-    """Fit every benchmark video (its own asset excluded from retrieval) and report CASA's metrics and
-    how many templates have the video's body plan. Each fit's folder in the store (`zooctl fits
-    show NAME`) gets novel_view.png: the fit against the truth from the cameras it never saw."""
+    """Fit every benchmark video (its own asset excluded from retrieval) and report CASA's metrics,
+    how many templates have the video's body plan, and the metrics by that plan (the lowest novel view
+    first). Each fit's folder in the store (`zooctl fits show NAME`) gets novel_view.png: the fit
+    against the truth from the cameras it never saw."""
     from ..benchdata.run import markdown_table, run_benchmark
     from ..store.fs import write_bytes_atomic
 
