@@ -11,7 +11,7 @@ from PIL import Image
 
 from zooctl.benchdata.make import make_video
 from zooctl.benchdata.run import ABLATIONS, markdown_table, run_benchmark
-from zooctl.errors import UsageError
+from zooctl.errors import InputError, UsageError
 from zooctl.rig.synthetic import tube_asset
 
 TINY = tiny_overrides()
@@ -115,6 +115,20 @@ def test_bench_run_table(tmp_path, store):
     assert "each video's own asset" in markdown_table(own) and "Camera motion: known" in markdown_table(own)
     with pytest.raises(UsageError, match="exclude each other"):
         run_benchmark(tmp_path / "v", store, template="tube2", own_template=True)
+
+
+def test_bench_run_names_a_broken_meta_json(tmp_path, store):
+    """A benchmark video whose meta.json is not JSON, or not an object, is one clear error naming
+    that file, whether the benchmark or the fit reads it first."""
+    from zooctl.fit.inputs import load_bench_video
+
+    folder = make_video(tube_asset(bones=2, name="tube"), tmp_path / "v", frames=2, size=32)
+    for text, why in (("{bad", "is unreadable"), ("[]", "is not a JSON object")):
+        (folder / "meta.json").write_text(text)
+        with pytest.raises(InputError, match=f"meta.json {why}"):
+            run_benchmark(tmp_path / "v", store, template="tube", overrides=TINY)
+        with pytest.raises(InputError, match=f"meta.json {why}"):
+            load_bench_video(folder)
 
 
 def test_reanimation_uses_the_scale_of_the_frame_it_starts_from(tmp_path):

@@ -240,11 +240,18 @@ def load_bench_video(folder: Path) -> FitVideo:
     try:
         with np.load(folder / "video.npz") as z:
             data = {k: z[k] for k in z.files}
-        meta = json.loads((folder / "meta.json").read_text()) if (folder / "meta.json").is_file() else {}
     except (OSError, ValueError) as exc:
         raise InputError(
             f"{folder}/video.npz is unreadable: {exc}", hint="re-run `zooctl bench make`"
         ) from None
+    try:
+        meta = json.loads((folder / "meta.json").read_text()) if (folder / "meta.json").is_file() else {}
+    except (OSError, ValueError) as exc:
+        raise InputError(
+            f"{folder}/meta.json is unreadable: {exc}", hint="re-run `zooctl bench make`"
+        ) from None
+    if not isinstance(meta, dict):
+        raise InputError(f"{folder}/meta.json is not a JSON object", hint="re-run `zooctl bench make`")
     need = ("frames", "masks")
     for k in need:
         if k not in data:
