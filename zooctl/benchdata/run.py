@@ -141,19 +141,9 @@ def _own_asset(v: Path) -> str:
 
 
 def _meta(v: Path) -> dict[str, Any]:
-    """A benchmark video's ``meta.json`` (`make_video`), {} where it has none."""
-    path = v / "meta.json"
-    if not path.is_file():
-        return {}
-    try:
-        meta = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise InputError(
-            f"{path} is unreadable: {exc}", hint="make the video again with `zooctl bench make`"
-        ) from None
-    if not isinstance(meta, dict):
-        raise InputError(f"{path} is not a JSON object", hint="make the video again with `zooctl bench make`")
-    return meta
+    from ..fit.inputs import bench_meta
+
+    return bench_meta(v)
 
 
 def _video_plan(v: Path, bank, in_bank: set[str]) -> str | None:

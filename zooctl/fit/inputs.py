@@ -233,10 +233,25 @@ def auto_masks(frames: np.ndarray) -> np.ndarray:
 # -- benchmark videos ---------------------------------------------------------------------------
 
 
-def load_bench_video(folder: Path) -> FitVideo:
-    """A folder written by `zooctl.benchdata.make.make_video` (``video.npz`` + ``meta.json``)."""
+def bench_meta(folder: Path) -> dict[str, Any]:
+    """A benchmark video's ``meta.json`` (`zooctl.benchdata.make.make_video`), {} where it has
+    none; an unreadable one is an `InputError` naming it."""
     import json
 
+    path = folder / "meta.json"
+    if not path.is_file():
+        return {}
+    try:
+        meta = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{path} is unreadable: {exc}", hint="re-run `zooctl bench make`") from None
+    if not isinstance(meta, dict):
+        raise InputError(f"{path} is not a JSON object", hint="re-run `zooctl bench make`")
+    return meta
+
+
+def load_bench_video(folder: Path) -> FitVideo:
+    """A folder written by `zooctl.benchdata.make.make_video` (``video.npz`` + ``meta.json``)."""
     try:
         with np.load(folder / "video.npz") as z:
             data = {k: z[k] for k in z.files}
@@ -244,14 +259,7 @@ def load_bench_video(folder: Path) -> FitVideo:
         raise InputError(
             f"{folder}/video.npz is unreadable: {exc}", hint="re-run `zooctl bench make`"
         ) from None
-    try:
-        meta = json.loads((folder / "meta.json").read_text()) if (folder / "meta.json").is_file() else {}
-    except (OSError, ValueError) as exc:
-        raise InputError(
-            f"{folder}/meta.json is unreadable: {exc}", hint="re-run `zooctl bench make`"
-        ) from None
-    if not isinstance(meta, dict):
-        raise InputError(f"{folder}/meta.json is not a JSON object", hint="re-run `zooctl bench make`")
+    meta = bench_meta(folder)
     need = ("frames", "masks")
     for k in need:
         if k not in data:
