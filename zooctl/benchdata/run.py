@@ -24,6 +24,7 @@ import numpy as np
 
 from ..errors import InputError, UsageError
 from ..fit.config import KEEP_SHAPE, FitConfig, preset
+from ..fit.inputs import bench_meta
 
 ABLATIONS: dict[str, dict[str, Any]] = {
     "full": {},
@@ -104,10 +105,10 @@ def run_benchmark(
         rows = _run_batch(*args, executor, resume, batch_progress)
     else:
         rows = _run_inline(*args, bank, progress)
-    in_bank = set(bank)
-    video_plans = {v.name: _video_plan(v, bank, in_bank) for v in vids}
+    plans = _bank_plans(bank)
+    video_plans = {v.name: _video_plan(v, plans) for v in vids}
     if template is None and not own_template:
-        _add_body_plans(rows, {v.name: _own_asset(v) for v in vids}, bank, video_plans)
+        _add_body_plans(rows, {v.name: _own_asset(v) for v in vids}, plans, video_plans)
     for r in rows:
         r.pop("candidates", None)
         if "error" not in r and video_plans.get(r["video"]):
@@ -137,29 +138,14 @@ def _config(a: str, preset_name: str, overrides: dict[str, Any] | None) -> FitCo
 
 
 def _own_asset(v: Path) -> str:
-    return _meta(v).get("asset", v.name)
+    return bench_meta(v).get("asset", v.name)
 
 
-def _meta(v: Path) -> dict[str, Any]:
-    from ..fit.inputs import bench_meta
-
-    return bench_meta(v)
-
-
-def _video_plan(v: Path, bank, in_bank: set[str]) -> str | None:
-    """The body plan of the animal in benchmark video ``v``: its bank card's where its asset is in
-    the bank (``in_bank``: the bank's names), else the one `make_video` recorded (held-out animals
-    made from another bank)."""
-    from ..errors import ZooctlError
-    from ..retrieval.evaluate import plan_label
-
-    meta, asset = _meta(v), _own_asset(v)
-    if asset in in_bank:
-        try:
-            return plan_label(asset, bank.card(asset).get("meta"))
-        except ZooctlError:
-            pass
-    plan = meta.get("body_plan")
+def _video_plan(v: Path, plans: dict[str, str | None]) -> str | None:
+    """The body plan of the animal in benchmark video ``v``: its asset's in the bank (``plans``:
+    `_bank_plans`), else the one `make_video` recorded (held-out animals made from another bank)."""
+    meta = bench_meta(v)
+    plan = plans.get(meta.get("asset", v.name)) or meta.get("body_plan")
     return plan if isinstance(plan, str) and plan else None
 
 
@@ -274,28 +260,36 @@ def _colour_error(store_root: Path, name: str, video: str | Path) -> dict[str, A
     return {"view_psnr": res["view_psnr"], "input_psnr": res["input_psnr"]}
 
 
-def _add_body_plans(
-    rows: list[dict[str, Any]], own: dict[str, str], bank, video_plans: dict[str, str | None]
-) -> None:
-    """Each fitted row gets ``plan``: the body plans of its video and template, and whether the
-    template, retrieval's top-1 and any candidate the trials tried have the video's plan
-    (None where the video's asset has no label); ``answerable``: another bank asset has it.
-    The video's plan is its asset's bank card's, else ``video_plans``' (`_video_plan`)."""
+def _bank_plans(bank) -> dict[str, str | None]:
+    """Each bank asset's body plan (None where it has no label), from the cards: no asset file is
+    opened."""
     from ..errors import ZooctlError
     from ..retrieval.evaluate import plan_label
 
-    names = [s["name"] for s in bank.list()]
     plans: dict[str, str | None] = {}
-    for n in names:  # from the cards: no asset file is opened
+    for n in (s["name"] for s in bank.list()):
         try:
             plans[n] = plan_label(n, bank.card(n).get("meta"))
         except ZooctlError:
             plans[n] = None
+    return plans
+
+
+def _add_body_plans(
+    rows: list[dict[str, Any]],
+    own: dict[str, str],
+    plans: dict[str, str | None],
+    video_plans: dict[str, str | None],
+) -> None:
+    """Each fitted row gets ``plan``: the body plans of its video (``video_plans``: `_video_plan`)
+    and template (``plans``: `_bank_plans`), and whether the template, retrieval's top-1 and any
+    candidate the trials tried have the video's plan (None where the video has no label);
+    ``answerable``: another bank asset has it."""
     for r in rows:
         if "error" in r:
             continue
         asset = own.get(r["video"], r["video"])
-        want = plans.get(asset) or video_plans.get(r["video"])
+        want = video_plans.get(r["video"])
         cands = r.pop("candidates", None) or []
         tried = [c["name"] for c in cands if c.get("trial_iou") is not None] or [r["template"]]
 
@@ -308,7 +302,7 @@ def _add_body_plans(
             "right": right(r["template"]),
             "top1_right": right(cands[0]["name"] if cands else r["template"]),
             "tried_right": None if want is None else any(right(n) for n in tried),
-            "answerable": want is not None and any(plans[n] == want for n in names if n != asset),
+            "answerable": want is not None and any(p == want for n, p in plans.items() if n != asset),
         }
 
 
