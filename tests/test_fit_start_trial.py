@@ -128,7 +128,9 @@ def test_the_two_starts_side_by_side_are_the_two_one_after_another(tmp_path):
     assert one.state["iteration"] == two.state["iteration"] == cfg.camera.start_trial_at
     for k, v in one.state["scene"].items():
         assert torch.allclose(v, two.state["scene"][k], atol=1e-5), k
-    assert rep.stages and any("(steady turn)" in s for s in rep.stages + rep.messages)
+    # the workers' bars come through named by their start; which start's bar a stage shows is a
+    # race (`_Forwarder` shows one trial's stage at a time), so either may hold all of them
+    assert rep.stages and all("(greedy turn)" in s or "(steady turn)" in s for s in rep.stages)
 
 
 def test_fit_with_a_named_template_records_the_start_trial(tmp_path, store, capsys):
