@@ -80,7 +80,9 @@ throughput() {
   $PY -c "import torch; print('torch', torch.__version__, 'cuda', torch.version.cuda)"; cat "$OUT/setup_time"; } >"$OUT/summary.txt" 2>&1
 rm -f "$OUT/setup_time" "$OUT/install.txt"  # the install worked: its log would take a file's place
 check test_cuda $PY -m pytest -q -p no:cacheprovider tests/test_cuda.py
-check step $PY bench/step.py --device cuda --steps 50 --profile 10
+# the step, then the same with the renderers' pairs budgeted (no read-back a step: pair_budget)
+check step bash -c "$PY bench/step.py --device cuda --steps 50 --profile 10 &&
+    $PY bench/step.py --device cuda --steps 50 --pair-budget"
 check speed_default $PY bench/fit.py speed --device cuda --repeat 1
 # the named template's two starts side by side, two processes on the one GPU, against the above
 echo '{"trials": {"workers": 2}}' >/tmp/starts_side_by_side.json

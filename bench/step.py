@@ -1,7 +1,8 @@
 """What one stage-2 step costs: operators launched, host syncs, and milliseconds.
 
     python bench/step.py [--video DIR] [--template NAME] [--steps 30] [--threads 1]
-                         [--device cpu|cuda] [--torch-path] [--sites N] [--profile N] [--json OUT]
+                         [--device cpu|cuda] [--torch-path] [--pair-budget] [--sites N] [--profile N]
+                         [--json OUT]
 
 A GPU step of this fit is bound by its host (Python, autograd and the launches) once no kernel
 holds the device (BENCHMARKS.md, "One NVIDIA H200"), so the number of operators a step runs is
@@ -19,8 +20,10 @@ fast`` to stage-2 iteration 20, then:
   their own device time (CPU time on a CPU).
 
 ``--torch-path`` turns the CPU kernels off, so the CPU runs what a CUDA device runs (the same
-PyTorch expressions: its operator and sync counts are the device path's). The fit itself is that
-of `zooctl fit --template NAME --preset fast`. One JSON line at the end.
+PyTorch expressions: its operator and sync counts are the device path's). ``--pair-budget``: the
+renderers take a fixed budget of (face, pixel) pairs (`{"pair_budget": true}`,
+`zooctl.render.windows.PairBudget`) instead of counting them at every call, a read-back each.
+The fit itself is that of `zooctl fit --template NAME --preset fast`. One JSON line at the end.
 """
 
 from __future__ import annotations
@@ -60,6 +63,7 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--torch-path", action="store_true", help="CPU kernels off: the device path")
+    ap.add_argument("--pair-budget", action="store_true", help="the renderers' pairs budgeted: no read-back")
     ap.add_argument("--sites", type=int, default=0, help="list the forward call sites running the most")
     ap.add_argument("--json", default=None, help="also write the JSON line here")
     ap.add_argument(
@@ -91,6 +95,7 @@ def main() -> None:
     template = load_gltf(pack / f"{args.template}.glb", args.template)
     cfg = preset("fast")
     cfg.device = args.device
+    cfg.pair_budget = args.pair_budget
 
     ops: collections.Counter = collections.Counter()
     syncs: collections.Counter = collections.Counter()
@@ -157,7 +162,8 @@ def main() -> None:
         "machine": machine(),
         "torch": torch.__version__,
         "device": args.device,
-        "path": "torch" if args.torch_path or args.device != "cpu" else "cpu kernels",
+        "path": ("torch" if args.torch_path or args.device != "cpu" else "cpu kernels")
+        + (", pair budget" if args.pair_budget else ""),
         "threads": args.threads,
         "template": args.template,
         "ops": dict(ops) | {"total": sum(ops.values())},

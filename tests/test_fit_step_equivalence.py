@@ -61,10 +61,13 @@ def test_pose_with_rest_is_the_pose_and_the_rest_shape_of_one_pass():
         torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-5)
 
 
-def test_a_device_step_reads_back_only_the_pair_counts():
+@pytest.mark.parametrize("budget", [False, True], ids=["counted", "budgeted"])
+def test_a_device_step_reads_back_only_the_pair_counts_or_nothing_with_a_pair_budget(budget):
     """A stage-2 step on the path a GPU runs (the CPU kernels off) makes the host wait for the
     device only where the soft and hard rasterisers count their (face, pixel) pairs: no scalar
-    read, boolean mask or ``nonzero`` elsewhere in the forward, backward or optimiser step."""
+    read, boolean mask or ``nonzero`` elsewhere in the forward, backward or optimiser step. With
+    ``pair_budget`` not even there: the pairs come from budgets (`PairBudget`) set by the first
+    step's count, and each budget reads its calls' counts back after 4, 8 and every 16 steps."""
     import numpy as np
     from torch.utils._python_dispatch import TorchDispatchMode
 
@@ -86,6 +89,7 @@ def test_a_device_step_reads_back_only_the_pair_counts():
     targets = Targets(MaskTargets.build(masks, seed=0), flow, torch.ones(T - 1, 24, 24, dtype=torch.bool))
     cfg = preset("fast")
     cfg.stage2.batch = 4
+    cfg.pair_budget = budget
     runner = StageRunner(scene, targets, cfg, 2)
     opt = make_optimizer(scene, cfg, 2, learn_focal=False)
     reads = []
@@ -115,9 +119,24 @@ def test_a_device_step_reads_back_only_the_pair_counts():
             in_adam = False
 
     opt.step = step
+    per_step = []
     with _kernels.disabled():
-        runner.step(opt, 0)  # Adam's state made
-        with Reads():
-            terms = runner.step(opt, 1)
+        runner.step(opt, 0)  # Adam's state made, the pair budgets set
+        for it in range(1, 29):  # the budgets read back after 4, 8 and 16 steps
+            with Reads():
+                terms = runner.step(opt, it)
+            per_step.append(reads)
+            reads = []
     assert "flow" in terms and "edge_stretch" in terms
-    assert reads == ["_local_scalar_dense"] * 2, reads
+    if not budget:
+        assert per_step == [["_local_scalar_dense"] * 2] * 28, per_step
+        assert runner.pair_overflows() == 0 and runner.silhouette.budget.reads == 0
+        return
+    assert per_step == [[]] * 28, [(i, r) for i, r in enumerate(per_step) if r]
+    for b in (runner.silhouette.budget, runner.flow_renderer.budget):
+        assert b.reads == 4 and b.overflows == 0  # the first count, then after 4, 8, 16
+    assert runner.pair_overflows() == 0
+    runner.silhouette.budget.capacity = 64  # far too small: the next step's silhouettes lose pixels
+    with _kernels.disabled():
+        runner.step(opt, 29)
+    assert runner.pair_overflows() == 1  # read back at the stage's end, as a fit does

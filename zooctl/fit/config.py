@@ -470,6 +470,13 @@ class FitConfig:
         required=False,
         **_RATE,
     )
+    pair_budget: bool = spec(
+        False,
+        help="the renderers' PyTorch path (a GPU's): a fixed budget of (face, pixel) pairs, so a step "
+        "reads nothing back from the device, instead of counting them at every call (off until "
+        "measured on a GPU)",
+        required=False,
+    )
     checkpoint_every: int = spec(
         25, help="steps between saved states (for --resume)", required=False, minimum=0
     )

@@ -589,6 +589,9 @@ def _run_stage(
             checkpoint(state(done))
         raise
     log.flush()
+    left_out = runner.pair_overflows()
+    if left_out:
+        rep.message(f"{key}: {left_out} renders on the device left pixels out before their pair budget grew")
     if pause_at is not None:
         result.paused = copy.deepcopy(state(last))
     result.timings[key] = result.timings.get(key, 0.0) + time.perf_counter() - t

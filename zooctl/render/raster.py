@@ -28,7 +28,15 @@ from torch import nn
 from ..errors import InputError
 from . import _kernels
 from .camera import Camera
-from .windows import ScreenFaces, check_face_indices, face_pixel_pairs, face_windows_int32, project_faces
+from .windows import (
+    PairBudget,
+    ScreenFaces,
+    check_face_indices,
+    face_pixel_pairs,
+    face_windows_int32,
+    padded,
+    project_faces,
+)
 
 Tensor = torch.Tensor
 
@@ -83,22 +91,27 @@ def _zbuffer_kernel(sf: ScreenFaces, H: int, W: int) -> tuple[Tensor, Tensor] | 
 
 
 @torch.no_grad()
-def _zbuffer(sf: ScreenFaces, H: int, W: int) -> Tensor:
-    """(B*H*W,) long: nearest covering face (index into B*F) per pixel centre, -1 if none."""
-    pairs = face_pixel_pairs(sf, H, W, margin=0.0)
-    tri = sf.tri.detach()[pairs.face]
+def _zbuffer(sf: ScreenFaces, H: int, W: int, budget: PairBudget | None = None) -> Tensor:
+    """(B*H*W,) long: nearest covering face (index into B*F) per pixel centre, -1 if none; the
+    pairs from ``budget`` when given (no read-back), else counted exactly."""
+    pairs = face_pixel_pairs(sf, H, W, margin=0.0) if budget is None else budget.pairs(sf, H, W, 0.0)
+    tri = padded(sf.tri.detach(), pairs)[pairs.face]
     lam, area = _screen_barycentrics(tri, pairs.px, pairs.py)
-    inside = (lam >= 0).all(-1) & (area.abs() > 1e-12)
-    _, z = _perspective_correct(lam.clamp_min(0), sf.depth.detach()[pairs.face])
+    inside = (lam >= 0).all(-1) & (area.abs() > 1e-12)  # never a padding pair's (no area)
+    _, z = _perspective_correct(lam.clamp_min(0), padded(sf.depth.detach(), pairs, 1.0)[pairs.face])
     # Pairs outside their face are masked, not dropped: boolean indexing would make the host wait
     # for the device to learn how many are left (a GPU step then stalls at every call).
     pix = pairs.pixel
     z = torch.where(inside, z, torch.full_like(z, float("inf")))
-    n = sf.batch * H * W
-    zbuf = torch.full((n,), float("inf"), dtype=z.dtype, device=z.device).scatter_reduce(0, pix, z, "amin")
+    n = sf.batch * H * W  # and one more slot: a padding pair's (`Pairs`)
+    zbuf = torch.full((n + 1,), float("inf"), dtype=z.dtype, device=z.device).scatter_reduce(
+        0, pix, z, "amin"
+    )
     win = inside & (z <= zbuf[pix])
-    out = torch.full((n,), -1, dtype=torch.long, device=z.device)
-    return out.scatter_reduce(0, pix, torch.where(win, pairs.face, torch.full_like(pairs.face, -1)), "amax")
+    out = torch.full((n + 1,), -1, dtype=torch.long, device=z.device)
+    return out.scatter_reduce(0, pix, torch.where(win, pairs.face, torch.full_like(pairs.face, -1)), "amax")[
+        :n
+    ]
 
 
 class _FragmentsKernel(torch.autograd.Function):
@@ -129,11 +142,12 @@ class _FragmentsKernel(torch.autograd.Function):
         return grad_tri, grad_depth, None, None, None, None
 
 
-def rasterize(vertices: Tensor, faces: Tensor, camera: Camera) -> Fragments:
+def rasterize(vertices: Tensor, faces: Tensor, camera: Camera, budget: PairBudget | None = None) -> Fragments:
     """Hard-rasterise vertices (B, V, 3) with faces (F, 3) long through ``camera`` (B or 1 cameras).
 
     Both windings are drawn (no back-face culling); ties in depth go to the higher face index.
-    CPU tensors use the C++ kernels when they build, CUDA tensors the PyTorch path (same result).
+    CPU tensors use the C++ kernels when they build, CUDA tensors the PyTorch path (same result);
+    there a caller that rasterises every step passes its ``budget`` (`PairBudget`).
     """
     H, W = camera.height, camera.width
     sf = project_faces(vertices, faces, camera)
@@ -142,7 +156,7 @@ def rasterize(vertices: Tensor, faces: Tensor, camera: Camera) -> Fragments:
     if found is not None:
         winner, face_ids = found
     else:
-        winner = _zbuffer(sf, H, W)
+        winner = _zbuffer(sf, H, W, budget)
         face_ids = torch.where(winner >= 0, winner % sf.num_faces, winner)
     if _kernels.kernel_for("fragments_forward", sf.tri, sf.depth, indices=(winner,)) is not None:
         bary_img, depth_img = _FragmentsKernel.apply(sf.tri, sf.depth, winner, sf.batch, H, W)
@@ -254,6 +268,7 @@ class RasterFlow(nn.Module):
 
     def __init__(self, image_size: int | tuple[int, int] | None = None, device: str = "cpu"):
         super().__init__()
+        self.budget = PairBudget()  # the pair path's: no read-back a call (`PairBudget`)
 
     def forward(
         self,
@@ -263,7 +278,7 @@ class RasterFlow(nn.Module):
         vertices_next: Tensor,
         camera_next: Camera | None = None,
     ) -> dict[str, Tensor]:
-        frags = rasterize(vertices, faces, camera)
+        frags = rasterize(vertices, faces, camera, self.budget)
         cam1 = (camera if camera_next is None else camera_next).expand(frags.face_ids.shape[0])
         # Interpolate the 3D camera-frame points at t+1, then project (exact for per-face affine motion).
         pts1 = interpolate(cam1.to_camera(vertices_next), faces, frags)  # (B, H, W, 3)

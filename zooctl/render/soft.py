@@ -36,7 +36,7 @@ from torch import nn
 
 from . import _kernels
 from .camera import Camera
-from .windows import face_pixel_pairs, face_windows_int32, project_faces
+from .windows import PairBudget, face_windows_int32, padded, project_faces
 
 Tensor = torch.Tensor
 
@@ -133,6 +133,7 @@ class SoftSilhouette(nn.Module):
             raise ValueError("sigma must be positive")
         self.sigma = float(sigma)
         self.margin = math.sqrt(self.sigma * math.log(1.0 / eps))
+        self.budget = PairBudget()  # the pair path's: no read-back a call (`PairBudget`)
 
     def forward(self, vertices: Tensor, faces: Tensor, camera: Camera) -> Tensor:
         H, W = camera.height, camera.width
@@ -140,7 +141,8 @@ class SoftSilhouette(nn.Module):
         if _kernels.kernel_for("soft_forward", sf.tri) is not None:
             win = face_windows_int32(sf, H, W, self.margin)
             return _SoftSilhouetteKernel.apply(sf.tri, win, sf.batch, H, W, self.sigma).view(sf.batch, H, W)
-        pairs = face_pixel_pairs(sf, H, W, self.margin)
-        val = _SoftCoverage.apply(sf.tri, pairs.face, pairs.px, pairs.py, self.sigma)
-        acc = torch.zeros(sf.batch * H * W, dtype=val.dtype, device=val.device).index_add(0, pairs.pixel, val)
-        return (1.0 - acc.exp()).view(sf.batch, H, W)
+        pairs = self.budget.pairs(sf, H, W, self.margin)
+        val = _SoftCoverage.apply(padded(sf.tri, pairs), pairs.face, pairs.px, pairs.py, self.sigma)
+        n = sf.batch * H * W
+        acc = torch.zeros(n + 1, dtype=val.dtype, device=val.device).index_add(0, pairs.pixel, val)
+        return (1.0 - acc[:n].exp()).view(sf.batch, H, W)

@@ -33,12 +33,19 @@ class ScreenFaces:
 
 @dataclass
 class Pairs:
-    """Flattened (face, pixel) pairs: face (P,) into B*F, pixel (P,) into B*H*W, px/py (P,) centres."""
+    """Flattened (face, pixel) pairs: face (P,) into B*F, pixel (P,) into B*H*W, px/py (P,) centres.
+
+    Pairs of a fixed capacity (`face_pixel_pairs`'s ``capacity``, `PairBudget`) end in padding:
+    face B*F and pixel B*H*W, each one past the last (a caller gives its per-face and per-pixel
+    tensors one more row, `padded`, and drops it), so padding touches no face or pixel of the
+    picture; ``total`` (0-d, on the device) is how many pairs the windows held, padding not
+    counted: where that was more than the capacity the pairs beyond it were left out."""
 
     face: Tensor
     pixel: Tensor
     px: Tensor
     py: Tensor
+    total: Tensor | None = None
 
 
 def check_face_indices(faces: Tensor, num_vertices: int) -> None:
@@ -132,23 +139,115 @@ def face_windows_int32(sf: ScreenFaces, height: int, width: int, margin: float) 
     return win
 
 
+def padded(rows: Tensor, pairs: Pairs, fill: float = 0.0) -> Tensor:
+    """``rows`` (N, ...) with one more row of ``fill`` where ``pairs`` may hold padding (`Pairs`),
+    which indexes that row; the rows themselves otherwise."""
+    if pairs.total is None:
+        return rows
+    return torch.cat((rows, rows.new_full((1, *rows.shape[1:]), fill)))
+
+
 @torch.no_grad()
-def face_pixel_pairs(sf: ScreenFaces, height: int, width: int, margin: float) -> Pairs:
-    """Every (face, pixel) pair with the pixel centre within ``margin`` px of the face's box."""
+def face_pixel_pairs(
+    sf: ScreenFaces, height: int, width: int, margin: float, capacity: int | None = None
+) -> Pairs:
+    """Every (face, pixel) pair with the pixel centre within ``margin`` px of the face's box.
+
+    The number of pairs is read back from the device (the host waits for it) unless ``capacity``
+    is given: then exactly ``capacity`` pairs, the same pairs in the same order as without it
+    followed by padding (`Pairs`), and nothing is read back."""
     win = face_windows(sf, height, width, margin)
     x0, y0 = win[:, 0], win[:, 1]
     w = (win[:, 2] - x0 + 1).clamp_min(0)
     h = (win[:, 3] - y0 + 1).clamp_min(0)
     counts = w * h
-    total = int(counts.sum())
     dev = win.device
-    face = torch.repeat_interleave(torch.arange(len(counts), device=dev), counts, output_size=total)
-    start = torch.cumsum(counts, 0) - counts
-    local = torch.arange(total, device=dev) - start[face]
-    wf = w[face]
-    col = x0[face] + local % wf
-    row = y0[face] + torch.div(local, wf, rounding_mode="floor")
-    b = torch.div(face, sf.num_faces, rounding_mode="floor")
+    if capacity is None:
+        total = int(counts.sum())
+        face = torch.repeat_interleave(torch.arange(len(counts), device=dev), counts, output_size=total)
+        start = torch.cumsum(counts, 0) - counts
+        local = torch.arange(total, device=dev) - start[face]
+        pad, count = None, None
+    else:
+        # The counts cut at the capacity, and one more "face" holding the padding, so that they
+        # sum to the capacity exactly: the output's size is known without a read-back.
+        end = torch.cumsum(counts, 0)
+        count = end[-1]
+        kept = torch.diff(end.clamp_max(capacity), prepend=end.new_zeros(1))
+        rest = (capacity - count).clamp_min(0).reshape(1)
+        face = torch.repeat_interleave(
+            torch.arange(len(counts) + 1, device=dev), torch.cat((kept, rest)), output_size=capacity
+        )
+        pad = face == len(counts)
+        start = torch.cumsum(kept, 0) - kept
+        local = torch.arange(capacity, device=dev) - torch.cat((start, start.new_zeros(1)))[face]
+    # the windows' entries of each pair's face (padding reads the last face's: its pixel is replaced)
+    at = face if pad is None else face.clamp_max(len(counts) - 1)
+    wf = w[at].clamp_min(1)
+    col = x0[at] + local % wf
+    row = y0[at] + torch.div(local, wf, rounding_mode="floor")
+    b = torch.div(at, sf.num_faces, rounding_mode="floor")
     pixel = (b * height + row) * width + col
+    if pad is not None:
+        pixel = pixel.masked_fill(pad, sf.batch * height * width)
     dt = sf.tri.dtype
-    return Pairs(face, pixel, col.to(dt) + 0.5, row.to(dt) + 0.5)
+    return Pairs(face, pixel, col.to(dt) + 0.5, row.to(dt) + 0.5, count)
+
+
+class PairBudget:
+    """A fixed number of (face, pixel) pairs for one renderer's calls, so that a call waits for
+    nothing on the device; while ``on`` is False (the default, `FitConfig.pair_budget`) every
+    call counts its pairs exactly instead.
+
+    The first call counts its pairs (one read) and sets the budget to twice that. Later calls get
+    the budget's pairs (`face_pixel_pairs`'s ``capacity``), and after 4, 8 and then every 16
+    calls their counts are read back together (one read) and the budget set to ``headroom``
+    times the largest plus its growth since the last read: soon where the body grows or shrinks
+    at the start of a stage, and over the spread of the windows' frames later. A call whose
+    windows held more pairs than the budget leaves the rest out and counts in ``overflows``;
+    ``reads`` counts the reads back."""
+
+    def __init__(self, every: int = 16, headroom: float = 1.25, quantum: int = 4096) -> None:
+        self.every, self.headroom, self.quantum = every, headroom, quantum
+        self.capacity: int | None = None
+        self.on = False
+        self.overflows = self.reads = 0
+        self._pending: list[tuple[Tensor, int]] = []  # each call's count and capacity
+        self._next = 4
+        self._last = 0  # the largest count at the last read
+
+    def _size(self, count: float) -> int:
+        return max(self.quantum, -(-int(count) // self.quantum) * self.quantum)
+
+    def pairs(self, sf: ScreenFaces, height: int, width: int, margin: float) -> Pairs:
+        if not self.on or (sf.tri.device.type == "cpu" and _kernels.enabled()):
+            # On a CPU the pair path runs because no compiler built the kernels: nothing to wait
+            # for, and counting exactly is cheaper. With the kernels turned off (tests,
+            # `bench/step.py --torch-path`) the CPU runs what a device runs, budget included.
+            return face_pixel_pairs(sf, height, width, margin)
+        if self.capacity is None:
+            p = face_pixel_pairs(sf, height, width, margin)
+            self._last = len(p.face)
+            self.capacity = self._size(2 * self._last)
+            self.reads += 1
+            return p
+        p = face_pixel_pairs(sf, height, width, margin, capacity=self.capacity)
+        assert p.total is not None
+        self._pending.append((p.total, self.capacity))
+        if len(self._pending) >= self._next:
+            self.check()
+        return p
+
+    def check(self) -> None:
+        """Read the counts of the calls since the last check (one read) and set the budget."""
+        if not self._pending or self.capacity is None:
+            return
+        counts = torch.stack([t for t, _ in self._pending]).tolist()
+        self.overflows += sum(c > cap for c, (_, cap) in zip(counts, self._pending, strict=True))
+        self._pending = []
+        self.reads += 1
+        self._next = min(2 * self._next, self.every)
+        most = max(counts)
+        growth = max(0, most - self._last)  # since the last read: a body growing keeps growing
+        self._last = most
+        self.capacity = self._size(self.headroom * (most + growth))
