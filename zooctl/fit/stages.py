@@ -142,10 +142,14 @@ class StageRunner:
         options = {"sigma": cfg.soft_sigma} if self.st.renderer == "soft" else {}
         self.silhouette = get_renderer(self.st.renderer, size, device=cfg.device, **options)
         self.flow_renderer = get_renderer("flow", size, device=cfg.device)
-        for renderer in (self.silhouette, self.flow_renderer):
-            budget = getattr(renderer, "budget", None)  # plugins' renderers need not have one
-            if isinstance(budget, PairBudget):
-                budget.on = cfg.pair_budget
+        # the renderers' pair budgets (`PairBudget`; plugins' renderers need not have one)
+        self.budgets = [
+            b
+            for b in (getattr(r, "budget", None) for r in (self.silhouette, self.flow_renderer))
+            if isinstance(b, PairBudget)
+        ]
+        for b in self.budgets:
+            b.on = cfg.pair_budget
         self.gen = np.random.default_rng([cfg.seed, stage])
         present = targets.masks.present.cpu().numpy()
         self.present_idx = np.nonzero(present[: self.hi])[0]
@@ -326,13 +330,9 @@ class StageRunner:
     def pair_overflows(self) -> int:
         """How many of this stage's device renders left (face, pixel) pairs out before their
         renderer's budget grew (`zooctl.render.windows.PairBudget`; renderers without one: 0)."""
-        n = 0
-        for renderer in (self.silhouette, self.flow_renderer):
-            budget = getattr(renderer, "budget", None)
-            if isinstance(budget, PairBudget):
-                budget.check()
-                n += budget.overflows
-        return n
+        for b in self.budgets:
+            b.check()
+        return sum(b.overflows for b in self.budgets)
 
     def step(self, opt: torch.optim.Optimizer, it: int) -> dict[str, Tensor]:
         """One optimiser step; its weighted terms and ``total`` as detached 0-d tensors, read by

@@ -173,13 +173,14 @@ def face_pixel_pairs(
         # sum to the capacity exactly: the output's size is known without a read-back.
         end = torch.cumsum(counts, 0)
         count = end[-1]
-        kept = torch.diff(end.clamp_max(capacity), prepend=end.new_zeros(1))
+        kept_end = end.clamp_max(capacity)
+        kept = torch.diff(kept_end, prepend=end.new_zeros(1))
         rest = (capacity - count).clamp_min(0).reshape(1)
         face = torch.repeat_interleave(
             torch.arange(len(counts) + 1, device=dev), torch.cat((kept, rest)), output_size=capacity
         )
         pad = face == len(counts)
-        start = torch.cumsum(kept, 0) - kept
+        start = kept_end - kept
         local = torch.arange(capacity, device=dev) - torch.cat((start, start.new_zeros(1)))[face]
     # the windows' entries of each pair's face (padding reads the last face's: its pixel is replaced)
     at = face if pad is None else face.clamp_max(len(counts) - 1)
