@@ -125,7 +125,9 @@ def add(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars."),
     json_out: bool = JsonOpt,
 ) -> None:
-    """Decode a video, compute forward/backward flow and masks, and store them (atomic: a failure stores nothing)."""
+    """Decode a video, compute forward/backward flow and masks, and store them (atomic: a failure stores nothing).
+
+    Automatic masks (no --box) are checked: a warning says when they may hold no animal."""
     from ..video.ingest import AddOptions, add_video, parse_box
 
     seg_opts = _parse_options(seg_option, "--seg-option")
@@ -156,8 +158,14 @@ def add(
         lens=lens,
     )
 
+    warnings: list[str] = []  # said after the summary line, not between the progress bars
+
     def notify(text: str) -> None:
-        if not json_out:
+        if json_out:
+            return
+        if text.startswith("warning:"):
+            warnings.append(text)
+        else:
             err_console.print(text, highlight=False, markup=False)
 
     with stage_progress(not quiet and not json_out) as progress:
@@ -178,6 +186,8 @@ def add(
                 highlight=False,
                 markup=False,
             )
+        for text in warnings:
+            err_console.print(text, style="yellow", highlight=False, markup=False)
 
 
 @app.command("list")

@@ -37,7 +37,8 @@ class FitVideo:
     in pixels of this resolution or None; gt: ground truth arrays (benchmark videos only);
     camera_rotations (T, 3, 3) world-to-camera rotations (OpenCV axes) when the camera's motion is
     known (``--cameras``, or `zooctl bench run --known-camera`), else None; lens: the lens a stored
-    video was filmed with (`zooctl.video.lens.read_lens`'s dict), when known.
+    video was filmed with (`zooctl.video.lens.read_lens`'s dict), when known; animal_check: a stored
+    video's check that its automatic masks hold an animal (`zooctl.video.animal_check`), when made.
 
     A stored video's frames, masks, flow and flow_valid are `FrameArray` s: read from its file as
     they are indexed, so a long video's frames, masks and flow never sit in memory whole (what needs
@@ -58,6 +59,7 @@ class FitVideo:
     mask_source: str = "given"
     camera_rotations: np.ndarray | None = None
     lens: dict[str, Any] | None = None
+    animal_check: dict[str, Any] | None = None
     cache: dict[Any, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -107,6 +109,7 @@ class FitVideo:
             self.mask_source,
             None if self.camera_rotations is None else self.camera_rotations[start:stop],
             self.lens,
+            self.animal_check,
         )
 
 

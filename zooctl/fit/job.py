@@ -28,6 +28,7 @@ from ..errors import (
 )
 from ..names import check_name, sanitize_name
 from ..store.fits import FitStore
+from ..video.animal_check import unsure_line
 from .config import FitConfig, preset
 from .focal import guessed_note, lens_note, resolve_focal
 from .inputs import FitVideo, load_camera_rotations, load_fit_video, mask_notes
@@ -106,6 +107,7 @@ def load_source(
         source=f"video:{source}",
         mask_source=str(rec.segmenter.get("name", "stored")) if rec.segmenter else "stored",
         lens=rec.source.get("lens"),
+        animal_check=(rec.segmenter or {}).get("animal_check"),
     )
     return video.truncated(max_frames).check()
 
@@ -561,6 +563,9 @@ def _run_and_write(
     if focal_line:
         record["notes"] = [focal_line] + record["notes"]
     record["notes"] = mask_notes(video.truncated(cfg.max_frames).masks) + record["notes"]
+    unsure = unsure_line(video.animal_check, video.name)
+    if unsure:
+        record["notes"] = [unsure.removeprefix("warning: ")] + record["notes"]
     record["timings"]["total_wall"] = time.perf_counter() - t_start
     record["status"] = "done"
     from .outputs import write_fit_json

@@ -164,7 +164,8 @@ def add_video(
     Streams: frames, flow and masks go to a temporary file beside the video's final path as they
     are made (memory holds a few frames whatever the length), published under the store's lock
     once complete; any failure removes it and leaves the store as it was. ``notify`` is told what
-    the frame budget kept, when it chose."""
+    the frame budget kept, when it chose, and when automatic masks may hold no animal
+    (`zooctl.video.animal_check`)."""
     name = opts.name or default_name(Path(path))
     store.check_new(name, opts.replace)  # fail before minutes of work
     opts = AddOptions(**{**opts.__dict__, "name": name})
@@ -281,6 +282,14 @@ def ingest(
                 f"segmenter {seg_name!r} returned masks of shape {tuple(masks.shape)}, expected {(t, h, w)}"
             )
         report = store_masks(masks, writer, seg_name, user=seg_name == "masks")
+        if seg_name != "masks" and box is None:  # a box says where the animal is
+            from .animal_check import check_animal, unsure_line
+
+            seg_report = dict(getattr(segmenter, "report", None) or {})
+            report["animal_check"] = check_animal(writer.frames, masks, {**seg_report, **report})
+            line = unsure_line(report["animal_check"], name)
+            if line and notify is not None:
+                notify(line)
     finally:
         for part in (() if seg_flow is None else (seg_flow.forward, seg_flow.backward)) + (
             () if small is None else (small,)

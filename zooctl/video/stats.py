@@ -99,6 +99,7 @@ def _stats(seg, coverage, boxes, mean, p99, top, occluded, per_frame) -> dict[st
         "animalnet",
         "self_training",
         "colour_snap",
+        "animal_check",
     )
     return {
         "seeding": {k: seg[k] for k in keys if k in seg} or None,
@@ -201,6 +202,20 @@ def seeding_lines(seeding: dict[str, Any] | None) -> list[str]:
         )
     if seeding.get("small_frames"):
         out.append(f"masks under 0.1% of the frame in frames {_ranges(seeding['small_frames'])}")
+    check = seeding.get("animal_check")
+    if check:
+        out.append(
+            f"animal check: the classifier gives the masked parts {check['looks']:.0%} animal (median of "
+            f"{len(check['frames'])} frames), "
+            + (
+                "no localiser to count regions"
+                if check["regions"] is None
+                else f"{check['regions']} animal-like region(s) where it seeded"
+            )
+            + ", "
+            f"{check['empty_share']:.0%} of frames empty: "
+            + ("UNSURE the masks hold an animal" if check["unsure"] else "an animal")
+        )
     return out
 
 
