@@ -252,13 +252,14 @@ class _QueueReporter:
 # -- in the parent ------------------------------------------------------------------------
 class _Forwarder:
     """Passes the workers' reports on to ``reporter`` from a thread: every message, named by its
-    template, and the stages and steps of one trial at a time (a reporter draws one bar), the next
-    running trial's from its next stage once that trial's are over."""
+    template, and the stages and steps of one trial at a time (a reporter draws one bar). When the
+    shown trial's stage is over, the bar goes to the next trial in turn that is inside a stage,
+    from where that stage has got to, so every trial's progress shows."""
 
     def __init__(self, events: Any, reporter: Reporter | None, names: list[str]) -> None:
         self.events, self.reporter, self.names = events, reporter, names
         self.shown: int | None = None
-        self.left = 0  # steps left in the shown trial's stage
+        self.stages: dict[int, list] = {}  # trial -> [stage name, total steps, steps done]
         self.thread = threading.Thread(target=self._loop, name="zooctl-trial-reports", daemon=True)
         self.done = threading.Event()
 
@@ -289,13 +290,31 @@ class _Forwarder:
             rep.message(f"[{self.names[index]}] {value}")
         elif kind == "stage":
             name, total, done = value
-            if self.shown is None:
-                self.shown = index
+            self.stages[index] = [name, total, done]
+            if self.shown is None or self.shown == index:
+                self._show(index)
+        elif kind == "step":
+            stage = self.stages.get(index)
+            if stage is not None:
+                stage[2] += 1
             if self.shown == index:
-                rep.stage(f"{name} ({self.names[index]})", total, done)
-                self.left = total - done
-        elif kind == "step" and self.shown == index:
-            rep.step(value)
-            self.left -= 1
-            if self.left <= 0:
-                self.shown = None  # the next trial to start a stage takes the bar
+                rep.step(value)
+                if stage is None or stage[2] >= stage[1]:
+                    self._hand_on(index)
+
+    def _show(self, index: int) -> None:
+        name, total, done = self.stages[index]
+        self.shown = index
+        assert self.reporter is not None
+        self.reporter.stage(f"{name} ({self.names[index]})", total, done)
+
+    def _hand_on(self, index: int) -> None:
+        """The bar of a trial whose stage is over, to the next trial after it inside a stage."""
+        n = len(self.names)
+        for k in range(1, n + 1):
+            other = (index + k) % n
+            stage = self.stages.get(other)
+            if other != index and stage is not None and stage[2] < stage[1]:
+                self._show(other)
+                return
+        self.shown = None  # the next trial to start a stage takes the bar
