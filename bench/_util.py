@@ -80,6 +80,18 @@ def add_log_parser(sub) -> object:
     return a
 
 
+def stored_fits_parser(doc: str):
+    """The command line of a script over a store's benchmark fits: ``--store STORE [FIT ...]
+    [--json OUT]`` (add more with ``add_argument`` before ``parse_args``)."""
+    import argparse
+
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("--store", required=True, type=Path)
+    ap.add_argument("fits", nargs="*", help="fit names (default: every fit of the store)")
+    ap.add_argument("--json", type=Path, default=None, help="also write the lines here")
+    return ap
+
+
 def stored_bench_fits(store: Path, names: list[str] | None = None, need: str = "vertices"):
     """Yield (name, record, result) for each finished fit of ``store`` (``names``, default every
     fit) whose source is a benchmark video with truth ``need``: the fit reloaded from its

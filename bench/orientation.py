@@ -20,7 +20,6 @@ One JSON line a fit, then the means (BENCHMARKS.md, "Where the own rig's novel v
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import sys
@@ -29,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _util import finish_lines, stored_bench_fits  # noqa: E402
+from _util import finish_lines, stored_bench_fits, stored_fits_parser  # noqa: E402
 
 
 def similarity(p: np.ndarray, g: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
@@ -44,11 +43,7 @@ def similarity(p: np.ndarray, g: np.ndarray) -> tuple[float, np.ndarray, np.ndar
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--store", required=True, type=Path)
-    ap.add_argument("fits", nargs="*", help="fit names (default: every fit of the store)")
-    ap.add_argument("--json", type=Path, default=None, help="also write the lines here")
-    args = ap.parse_args()
+    args = stored_fits_parser(__doc__).parse_args()
 
     from zooctl.fit import metrics
 

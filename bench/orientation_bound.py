@@ -31,7 +31,6 @@ most, for any template").
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -39,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _util import finish_lines, stored_bench_fits  # noqa: E402
+from _util import finish_lines, stored_bench_fits, stored_fits_parser  # noqa: E402
 
 FLIPPED = 0.05  # a frame whose mirror scores this much higher counts as seen from the wrong side
 
@@ -92,11 +91,8 @@ def _per_frame(seen: list) -> np.ndarray:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--store", required=True, type=Path)
-    ap.add_argument("fits", nargs="*", help="fit names (default: every fit of the store)")
+    ap = stored_fits_parser(__doc__)
     ap.add_argument("--frames", type=int, default=4, help="frames scored a fit (the benchmark's 4)")
-    ap.add_argument("--json", type=Path, default=None, help="also write the lines here")
     args = ap.parse_args()
 
     from zooctl.fit import metrics
