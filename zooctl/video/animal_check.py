@@ -28,7 +28,7 @@ import numpy as np
 LOOK_FRAMES = 6  # frames classified, spread over the video
 CROP_MARGIN = 1.25  # the classified square's side, in the mask's longer sides
 CROP_WIDTH = 224  # the classifier's input for a crop (its training size)
-# Chosen leave-one-video-out on 54 videos of animals and 17 without one (BENCHMARKS.md)
+# Chosen leave-one-video-out on 55 videos of an animal and 17 without one (BENCHMARKS.md)
 MIN_REGIONS = 2
 MIN_LOOKS = 0.525
 MAX_EMPTY_SHARE = 0.3
