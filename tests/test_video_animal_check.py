@@ -75,6 +75,14 @@ def test_the_classifier_tells_an_animal_s_crop_from_the_scene_s():
         moved[i, 20 : 20 + h, 600 : 600 + w] = True
     _, looks = crop_looks(rgb, moved)
     assert max(looks) < MIN_LOOKS
+    # the swan's own masks, two regions: frames left empty beyond the share make them unsure
+    seen = {"animals_seen": MIN_REGIONS}
+    ok = check_animal(rgb, truth, {**seen, "empty_frames": [0]})  # 1 of 6 empty
+    assert ok["looks"] > MIN_LOOKS and not ok["unsure"]
+    gaps = check_animal(rgb, truth, {**seen, "empty_frames": [0, 1]})  # 2 of 6
+    assert gaps["looks"] > MIN_LOOKS and gaps["empty_share"] > MAX_EMPTY_SHARE and gaps["unsure"]
+    line = unsure_line(gaps, "swan")
+    assert "33% of the frames have no mask" in line and "classifier gives" not in line
 
 
 def _scene(folder, seed: int = 0, t: int = 16, size: int = 240):
