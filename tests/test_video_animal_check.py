@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import cv2
 import numpy as np
 from cli_helpers import run_inprocess
@@ -129,6 +131,22 @@ def test_video_add_of_a_scene_without_an_animal_warns_and_a_fit_repeats_it(tmp_p
     Bank(store).add(tube_asset(bones=3, name="tube"))
     rec = fit_job("hills", store, tiny_fit_config(), name="h", template="tube", outputs=("loss",))
     assert rec["notes"][0].startswith("hills's masks may not hold an animal")
+
+    # a video stored before the check existed: the fit makes it, as video add would have
+    import gc
+
+    import h5py
+
+    gc.collect()  # the first fit's reader of the file, closed
+
+    from zooctl.store.videos import VideoStore
+
+    with h5py.File(VideoStore(store).path("hills"), "r+") as f:
+        seg = json.loads(f.attrs["segmenter"])
+        del seg["animal_check"]
+        f.attrs["segmenter"] = json.dumps(seg)
+    rec = fit_job("hills", store, tiny_fit_config(), name="h2", template="tube", outputs=("loss",))
+    assert rec["notes"][0] == "hills's masks" + unsure_line(check, "hills").split("'s masks", 1)[1]
 
 
 def test_video_add_of_a_rendered_animal_does_not_warn(tmp_path, store, capsys):

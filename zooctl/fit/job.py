@@ -107,9 +107,21 @@ def load_source(
         source=f"video:{source}",
         mask_source=str(rec.segmenter.get("name", "stored")) if rec.segmenter else "stored",
         lens=rec.source.get("lens"),
-        animal_check=(rec.segmenter or {}).get("animal_check"),
+        animal_check=stored_animal_check(rec),
     )
     return video.truncated(max_frames).check()
+
+
+def stored_animal_check(rec: Any) -> dict[str, Any] | None:
+    """A stored video's check that its automatic masks hold an animal: the one `video add` made,
+    else (a video stored before the check existed) made now from its frames, masks and segmenter
+    report, as `video add` would have; None for a user's masks or a box's."""
+    seg = rec.segmenter or {}
+    if "animal_check" in seg or seg.get("name") in (None, "masks") or seg.get("box") is not None:
+        return seg.get("animal_check")
+    from ..video.animal_check import check_animal
+
+    return check_animal(rec.frames, rec.masks, seg)
 
 
 def is_single_image(p: Path) -> bool:
