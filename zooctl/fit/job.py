@@ -28,7 +28,7 @@ from ..errors import (
 )
 from ..names import check_name, sanitize_name
 from ..store.fits import FitStore
-from ..video.animal_check import unsure_line
+from ..video.animal_check import check_animal, unsure_line
 from .config import FitConfig, preset
 from .focal import guessed_note, lens_note, resolve_focal
 from .inputs import FitVideo, load_camera_rotations, load_fit_video, mask_notes
@@ -119,8 +119,6 @@ def stored_animal_check(rec: Any) -> dict[str, Any] | None:
     seg = rec.segmenter or {}
     if "animal_check" in seg or seg.get("name") in (None, "masks") or seg.get("box") is not None:
         return seg.get("animal_check")
-    from ..video.animal_check import check_animal
-
     return check_animal(rec.frames, rec.masks, seg)
 
 
