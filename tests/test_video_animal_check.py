@@ -132,12 +132,9 @@ def test_video_add_of_a_scene_without_an_animal_warns_and_a_fit_repeats_it(tmp_p
     rec = fit_job("hills", store, tiny_fit_config(), name="h", template="tube", outputs=("loss",))
     assert rec["notes"][0].startswith("hills's masks may not hold an animal")
 
-    # a video stored before the check existed: the fit makes it, as video add would have
-    import gc
-
+    # a video stored before the check existed: the fit makes it, as video add would have (the
+    # file opens for writing at once: the first fit closed it, not the garbage collector)
     import h5py
-
-    gc.collect()  # the first fit's reader of the file, closed
 
     from zooctl.store.videos import VideoStore
 

@@ -88,6 +88,13 @@ class FitVideo:
             )
         return self
 
+    def close(self) -> None:
+        """Close the stored video file its arrays read (nothing for arrays in memory); they, and
+        every part of this video, cannot be read after."""
+        for a in (self.frames, self.masks, self.flow, self.flow_valid):
+            if hasattr(a, "close"):
+                a.close()
+
     def truncated(self, max_frames: int | None) -> FitVideo:
         if max_frames is None or max_frames >= self.num_frames:
             return self

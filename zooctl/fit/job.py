@@ -347,96 +347,101 @@ def fit_job(
         cfg = dataclasses.replace(cfg, pose_prior=dataclasses.replace(cfg.pose_prior, motion=folder))
     t_start = time.perf_counter()
     video = load_source(source, store_root, masks, cfg.max_frames, box, reporter)
-    if truth is not None:
-        attach_truth(video, Path(truth))
-    if resume and old.get("focal"):
-        focal = old["focal"]  # the saved config holds the focal it started with
-    else:
-        cfg, focal = resolve_focal(cfg, video)
-    if cameras is not None and not resume:  # a resumed fit's camera search is done already
-        video.camera_rotations = load_camera_rotations(cameras, video)
-        if cameras != "gt":
-            cameras = str(Path(cameras).expanduser().resolve())
-    name = check_name(name or sanitize_name(video.name), "fit name")
-    replacing = not resume and not check_name_free(fits, name, replace)
-    t_ret = time.perf_counter()
-    if resume and state is not None:
-        asset = bank.get(template)  # the template chosen (and tried) when the fit started
-        candidates, t_trials = fits.get(name).get("retrieval", []), None
-    else:
-        asset, candidates, state, t_trials = select_template(
-            bank, template, video, cfg, exclude=exclude, reporter=reporter
-        )
-        cfg = winner_config(cfg, candidates, asset.name)
-    t_ret = time.perf_counter() - t_ret - (t_trials or 0.0)
-    if out is not None:
-        out_dir = Path(out)
-    else:
-        out_dir = Path(out_root) / name if out_root is not None else fits.path(name)
-    out_dir = out_dir.resolve()  # the record names its files by absolute paths
-    final_fits, final_out, staged = fits, out_dir, None
-    if replacing:  # the old fit and its outputs stay until the new fit is committed
-        staged = fits.staging(name)
-        fits = FitStore(staged)
-        in_store = final_out == final_fits.path(name).resolve()
-        out_dir = (fits.path(name) if in_store else staged / "out").resolve()
     try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        record: dict[str, Any] = {
-            "status": "running",
-            "source": str(source),
-            "video": video.name,
-            "masks": masks,
-            "cameras": cameras,
-            "truth": str(Path(truth).resolve()) if truth is not None else None,
-            "focal": focal,
-            "box": list(box) if box is not None else None,
-            "stored_video": video.source[len("video:") :] if video.source.startswith("video:") else None,
-            "mask_source": video.mask_source,
-            "frames": video.num_frames if cfg.max_frames is None else min(cfg.max_frames, video.num_frames),
-            "image_size": list(video.size),
-            "fps": video.fps,
-            "template": asset.name,
-            "retrieval": candidates,
-            "excluded": sorted(exclude or []),
-            "out": str(out_dir.resolve()),
-            "config": cfg.to_dict(),
-            "outputs": {},
-        }
-        fits.save_record(name, record)
-        from ..store.fs import write_json_atomic
+        if truth is not None:
+            attach_truth(video, Path(truth))
+        if resume and old.get("focal"):
+            focal = old["focal"]  # the saved config holds the focal it started with
+        else:
+            cfg, focal = resolve_focal(cfg, video)
+        if cameras is not None and not resume:  # a resumed fit's camera search is done already
+            video.camera_rotations = load_camera_rotations(cameras, video)
+            if cameras != "gt":
+                cameras = str(Path(cameras).expanduser().resolve())
+        name = check_name(name or sanitize_name(video.name), "fit name")
+        replacing = not resume and not check_name_free(fits, name, replace)
+        t_ret = time.perf_counter()
+        if resume and state is not None:
+            asset = bank.get(template)  # the template chosen (and tried) when the fit started
+            candidates, t_trials = fits.get(name).get("retrieval", []), None
+        else:
+            asset, candidates, state, t_trials = select_template(
+                bank, template, video, cfg, exclude=exclude, reporter=reporter
+            )
+            cfg = winner_config(cfg, candidates, asset.name)
+        t_ret = time.perf_counter() - t_ret - (t_trials or 0.0)
+        if out is not None:
+            out_dir = Path(out)
+        else:
+            out_dir = Path(out_root) / name if out_root is not None else fits.path(name)
+        out_dir = out_dir.resolve()  # the record names its files by absolute paths
+        final_fits, final_out, staged = fits, out_dir, None
+        if replacing:  # the old fit and its outputs stay until the new fit is committed
+            staged = fits.staging(name)
+            fits = FitStore(staged)
+            in_store = final_out == final_fits.path(name).resolve()
+            out_dir = (fits.path(name) if in_store else staged / "out").resolve()
+        try:
+            out_dir.mkdir(parents=True, exist_ok=True)
+            record: dict[str, Any] = {
+                "status": "running",
+                "source": str(source),
+                "video": video.name,
+                "masks": masks,
+                "cameras": cameras,
+                "truth": str(Path(truth).resolve()) if truth is not None else None,
+                "focal": focal,
+                "box": list(box) if box is not None else None,
+                "stored_video": video.source[len("video:") :] if video.source.startswith("video:") else None,
+                "mask_source": video.mask_source,
+                "frames": video.num_frames
+                if cfg.max_frames is None
+                else min(cfg.max_frames, video.num_frames),
+                "image_size": list(video.size),
+                "fps": video.fps,
+                "template": asset.name,
+                "retrieval": candidates,
+                "excluded": sorted(exclude or []),
+                "out": str(out_dir.resolve()),
+                "config": cfg.to_dict(),
+                "outputs": {},
+            }
+            fits.save_record(name, record)
+            from ..store.fs import write_json_atomic
 
-        write_json_atomic(fits.path(name) / "config.json", cfg.to_dict())
+            write_json_atomic(fits.path(name) / "config.json", cfg.to_dict())
 
-        def checkpoint(st: dict[str, Any]) -> None:
-            fits.save_state(name, st)
+            def checkpoint(st: dict[str, Any]) -> None:
+                fits.save_state(name, st)
 
-        record = _run_and_write(
-            video,
-            asset,
-            cfg,
-            reporter,
-            checkpoint,
-            state,
-            template,
-            candidates,
-            source,
-            out_dir,
-            fits,
-            name,
-            outputs,
-            record,
-            t_ret,
-            t_trials,
-            t_start,
-        )
-    except BaseException:
+            record = _run_and_write(
+                video,
+                asset,
+                cfg,
+                reporter,
+                checkpoint,
+                state,
+                template,
+                candidates,
+                source,
+                out_dir,
+                fits,
+                name,
+                outputs,
+                record,
+                t_ret,
+                t_trials,
+                t_start,
+            )
+        except BaseException:
+            if staged is not None:
+                shutil.rmtree(staged, ignore_errors=True)
+            raise
         if staged is not None:
-            shutil.rmtree(staged, ignore_errors=True)
-        raise
-    if staged is not None:
-        record = _commit_replacement(final_fits, name, staged, fits.path(name), out_dir, final_out)
-    return record | {"name": name}
+            record = _commit_replacement(final_fits, name, staged, fits.path(name), out_dir, final_out)
+        return record | {"name": name}
+    finally:
+        video.close()  # the stored video's file, now, not when the collector finds it
 
 
 def check_name_free(fits: FitStore, name: str, replace: bool) -> bool:

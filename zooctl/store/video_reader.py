@@ -58,6 +58,10 @@ class FrameArray:
     def shape(self) -> tuple[int, ...]:
         return (self._len, *(int(s) for s in self._ds.shape[1:]))
 
+    def close(self) -> None:
+        """Close the file this array reads (`StoredVideo.close`): every array of it, after."""
+        self._video.close()
+
     @property
     def ndim(self) -> int:
         return len(self._ds.shape)
