@@ -438,6 +438,11 @@ class VideoWriter:
         if self._failed is not None:
             raise self._failed
 
+    @property
+    def masks(self):
+        """The masks dataset (T, H, W) uint8 0/1: the frames `set_mask` has stored so far."""
+        return self._masks
+
     def set_mask(self, i: int, mask: np.ndarray) -> None:
         """Store frame i's (H, W) bool mask; every frame's, in order 0, 1, ..."""
         if i != len(self._boxes):

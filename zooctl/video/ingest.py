@@ -286,7 +286,8 @@ def ingest(
             from .animal_check import check_animal, unsure_line
 
             seg_report = dict(getattr(segmenter, "report", None) or {})
-            report["animal_check"] = check_animal(writer.frames, masks, {**seg_report, **report})
+            # the masks as stored: a segmenter's lazy view would upsample its frames again
+            report["animal_check"] = check_animal(writer.frames, writer.masks, {**seg_report, **report})
             line = unsure_line(report["animal_check"], name)
             if line and notify is not None:
                 notify(line)
