@@ -144,6 +144,13 @@ def test_video_add_of_a_scene_without_an_animal_warns_and_a_fit_repeats_it(tmp_p
         f.attrs["segmenter"] = json.dumps(seg)
     rec = fit_job("hills", store, tiny_fit_config(), name="h2", template="tube", outputs=("loss",))
     assert rec["notes"][0] == "hills's masks" + unsure_line(check, "hills").split("'s masks", 1)[1]
+    # and `video show` makes it too, says so, and stores nothing
+    shown = run_inprocess(capsys, "video", "show", "hills", "--json").json()["seeding"]["animal_check"]
+    assert shown["made_now"] and shown["looks"] == check["looks"] and shown["unsure"]
+    out = run_inprocess(capsys, "video", "show", "hills").out
+    assert "UNSURE the masks hold an animal (made now: the video was stored before the check" in out
+    with h5py.File(VideoStore(store).path("hills"), "r") as f:
+        assert "animal_check" not in json.loads(f.attrs["segmenter"])
 
 
 def test_video_add_of_a_rendered_animal_does_not_warn(tmp_path, store, capsys):

@@ -246,9 +246,17 @@ def show(
 
     store = _store()
     info = {**store.summary(name), **_read_stats(store, name, stored_video_stats)}
-    if preview:
-        from ..store.video_reader import StoredVideo
+    from ..store.video_reader import StoredVideo
 
+    seeding = info.get("seeding")
+    if seeding and "animal_check" not in seeding:
+        from ..video.animal_check import stored_animal_check
+
+        with StoredVideo(store.path(name)) as rec:  # stored before the check: made now, not stored
+            check = stored_animal_check(rec)
+        if check is not None:
+            seeding["animal_check"] = check
+    if preview:
         with StoredVideo(store.path(name)) as rec, stage_progress(not json_out) as progress:
             from ..video.preview import write_preview
 

@@ -28,7 +28,7 @@ from ..errors import (
 )
 from ..names import check_name, sanitize_name
 from ..store.fits import FitStore
-from ..video.animal_check import check_animal, unsure_line
+from ..video.animal_check import stored_animal_check, unsure_line
 from .config import FitConfig, preset
 from .focal import guessed_note, lens_note, resolve_focal
 from .inputs import FitVideo, load_camera_rotations, load_fit_video, mask_notes
@@ -110,16 +110,6 @@ def load_source(
         animal_check=stored_animal_check(rec),
     )
     return video.truncated(max_frames).check()
-
-
-def stored_animal_check(rec: Any) -> dict[str, Any] | None:
-    """A stored video's check that its automatic masks hold an animal: the one `video add` made,
-    else (a video stored before the check existed) made now from its frames, masks and segmenter
-    report, as `video add` would have; None for a user's masks or a box's."""
-    seg = rec.segmenter or {}
-    if "animal_check" in seg or seg.get("name") in (None, "masks") or seg.get("box") is not None:
-        return seg.get("animal_check")
-    return check_animal(rec.frames, rec.masks, seg)
 
 
 def is_single_image(p: Path) -> bool:

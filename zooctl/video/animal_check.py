@@ -114,3 +114,14 @@ def unsure_line(check: dict[str, Any] | None, name: str) -> str | None:
         f"{check['regions']} animal-like regions, none clearly. Look at `zooctl video show {name}`; "
         "if the animal is there, add the video again with --box x,y,w,h around it or your own --masks"
     )
+
+
+def stored_animal_check(rec: Any) -> dict[str, Any] | None:
+    """A stored video's (`zooctl.store.video_reader.StoredVideo`) check that its automatic masks
+    hold an animal: the one `video add` made, else (a video stored before the check existed) made
+    now from its frames, masks and segmenter report, as `video add` would have, and marked
+    ``made_now``; None for a user's masks or a box's."""
+    seg = rec.segmenter or {}
+    if "animal_check" in seg or seg.get("name") in (None, "masks") or seg.get("box") is not None:
+        return seg.get("animal_check")
+    return {**check_animal(rec.frames, rec.masks, seg), "made_now": True}

@@ -215,6 +215,11 @@ def seeding_lines(seeding: dict[str, Any] | None) -> list[str]:
             + ", "
             f"{check['empty_share']:.0%} of frames empty: "
             + ("UNSURE the masks hold an animal" if check["unsure"] else "an animal")
+            + (
+                " (made now: the video was stored before the check; not stored)"
+                if check.get("made_now")
+                else ""
+            )
         )
     return out
 
