@@ -24,7 +24,7 @@ DEMO_RANDOM_SEED = 7
 
 def main(argv: list[str] | None = None) -> int:
     from .benchdata.make import make_video
-    from .cli._common import LineConsole
+    from .cli._common import LineConsole, stage_progress
     from .errors import ZooctlError
     from .fit.config import preset
     from .fit.job import fit_job
@@ -53,8 +53,14 @@ def main(argv: list[str] | None = None) -> int:
         store = default_store()
         bank = Bank.open(store)
         con.print(f"seeding the starter bank and {DEMO_RANDOM_ANIMALS} random animals (about a minute) ...")
-        added = seed_starter(bank)
-        added += seed_starter(bank, seed=DEMO_RANDOM_SEED, random=DEMO_RANDOM_ANIMALS)
+        with stage_progress(True) as progress:
+            added = seed_starter(bank, progress=lambda _, d, t: progress("starter animals", d, t))
+            added += seed_starter(
+                bank,
+                seed=DEMO_RANDOM_SEED,
+                random=DEMO_RANDOM_ANIMALS,
+                progress=lambda _, d, t: progress("random animals", d, t),
+            )
         con.print(f"starter bank at {store}/bank: {len(bank)} assets ({len(added)} added)")
         animal = bank.get(args.animal)
         own = args.clip != "random"
