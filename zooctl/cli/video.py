@@ -246,24 +246,28 @@ def show(
 
     store = _store()
     info = {**store.summary(name), **_read_stats(store, name, stored_video_stats)}
-    from ..store.video_reader import StoredVideo
-
     seeding = info.get("seeding")
-    if seeding and "animal_check" not in seeding:
-        from ..video.animal_check import stored_animal_check
+    need_check = bool(seeding) and "animal_check" not in seeding  # stored before the check
+    if need_check or preview:
+        from ..store.video_reader import StoredVideo
 
-        with StoredVideo(store.path(name)) as rec:  # stored before the check: made now, not stored
-            check = stored_animal_check(rec)
-        if check is not None:
-            seeding["animal_check"] = check
-    if preview:
-        with StoredVideo(store.path(name)) as rec, stage_progress(not json_out) as progress:
-            from ..video.preview import write_preview
+        with StoredVideo(store.path(name)) as rec:
+            if need_check:
+                from ..video.animal_check import stored_animal_check
 
-            write_preview(
-                rec, preview, progress=None if progress is None else (lambda d, t: progress("preview", d, t))
-            )
-        info["preview"] = str(preview)
+                check = stored_animal_check(rec)  # made now, not stored
+                if check is not None:
+                    seeding["animal_check"] = check
+            if preview:
+                from ..video.preview import write_preview
+
+                with stage_progress(not json_out) as progress:
+                    write_preview(
+                        rec,
+                        preview,
+                        progress=None if progress is None else (lambda d, t: progress("preview", d, t)),
+                    )
+                info["preview"] = str(preview)
     if json_out:
         print_json(info)
         return

@@ -122,6 +122,12 @@ def stored_animal_check(rec: Any) -> dict[str, Any] | None:
     now from its frames, masks and segmenter report, as `video add` would have, and marked
     ``made_now``; None for a user's masks or a box's."""
     seg = rec.segmenter or {}
-    if "animal_check" in seg or seg.get("name") in (None, "masks") or seg.get("box") is not None:
+    if "animal_check" in seg or not is_checked(seg.get("name"), seg.get("box")):
         return seg.get("animal_check")
     return {**check_animal(rec.frames, rec.masks, seg), "made_now": True}
+
+
+def is_checked(segmenter: str | None, box: Any) -> bool:
+    """Whether masks made by ``segmenter`` (its name; "masks": the user's own) with ``box`` are
+    checked: automatic masks made without a box (a box says where the animal is)."""
+    return segmenter not in (None, "masks") and box is None

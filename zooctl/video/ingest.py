@@ -282,9 +282,9 @@ def ingest(
                 f"segmenter {seg_name!r} returned masks of shape {tuple(masks.shape)}, expected {(t, h, w)}"
             )
         report = store_masks(masks, writer, seg_name, user=seg_name == "masks")
-        if seg_name != "masks" and box is None:  # a box says where the animal is
-            from .animal_check import check_animal, unsure_line
+        from .animal_check import check_animal, is_checked, unsure_line
 
+        if is_checked(seg_name, box):
             seg_report = dict(getattr(segmenter, "report", None) or {})
             # the masks as stored: a segmenter's lazy view would upsample its frames again
             report["animal_check"] = check_animal(writer.frames, writer.masks, {**seg_report, **report})
