@@ -17,7 +17,7 @@ from pathlib import Path
 # time budget trained a busy machine's prior into statues; BENCHMARKS.md, Motion prior).
 DEMO_PRIOR_STEPS = 1600
 # Random animals beside the starter set: of 0, 30, 60 and 100 the best on animals the bank does not
-# hold, though not by more than another draw moves it (BENCHMARKS.md, "More random animals").
+# hold, with two draws of 30 alike (BENCHMARKS.md, "More random animals").
 DEMO_RANDOM_ANIMALS = 30
 DEMO_RANDOM_SEED = 7
 
