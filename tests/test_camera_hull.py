@@ -13,6 +13,7 @@ from zooctl.fit.camera_init import (
     view_rotation,
 )
 from zooctl.fit.scene import CAMERA_ROTATION
+from zooctl.geometry import quat_to_matrix
 
 
 def test_hull_points_give_the_same_projected_box():
@@ -73,3 +74,40 @@ def test_a_long_body_seen_end_on_is_placed_to_fill_its_box():
         worst = max(worst, abs(np.log(size)))
         np.testing.assert_allclose(0.5 * (lo + hi), 0.5 * (box[:2] + box[2:]), atol=1.5)
     assert worst < 0.01
+
+
+def _project(points: np.ndarray) -> np.ndarray:
+    cam = points @ CAMERA_ROTATION.T  # the scene's camera looks down -Z
+    return cam[:, :2] / cam[:, 2:]
+
+
+def test_held_and_trend_distances_keep_each_frame_in_its_place_on_the_image():
+    """`camera.depth`: each frame's body centre stays on its ray (its projection unchanged) and its
+    log distance becomes the frames' median (held) or their least-squares line (trend); a frame
+    without a mask does not count; with fewer than two frames nothing moves."""
+    from zooctl.fit.camera_init import _depth_held
+    from zooctl.geometry import matrix_to_quat
+
+    rng = np.random.default_rng(3)
+    T = 9
+    rot_q = np.stack([matrix_to_quat(view_rotation(*rng.uniform(-180, 180, 3))) for _ in range(T)])
+    R = np.stack([quat_to_matrix(q) for q in rot_q])
+    centre = np.array([0.3, -0.2, 0.5])
+    dist = np.exp(np.linspace(1.0, 1.6, T) + rng.normal(0, 0.3, T))  # a trend and jumps about it
+    rays = np.c_[rng.uniform(-0.2, 0.2, (T, 2)), -np.ones(T)]
+    body = rays * dist[:, None]
+    trans = body - R @ centre
+    present = np.array([0, 1, 2, 4, 5, 6, 7, 8])  # frame 3 has no mask
+    for depth in ("held", "trend"):
+        out = _depth_held(trans, rot_q, centre, present, depth)
+        moved = out + R @ centre
+        np.testing.assert_allclose(_project(moved), _project(body), atol=1e-9)
+        log_d = np.log(-moved[:, 2])
+        if depth == "held":
+            np.testing.assert_allclose(log_d, np.median(np.log(dist[present])), atol=1e-9)
+        else:
+            slope, at0 = np.polyfit(present, np.log(dist[present]), 1)
+            np.testing.assert_allclose(log_d, slope * np.arange(T) + at0, atol=1e-9)
+            assert slope > 0
+        assert np.std(log_d) < np.std(np.log(dist))
+    np.testing.assert_allclose(_depth_held(trans, rot_q, centre, np.array([4]), "held"), trans)

@@ -365,7 +365,9 @@ def initialise_camera(
             tracks.append(track(view_rotation(*b[:3]), b[3], i, top, place=False))
         kept = max(tracks, key=lambda x: float(np.mean(x.keyframe_iou)))
         focal = kept.focal / fit_scale
-        trans = _box_translations(scorer, masks, kept.root_rotation, rest, focal, principal, present)
+        trans = _box_translations(
+            scorer, masks, kept.root_rotation, rest, focal, principal, present, cfg.depth
+        )
         return replace(kept, root_translation=trans)
     best, iou = refine(best)
     focal = best[3]
@@ -376,7 +378,7 @@ def initialise_camera(
         return CameraInit(
             focal * fit_scale,
             rot_q,
-            _box_translations(scorer, masks, rot_q, rest, focal, principal, present),
+            _box_translations(scorer, masks, rot_q, rest, focal, principal, present, cfg.depth),
             top,
             iou,
             key_iou,
@@ -520,7 +522,7 @@ def _tracked(
             a = (t - keys[j]) / (keys[j + 1] - keys[j])
             rot_q[t] = quat_slerp(kq[j], kq[j + 1], a)
     trans = (
-        _box_translations(scorer, masks, rot_q, rest, focal, principal, present)
+        _box_translations(scorer, masks, rot_q, rest, focal, principal, present, cfg.depth)
         if place
         else np.zeros((T, 3))
     )
@@ -568,9 +570,11 @@ def _box_translations(
     focal: float,
     principal: tuple[float, float],
     present: list[int],
+    depth: str = "box",
 ) -> np.ndarray:
     """(T, 3) each frame's own box alignment at the input resolution's camera (frames whose mask
-    is empty interpolate their neighbours')."""
+    is empty interpolate their neighbours'), its distances then as ``depth`` says
+    (`CameraConfig.depth`, `_depth_held`)."""
     T, H, W = masks.shape
     trans = np.full((T, 3), np.nan)
     full = SilhouetteScorer.__new__(SilhouetteScorer)
@@ -585,4 +589,24 @@ def _box_translations(
     idx = np.array(present)
     for c in range(3):
         trans[:, c] = np.interp(np.arange(T), idx, trans[idx, c])
-    return trans
+    return trans if depth == "box" else _depth_held(trans, rot_q, centre, idx, depth)
+
+
+def _depth_held(
+    trans: np.ndarray, rot_q: np.ndarray, centre: np.ndarray, present: np.ndarray, depth: str
+) -> np.ndarray:
+    """(T, 3) ``trans`` with each frame's body centre moved along its ray (its projection kept) to
+    the distance of ``depth`` (`CameraConfig.depth`): ``trend`` the least-squares line of the log
+    distances of the ``present`` frames over time, ``held`` their median."""
+    T = len(trans)
+    if len(present) < 2:
+        return trans
+    R = quat_to_matrix(np.asarray(rot_q, np.float64))  # (T, 3, 3)
+    body = trans + R @ centre  # (T, 3); the camera looks down -Z
+    log_d = np.log(np.maximum(-body[:, 2], 1e-9))
+    if depth == "held":
+        want = np.full(T, np.median(log_d[present]))
+    else:
+        slope, at0 = np.polyfit(present.astype(np.float64), log_d[present], 1)
+        want = slope * np.arange(T) + at0
+    return body * np.exp(want - log_d)[:, None] - R @ centre

@@ -27,6 +27,7 @@ TRACKERS = ("greedy", "steady")
 START_TRIALS = ("none", "steady")
 CAMERA_MOTIONS = ("given", "background", "none")
 SEARCH_OVER = ("head", "both")
+DEPTH_STARTS = ("box", "trend", "held")
 PRESET_NAMES = ("fast", "quality")
 _RATE = {"exclusiveMinimum": 0}
 _WEIGHT = {"minimum": 0}
@@ -82,6 +83,18 @@ class CameraConfig:
         "turn of the one before) or steady (a start and a steady turn about the animal's up axis scored "
         "over the whole video, then each keyframe the best small turn of that prediction)",
         enum=TRACKERS,
+    )
+    # held since 2026-12-07: own rigs, retrieved templates and held-out animals all closer from the
+    # sides (BENCHMARKS.md, "Each frame's starting distance held").
+    depth: str = spec(
+        "held",
+        help="each frame's starting distance from the camera, its place in the image kept: held (the median "
+        "over the frames of each frame's own box alignment's distance), trend (the least-squares line of "
+        "those distances' logs over time, for an animal walking towards or away from the camera) or box "
+        "(each frame's own: a template turned wrongly in a frame fills that frame's box by moving nearer "
+        "or further instead of turning)",
+        required=False,
+        enum=DEPTH_STARTS,
     )
     motion: str = spec(
         "given",
