@@ -570,7 +570,7 @@ def _box_translations(
     focal: float,
     principal: tuple[float, float],
     present: list[int],
-    depth: str = "box",
+    depth: str,
 ) -> np.ndarray:
     """(T, 3) each frame's own box alignment at the input resolution's camera (frames whose mask
     is empty interpolate their neighbours'), its distances then as ``depth`` says
