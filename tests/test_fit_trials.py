@@ -34,6 +34,19 @@ def _bank_with_views(store):
     return bank, thin
 
 
+def _fat_then_thin(bank, video, **sections):
+    """`try_candidates` of fat then thin under TINY with ``sections`` merged in: (config, template,
+    candidates, state)."""
+    from zooctl.fit.template import try_candidates
+
+    data = json.loads(json.dumps(TINY))
+    for name, values in sections.items():
+        data[name] |= values
+    cfg = FitConfig.from_dict(data)
+    cands = [{"name": "fat", "score": -2.0}, {"name": "thin", "score": -1.0}]
+    return (cfg, *try_candidates(bank, video, cands, cfg))
+
+
 def test_trials_pick_the_template_whose_fit_matches_best(tmp_path, store):
     """Handed the wrong template first, the trial fits still choose the animal of the video."""
     from zooctl.fit.inputs import load_fit_video
@@ -111,18 +124,14 @@ def test_the_full_fit_continues_the_winning_trial(tmp_path, store):
 def test_the_trials_fit_the_shape_at_their_own_rate_and_the_winner_goes_on_at_stage_twos(tmp_path, store):
     from zooctl.fit.inputs import load_fit_video
     from zooctl.fit.run import fit_video
-    from zooctl.fit.template import try_candidates
 
     bank, thin = _bank_with_views(store)
     video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
 
     def trials(stage2_rate: float, trial_rate: float | None):
-        data = json.loads(json.dumps(TINY))
-        data["stage2"]["lr_shape"] = stage2_rate
-        data["trials"] |= {"lr_shape": trial_rate, "workers": 1}
-        cfg = FitConfig.from_dict(data)
-        cands = [{"name": "fat", "score": -2.0}, {"name": "thin", "score": -1.0}]
-        asset, tried, state = try_candidates(bank, video, cands, cfg)
+        cfg, asset, tried, state = _fat_then_thin(
+            bank, video, stage2={"lr_shape": stage2_rate}, trials={"lr_shape": trial_rate, "workers": 1}
+        )
         return cfg, asset, [c["trial_iou"] for c in tried], state
 
     slow_cfg, slow_asset, slow_ious, slow_state = trials(1e-3, 1e-3)
@@ -397,6 +406,31 @@ def test_the_winner_is_tried_longer_and_kept_longer_only_where_that_fits_better(
         res = fit_video(video, asset, cfg, resume=state)
         along = float(res.scene.model.bone_scales().detach()[0])
         assert (along > 1.3) is kept and along > 0.8
+
+
+def test_trials_at_their_own_depth_hand_on_the_winners_trial_run_again_at_the_fits(tmp_path, store):
+    """``trials.depth``: the candidates are compared from each frame's own box distance, and the
+    winner's fit goes on from its trial run again from the fit's ``camera.depth``: the same trial
+    IoUs as trials wholly at ``box``, the same state as the winner's trial wholly at ``held``."""
+    from zooctl.fit.inputs import load_fit_video
+
+    bank, thin = _bank_with_views(store)
+    video = load_fit_video(make_video(thin, tmp_path / "v", frames=3, size=32, seed=0))
+
+    def tried(camera_depth: str, trials_depth: str | None):
+        _, asset, out, state = _fat_then_thin(
+            bank, video, camera={"depth": camera_depth}, trials={"depth": trials_depth, "workers": 1}
+        )
+        return asset.name, out, state
+
+    name, split, state = tried("held", "box")
+    box_name, box, box_state = tried("box", None)
+    held_name, held, held_state = tried("held", None)
+    assert name == box_name == held_name == "thin"
+    assert [c["trial_iou"] for c in split] == [c["trial_iou"] for c in box]
+    assert split[1]["refit_trial_iou"] == held[1]["trial_iou"] and "refit_trial_iou" not in split[0]
+    assert state["history"]["stage2"] == held_state["history"]["stage2"]
+    assert state["history"]["stage2"] != box_state["history"]["stage2"]  # the start differs
 
 
 def test_a_trials_body_turn_in_the_world_is_measured_against_the_cameras_turn():

@@ -371,6 +371,17 @@ class TemplateTrials:
     prune_margin: float = spec(
         0.05, help="how far below the best trial's score a trial stops at prune_at", required=False, minimum=0
     )
+    # box since 2026-12-07: held in the trials moved picks to generic templates, mostly lower
+    # (BENCHMARKS.md, "The trials at each frame's own distance, the winner's fit held").
+    depth: str | None = spec(
+        "box",
+        help="camera.depth of the trials alone, where it differs from camera.depth: the candidates are "
+        "compared from this start, and the winner's trial is run again from camera.depth's (its "
+        "depth-mirror check, carried start and length as in its trial) for its fit to go on from: one "
+        "more trial's time. null: the trials start as the fit does",
+        required=False,
+        enum=[*DEPTH_STARTS, None],
+    )
     workers: int = spec(
         0,
         help="processes the trials (and a named template's two starts, camera.start_trial) run in "
@@ -587,12 +598,16 @@ class FitConfig:
         return out
 
     def for_trials(self) -> FitConfig:
-        """This config for the template trials: stage 2's shape at ``trials.lr_shape`` (when set).
-        The winner's fit goes on from its trial with this config's own rate."""
-        rate = self.trials.lr_shape
-        if rate is None or rate == self.stage2.lr_shape:
-            return self
-        return dataclasses.replace(self, stage2=dataclasses.replace(self.stage2, lr_shape=rate))
+        """This config for the template trials: stage 2's shape at ``trials.lr_shape`` and the
+        camera's starting distances at ``trials.depth`` (each when set). The winner's fit goes on
+        with this config's own rate, from its trial run again at ``camera.depth`` where the two
+        differ (`zooctl.fit.template.try_candidates`)."""
+        cfg, rate, depth = self, self.trials.lr_shape, self.trials.depth
+        if rate is not None and rate != self.stage2.lr_shape:
+            cfg = dataclasses.replace(cfg, stage2=dataclasses.replace(cfg.stage2, lr_shape=rate))
+        if depth is not None and depth != self.camera.depth:
+            cfg = dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, depth=depth))
+        return cfg
 
     def with_camera_motion(self, motion: str) -> FitConfig:
         """A copy of this config with ``camera.motion`` set to ``motion``."""

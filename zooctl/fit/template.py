@@ -15,6 +15,7 @@ trials cost only the losers' fits.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -196,11 +197,13 @@ def try_candidates(
     the winner's fit the same way). The two are compared at ``cfg.trials.carried_at`` (or at
     ``prune_at`` where that is earlier), and only the better goes on to ``cfg.trials.iters``.
 
-    The trials fit the shape at ``cfg.trials.lr_shape`` (`FitConfig.for_trials`); the winner's
-    fit goes on from its trial's state at ``cfg``'s own rate."""
+    The trials fit the shape at ``cfg.trials.lr_shape`` and start from ``cfg.trials.depth``
+    (`FitConfig.for_trials`); the winner's fit goes on from its trial's state at ``cfg``'s own
+    rate, from its trial run again at ``cfg.camera.depth`` where the two differ (`_winner_again`)."""
     from .run import trial_camera_turn
     from .trial_pool import Trial, run_trials
 
+    fit_depth = cfg.camera.depth
     cfg = cfg.for_trials()
     tried = candidates[: cfg.trials.candidates]
     if len(tried) < 2:
@@ -293,6 +296,8 @@ def try_candidates(
         )
     if reporter is not None:
         reporter.message(f"template {best.name}: trial mask IoU {results[won].iou:.3f}")
+    if cfg.camera.depth != fit_depth:
+        best_state = _winner_again(video, tried[win], best, mirror, cfg, fit_depth, runs[won][1], reporter)
     if best_state is not None:
         best_state["timings"] = {}  # the trials are timed as a whole by the caller
     return best, candidates, best_state
@@ -354,6 +359,30 @@ def _try_longer(
     ):
         return None
     cand["length"] = factor
+    return res.state
+
+
+def _winner_again(
+    video: FitVideo,
+    cand: dict[str, Any],
+    asset: RiggedAsset,
+    mirror: bool,
+    cfg: FitConfig,
+    depth: str,
+    motion: str | None,
+    reporter: Reporter | None,
+) -> dict[str, Any]:
+    """The winner's trial run again with ``camera.depth`` ``depth`` (the trials ran with
+    ``trials.depth``): its start, depth-mirror check, carried start (``motion``) and length as its
+    trial's; its paused state, for the fit to go on from. ``cand`` gets ``refit_trial_iou``."""
+    from .trial_pool import Trial, run_trials
+
+    again = dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, depth=depth))
+    if reporter is not None:
+        reporter.message(f"trial fit of {asset.name} again, camera.depth {depth}")
+    trial = Trial(asset, cfg.trials.iters, mirror, length=float(cand.get("length", 1.0)), motion=motion)
+    (res,) = run_trials(video, [trial], again, reporter)
+    cand["refit_trial_iou"] = round(res.iou, 4)
     return res.state
 
 
