@@ -5,6 +5,7 @@
     python bench/fit.py davis [--store DIR] [--videos dog cows blackswan] [--masks given auto]
         [--template VIDEO=ASSET ...] [--config FIT.json]
     python bench/fit.py length [--frames 240] [--short 60] [--asset Fox] [--template Wolf] [--whole]
+        [--config FIT.json]
 
 ``speed`` renders one 60-frame 320x320 video of a shared Quaternius animal, fits it with another
 animal as the template (`zooctl fit --template`, a fresh process, retrieval excluded only when
@@ -239,7 +240,7 @@ def length(args) -> None:
 
     import numpy as np
 
-    from zooctl.fit.config import preset
+    from zooctl.fit.config import load_config
     from zooctl.fit.inputs import load_fit_video
     from zooctl.fit.metrics import evaluate_fit
     from zooctl.fit.run import fit_video, input_mask_iou
@@ -261,7 +262,7 @@ def length(args) -> None:
         runs = [("short", video.truncated(args.short), None), ("long", video, None)]
         runs += [("long_whole", video, 0)] if args.whole else []
         for label, v, window_frames in runs:
-            cfg = preset("fast").for_named_template()
+            cfg = load_config(Path(args.config) if args.config else None, "fast").for_named_template()
             if window_frames is not None:
                 cfg.window_frames = window_frames
             t, c = time.perf_counter(), cpu()
@@ -332,5 +333,6 @@ if __name__ == "__main__":
     ln.add_argument("--template", default="Wolf")
     ln.add_argument("--seed", type=int, default=0)
     ln.add_argument("--whole", action="store_true", help="also fit the long clip at once (window_frames 0)")
+    ln.add_argument("--config", default=None, help="a fit config (JSON) on top of the fast preset")
     a = ap.parse_args()
     {"speed": speed, "quality": quality, "davis": davis, "length": length}[a.cmd](a)

@@ -115,6 +115,8 @@ def test_the_full_fit_continues_the_winning_trial(tmp_path, store):
     assert len(trial_steps) == 2 and continued.history["stage2"][:2] == trial_steps
     view = continued.camera_init.pop("view_trial")  # what the trial tried: its start only here
     assert view["start"] == "search" and "trial_iou" not in view
+    # the winner's trial ran again held, from its trial's search at box (`trials.depth`)
+    assert continued.camera_init.pop("search_reused_from_depth") == "box"
     assert continued.history == scratch.history and continued.camera_init == scratch.camera_init
     a, b = continued.scene.state_dict(), scratch.scene.state_dict()
     assert all(torch.equal(a[k], b[k]) for k in a)
@@ -431,6 +433,9 @@ def test_trials_at_their_own_depth_hand_on_the_winners_trial_run_again_at_the_fi
     assert split[1]["refit_trial_iou"] == held[1]["trial_iou"] and "refit_trial_iou" not in split[0]
     assert state["history"]["stage2"] == held_state["history"]["stage2"]
     assert state["history"]["stage2"] != box_state["history"]["stage2"]  # the start differs
+    # the winner's camera search is its trial's, placed at the held distance, not made again
+    assert state["camera_init"]["search_reused_from_depth"] == "box"
+    assert "search_reused_from_depth" not in held_state["camera_init"]
 
 
 def test_a_trials_body_turn_in_the_world_is_measured_against_the_cameras_turn():

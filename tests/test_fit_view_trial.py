@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import io
 import json
 
 import numpy as np
 import pytest
+import torch
 from scipy.spatial import cKDTree
 
 from zooctl.benchdata.make import make_video
@@ -81,6 +83,48 @@ def test_a_start_from_below_is_tried_against_its_mirror_and_the_fit_goes_on_from
     assert info["start"] == "search" and "trial_iou" not in info
     with pytest.raises(UsageError, match="mirror_trial"):
         _config(mirror_trial="sometimes")
+
+
+def test_a_search_made_at_one_distance_rule_starts_a_fit_at_another_as_its_own_search_would(tmp_path):
+    """`fit_video`'s ``found``: a paused fit's camera search, placed at another ``camera.depth``
+    (`placed_at_depth`), gives the fit that searched for itself, to the bit, through a
+    checkpoint's tensors too; the mirror start reuses its own fit's search; a search made for
+    another body or other camera settings, or placed at a rule that cannot give the asked one, is
+    searched again."""
+    from zooctl.fit.inputs import load_fit_video
+    from zooctl.fit.run import fit_video
+    from zooctl.store.fits import _plain
+
+    thin = tube_asset(bones=3, name="thin")
+    video = load_fit_video(make_video(thin, tmp_path / "v", frames=4, size=32, seed=1))
+    box, held = _config(depth="box"), _config(depth="held")
+
+    def same(a, b) -> bool:
+        sa, sb = a.scene.state_dict(), b.scene.state_dict()
+        return a.history == b.history and all(np.array_equal(sa[k], sb[k]) for k in sa)
+
+    at_box = fit_video(video, thin, box, pause_at=2)
+    found = at_box.paused["search"]
+    assert found["depth"] == "box" and "search_reused_from_depth" not in at_box.camera_init
+    own = fit_video(video, thin, held)
+    buf = io.BytesIO()
+    torch.save(_plain(found), buf)  # as the fits store writes a checkpoint and reads it back
+    stored = torch.load(io.BytesIO(buf.getvalue()), weights_only=True)
+    for handed in (found, stored):
+        reused = fit_video(video, thin, held, found=handed)
+        assert reused.camera_init["search_reused_from_depth"] == "box"
+        assert same(reused, own)
+    assert not np.array_equal(own.scene.root_translation.detach(), at_box.scene.root_translation.detach())
+    mirror = fit_video(video, thin, box, start="mirror")
+    assert same(fit_video(video, thin, box, start="mirror", found=found), mirror)
+    from_held = fit_video(video, thin, held, pause_at=2).paused["search"]
+    for cfg, length, hand in (
+        (box, 1.0, from_held),
+        (held, 1.3, found),
+        (_config(depth="held", azimuths=8), 1.0, found),
+    ):
+        res = fit_video(video, thin, cfg, found=hand, length=length)
+        assert "search_reused_from_depth" not in res.camera_init
 
 
 def test_a_start_from_above_is_not_mirrored_and_pausing_changes_nothing(tmp_path):

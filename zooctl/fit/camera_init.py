@@ -42,7 +42,9 @@ from .scene import CAMERA_ROTATION
 @dataclass
 class CameraInit:
     """focal in fit pixels; root_rotation (T, 4) wxyz; root_translation (T, 3); candidates: the
-    best scored candidates of the global search (for fit.json); iou: frame-0 search IoU."""
+    best scored candidates of the global search (for fit.json); iou: frame-0 search IoU;
+    present: the frames whose mask the search saw (those the distance rule reads,
+    `placed_at_depth`)."""
 
     focal: float
     root_rotation: np.ndarray
@@ -50,6 +52,7 @@ class CameraInit:
     candidates: list[dict] = field(default_factory=list)
     iou: float = 0.0
     keyframe_iou: list[float] = field(default_factory=list)
+    present: list[int] = field(default_factory=list)
 
 
 def view_rotation(azimuth: float, elevation: float, roll: float = 0.0) -> np.ndarray:
@@ -382,6 +385,7 @@ def initialise_camera(
             top,
             iou,
             key_iou,
+            list(present),
         )
     rotation = view_rotation(*best[:3])
     if cfg.track == "steady":
@@ -526,7 +530,7 @@ def _tracked(
         if place
         else np.zeros((T, 3))
     )
-    return CameraInit(focal * fit_scale, rot_q, trans, top, iou, key_iou)
+    return CameraInit(focal * fit_scale, rot_q, trans, top, iou, key_iou, list(present))
 
 
 _MAX_KNOWN_KEYFRAMES = 10
@@ -590,6 +594,27 @@ def _box_translations(
     for c in range(3):
         trans[:, c] = np.interp(np.arange(T), idx, trans[idx, c])
     return trans if depth == "box" else _depth_held(trans, rot_q, centre, idx, depth)
+
+
+def placed_at_depth(init: CameraInit, rest: np.ndarray, found: str, depth: str) -> CameraInit | None:
+    """``init``, a search's start whose distances ``found`` (`CameraConfig.depth`) placed, with
+    its distances as ``depth`` says instead; None where ``found``'s cannot give them (only each
+    frame's own box distance gives the others). The search's rotations and focal do not depend
+    on the rule, its last step alone does (`_box_translations`): a template trial's search at one
+    rule serves a fit at another. rest (V, 3): the template's rest vertices, as searched."""
+    if found == depth:
+        return init
+    if found != "box" or len(init.present) == 0:
+        return None
+    centre = 0.5 * (rest.max(0) + rest.min(0))
+    trans = _depth_held(
+        np.asarray(init.root_translation, np.float64),
+        np.asarray(init.root_rotation, np.float64),
+        centre,
+        np.array(init.present),
+        depth,
+    )
+    return replace(init, root_translation=trans)
 
 
 def _depth_held(

@@ -377,8 +377,9 @@ class TemplateTrials:
         "box",
         help="camera.depth of the trials alone, where it differs from camera.depth: the candidates are "
         "compared from this start, and the winner's trial is run again from camera.depth's (its "
-        "depth-mirror check, carried start and length as in its trial) for its fit to go on from: one "
-        "more trial's time. null: the trials start as the fit does",
+        "depth-mirror check, carried start and length as in its trial, its camera search the trial's "
+        "placed at camera.depth when the trials' is box) for its fit to go on from: one more trial's "
+        "time less the search. null: the trials start as the fit does",
         required=False,
         enum=[*DEPTH_STARTS, None],
     )

@@ -47,4 +47,5 @@ def depth_mirror(init: CameraInit, rest: np.ndarray, normal: np.ndarray, offset:
         init.candidates,
         init.iou,
         init.keyframe_iou,
+        init.present,
     )

@@ -23,7 +23,7 @@ from ..asset import RiggedAsset
 from ..errors import InputError, UsageError
 from ..geometry import silhouette_iou
 from ..rig.priors import find_symmetry_plane
-from .camera_init import CameraInit, camera_follow, initialise_camera
+from .camera_init import CameraInit, camera_follow, initialise_camera, placed_at_depth
 from .config import FitConfig
 from .depth_mirror import depth_mirror, view_elevation
 from .inputs import FitVideo, MaskWindow, crop_box, fit_resolution, resample_flow, resample_masks
@@ -58,7 +58,8 @@ class FitResult:
     """scene: the fitted `FitScene` (fit resolution); scale: fit pixels per input pixel; history:
     per stage, a list of loss-term dicts per step; timings in seconds; iou (T,) per-frame mask IoU
     at the input resolution (NaN where the mask is empty); paused: with `fit_video`'s ``pause_at``,
-    the state to continue from."""
+    the state to continue from; search: the first window's camera search (`_search_record`), kept
+    in the paused state so a fit at another distance rule need not search again."""
 
     scene: FitScene
     video: FitVideo
@@ -70,6 +71,7 @@ class FitResult:
     timings: dict[str, float] = field(default_factory=dict)
     iou: np.ndarray | None = None
     paused: dict[str, Any] | None = None  # resume state where ``pause_at`` stopped stage 2
+    search: dict[str, Any] | None = None
 
     def input_camera(self):
         """The fitted camera at the input resolution (one `Camera`)."""
@@ -113,6 +115,7 @@ def fit_video(
     pause_at: int | None = None,
     start: str = "search",
     length: float = 1.0,
+    found: dict[str, Any] | None = None,
 ) -> FitResult:
     """Fit ``template`` to ``video`` (see the module docstring). Deterministic for a given seed.
 
@@ -127,7 +130,10 @@ def fit_video(
     ``search`` (the camera search's start), ``mirror`` (its depth mirror, `zooctl.fit.view_trial`)
     or ``turned`` (the search's best view at least 90 degrees of azimuth from its start).
     ``length``: the template's body made that much longer first (its model's ``lengthen``; the
-    template trials' longer body). All concern the first window."""
+    template trials' longer body). ``found``: a paused state's ``search`` (a fit of this template
+    and video paused, at another ``camera.depth`` perhaps): its start placed at this config's
+    distances (`placed_at_depth`) instead of searching again, where it was searched for the same
+    body, camera settings and start; else the search runs. All concern the first window."""
     rep = reporter or _Silent()
     if start not in ("search", "mirror", "turned"):
         raise ValueError(f"start must be search, mirror or turned, not {start!r}")
@@ -137,14 +143,18 @@ def fit_video(
     video = video.truncated(cfg.max_frames).check()
     spans = cfg.windows(video.num_frames)
     if len(spans) == 1:
-        return _fit_window(video, template, cfg, rep, checkpoint, resume, pause_at, start, length=length)
+        return _fit_window(
+            video, template, cfg, rep, checkpoint, resume, pause_at, start, length=length, found=found
+        )
     if resume is not None and resume.get("window", 0) > 0:
         _check_version(resume)
         result, next_window = _resumed_whole(resume, video, template, cfg), int(resume["window"])
     else:
         # One first window per video, so the template trials' fits share its cache (its flow targets).
         head = video.cache.setdefault(("window", spans[0]), video.part(*spans[0]))
-        first = _fit_window(head, template, cfg, rep, checkpoint, resume, pause_at, start, length=length)
+        first = _fit_window(
+            head, template, cfg, rep, checkpoint, resume, pause_at, start, length=length, found=found
+        )
         if first.paused is not None:
             return first
         result, next_window = _whole(first, video), 1
@@ -170,6 +180,7 @@ def _fit_window(
     *,
     length: float = 1.0,
     held: _Held | None = None,
+    found: dict[str, Any] | None = None,
 ) -> FitResult:
     """One window's fit: a whole clip's, or (``held``) a later window's of a long clip."""
     torch.manual_seed(cfg.seed)
@@ -226,24 +237,30 @@ def _fit_window(
         cam_info: dict[str, Any] = {}
         history: dict[str, list[dict[str, float]]] = {"stage1": [], "stage2": []}
         start_stage, start_iter, opt_state, colours = 1, 0, None, None
+        search = None
     elif resume is None:
-        rep.message("searching the camera and viewpoint")
         t1 = time.perf_counter()
         motion, motion_used = _camera_motion(video, cfg)
         rest = scene.rest_vertices().cpu().numpy()
-        init = initialise_camera(
-            rest,
-            template.faces,
-            crop,
-            cfg.camera,
-            s,
-            cfg.seed,
-            (W / 2 - x0, H / 2 - y0),
-            H,
-            video.camera_rotations,
-            turned=start == "turned",
-            camera_motion=motion.rotations if motion_used else None,
-        )
+        key = _search_key(cfg, rest, start, motion_used)
+        init = _found_start(found, key, rest, cfg.camera.depth)
+        reused = init is not None
+        if init is None:
+            rep.message("searching the camera and viewpoint")
+            init = initialise_camera(
+                rest,
+                template.faces,
+                crop,
+                cfg.camera,
+                s,
+                cfg.seed,
+                (W / 2 - x0, H / 2 - y0),
+                H,
+                video.camera_rotations,
+                turned=start == "turned",
+                camera_motion=motion.rotations if motion_used else None,
+            )
+        search = _search_record(init, key, cfg.camera.depth)
         elevation = view_elevation(init.root_rotation)
         if start == "mirror":
             init = depth_mirror(init, rest, *find_symmetry_plane(rest)[:2])
@@ -253,6 +270,8 @@ def _fit_window(
             scene.root_translation.copy_(torch.as_tensor(init.root_translation, dtype=torch.float32))
         timings["camera"] = time.perf_counter() - t1
         cam_info = _camera_info(init, s) | {"elevation_deg": elevation}
+        if reused:
+            cam_info["search_reused_from_depth"] = found["depth"]
         if motion is not None:
             cam_info["motion"] = {"from": "background", "used": motion_used} | motion.summary()
         history = {"stage1": [], "stage2": []}
@@ -264,7 +283,8 @@ def _fit_window(
         history = resume["history"]
         start_stage, start_iter, opt_state = resume["stage"], resume["iteration"], resume.get("optimizer")
         colours = resume.get("colours")
-    result = FitResult(scene, video, template, cfg, cam_info, s, history, timings)
+        search = resume.get("search")
+    result = FitResult(scene, video, template, cfg, cam_info, s, history, timings, search=search)
     if cfg.ablation.optimise:
         span = (0, T) if held is None else (held.anchors, T)
         for stage in (1, 2):
@@ -289,6 +309,46 @@ def _fit_window(
         result.iou = input_mask_iou(result)
         timings["evaluate"] = time.perf_counter() - t2
     return result
+
+
+def _search_key(cfg: FitConfig, rest: np.ndarray, start: str, motion_used: bool) -> dict[str, Any]:
+    """What a camera search's result depends on, but the distance rule (`fit_video`'s ``found``):
+    the camera settings, the seed, the start asked for, whether the camera's turn was read, and
+    the body searched (its rest box)."""
+    camera = {k: v for k, v in dataclasses.asdict(cfg.camera).items() if k != "depth"}
+    box = [float(x) for x in np.concatenate([rest.min(0), rest.max(0)])]
+    return {
+        "camera": camera,
+        "seed": cfg.seed,
+        "turned": start == "turned",
+        "motion": motion_used,
+        "body": box,
+    }
+
+
+def _search_record(init: CameraInit, key: dict[str, Any], depth: str) -> dict[str, Any]:
+    """The camera search's start (before any depth mirror), its key and the distance rule that
+    placed it: a paused state's ``search``."""
+    return {"key": key, "depth": depth} | dataclasses.asdict(init)
+
+
+def _found_start(
+    found: dict[str, Any] | None, key: dict[str, Any], rest: np.ndarray, depth: str
+) -> CameraInit | None:
+    """``found`` (`_search_record`; from a checkpoint its arrays are tensors) placed at ``depth``
+    where it was searched under ``key``, else None (search again)."""
+    if found is None or found.get("key") != key:
+        return None
+    init = CameraInit(
+        float(found["focal"]),
+        np.asarray(found["root_rotation"], np.float64),
+        np.asarray(found["root_translation"], np.float64),
+        list(found["candidates"]),
+        float(found["iou"]),
+        [float(x) for x in found["keyframe_iou"]],
+        [int(t) for t in found["present"]],
+    )
+    return placed_at_depth(init, rest, str(found["depth"]), depth)
 
 
 def _colour_targets(video: FitVideo, box: tuple[int, int, int, int], h: int, w: int, device: str):
@@ -560,17 +620,21 @@ def _run_stage(
         log.flush()
         timings = dict(result.timings)
         timings[key] = timings.get(key, 0.0) + time.perf_counter() - t
-        return {
-            "version": STATE_VERSION,
-            "stage": stage,
-            "iteration": next_iter,
-            "scene": scene.state_dict(),
-            "optimizer": opt.state_dict(),
-            "history": result.history,
-            "camera_init": result.camera_init,
-            "config": cfg.to_dict(),
-            "timings": timings,
-        } | ({} if runner.colours is None else {"colours": runner.colours.detach().clone()})
+        return (
+            {
+                "version": STATE_VERSION,
+                "stage": stage,
+                "iteration": next_iter,
+                "scene": scene.state_dict(),
+                "optimizer": opt.state_dict(),
+                "history": result.history,
+                "camera_init": result.camera_init,
+                "config": cfg.to_dict(),
+                "timings": timings,
+            }
+            | ({} if runner.colours is None else {"colours": runner.colours.detach().clone()})
+            | ({} if result.search is None else {"search": result.search})
+        )
 
     try:
         # Skip the runner's random windows already drawn before an interruption (resume = same run).

@@ -297,7 +297,9 @@ def try_candidates(
     if reporter is not None:
         reporter.message(f"template {best.name}: trial mask IoU {results[won].iou:.3f}")
     if cfg.camera.depth != fit_depth:
-        best_state = _winner_again(video, tried[win], best, mirror, cfg, fit_depth, runs[won][1], reporter)
+        best_state = _winner_again(
+            video, tried[win], best, mirror, cfg, fit_depth, runs[won][1], reporter, best_state
+        )
     if best_state is not None:
         best_state["timings"] = {}  # the trials are timed as a whole by the caller
     return best, candidates, best_state
@@ -371,16 +373,22 @@ def _winner_again(
     depth: str,
     motion: str | None,
     reporter: Reporter | None,
+    state: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The winner's trial run again with ``camera.depth`` ``depth`` (the trials ran with
     ``trials.depth``): its start, depth-mirror check, carried start (``motion``) and length as its
-    trial's; its paused state, for the fit to go on from. ``cand`` gets ``refit_trial_iou``."""
+    trial's, its camera search the one in its trial's paused ``state`` placed at ``depth``
+    (`zooctl.fit.camera_init.placed_at_depth`) where that can be; its paused state, for the fit to
+    go on from. ``cand`` gets ``refit_trial_iou``."""
     from .trial_pool import Trial, run_trials
 
     again = dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, depth=depth))
     if reporter is not None:
         reporter.message(f"trial fit of {asset.name} again, camera.depth {depth}")
-    trial = Trial(asset, cfg.trials.iters, mirror, length=float(cand.get("length", 1.0)), motion=motion)
+    found = None if state is None else state.get("search")
+    trial = Trial(
+        asset, cfg.trials.iters, mirror, length=float(cand.get("length", 1.0)), motion=motion, found=found
+    )
     (res,) = run_trials(video, [trial], again, reporter)
     cand["refit_trial_iou"] = round(res.iou, 4)
     return res.state

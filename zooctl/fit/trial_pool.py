@@ -49,7 +49,8 @@ class Trial:
     the template's body made that much longer first; ``motion`` and ``track``: the fit's
     ``camera.motion`` and ``camera.track`` for this trial, when not None; ``then``: fitted on from
     that pause to this iteration and paused again) or on from a paused ``state``. ``label``
-    names it in progress reports (default: its template's name)."""
+    names it in progress reports (default: its template's name); ``found``: a camera search
+    already made (`fit_video`'s), not run again."""
 
     asset: RiggedAsset
     pause_at: int
@@ -60,6 +61,7 @@ class Trial:
     track: str | None = None
     then: int | None = None
     label: str | None = None
+    found: dict[str, Any] | None = None
 
     @property
     def name(self) -> str:
@@ -163,6 +165,7 @@ def _run(
             mirror=trial.mirror,
             pause_at=trial.pause_at,
             length=trial.length,
+            found=trial.found,
         )
         if trial.then is not None and trial.then > trial.pause_at and res.state is not None:
             on = continue_trial(video, trial.asset, cfg, res.state, trial.then, reporter)

@@ -164,6 +164,7 @@ def trial_with_mirror(
     mirror: bool = True,
     pause_at: int | None = None,
     length: float = 1.0,
+    found: dict[str, Any] | None = None,
 ) -> TrialResult:
     """The template's trial (`fit_video` paused after ``pause_at`` stage-2 iterations, by default
     ``cfg.trials.iters``) and, when ``mirror`` and its start sees the animal from below, its depth
@@ -172,10 +173,13 @@ def trial_with_mirror(
     Returns the kept trial: its IoU, displacement, paused state to continue from, and what was
     tried (``view``: also stored in the state's ``camera_init["view_trial"]`` for fit.json).
     ``checkpoint``: as `fit_video`'s, for both trials (each is a fit that a resume can finish).
-    ``length``: `fit_video`'s (the template's body made that much longer first)."""
+    ``length``: `fit_video`'s (the template's body made that much longer first); ``found``:
+    `fit_video`'s (a camera search already made, for both starts)."""
     pause_at = cfg.trials.iters if pause_at is None else pause_at
     t = time.perf_counter()
-    search = fit_video(video, template, cfg, reporter, checkpoint, pause_at=pause_at, length=length)
+    search = fit_video(
+        video, template, cfg, reporter, checkpoint, pause_at=pause_at, length=length, found=found
+    )
     search_s = time.perf_counter() - t
     iou = trial_iou(search)
     elevation = float(search.camera_init["elevation_deg"])
@@ -188,7 +192,15 @@ def trial_with_mirror(
             )
         t = time.perf_counter()
         mirrored = fit_video(
-            video, template, cfg, reporter, checkpoint, pause_at=pause_at, start="mirror", length=length
+            video,
+            template,
+            cfg,
+            reporter,
+            checkpoint,
+            pause_at=pause_at,
+            start="mirror",
+            length=length,
+            found=search.search,  # the search's own camera search: not made again
         )
         mirror_s = time.perf_counter() - t
         m_iou = trial_iou(mirrored)
