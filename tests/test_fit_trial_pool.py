@@ -5,6 +5,9 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
+import multiprocessing
+import os
+from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 import pytest
@@ -13,6 +16,7 @@ from test_fit_trials import TINY, _bank_with_views
 
 from zooctl.benchdata.make import make_video
 from zooctl.errors import InputError
+from zooctl.fit import trial_pool
 from zooctl.fit.config import FitConfig
 from zooctl.fit.trial_pool import Trial, run_trials, trial_threads
 
@@ -173,10 +177,18 @@ if __name__ == "__main__":
 """
 
 
+def _descendants(pid: int) -> list[int]:
+    """The processes under ``pid`` (Linux's /proc), children first."""
+    try:
+        kids = [int(p) for p in open(f"/proc/{pid}/task/{pid}/children").read().split()]
+    except FileNotFoundError:
+        return []
+    return kids + [d for k in kids for d in _descendants(k)]
+
+
 def test_sigterm_during_the_trials_ends_their_processes(tmp_path):
     """A SIGTERM to the fit's process alone (a scheduler's cancel) does not reach the trials'
     workers: the pool ends them, and the fit stops at once instead of waiting for the trials."""
-    import os
     import signal
     import subprocess
     import sys
@@ -194,18 +206,52 @@ def test_sigterm_during_the_trials_ends_their_processes(tmp_path):
         for line in proc.stdout:  # a worker's trial reached stage 2: the pool is up
             if line.startswith("stage stage2"):
                 break
-        children += [int(p) for p in open(f"/proc/{proc.pid}/task/{proc.pid}/children").read().split()]
-        assert children, "the trials run in worker processes"
+        children += _descendants(proc.pid)  # the fork server's workers are its children, not the fit's
+        assert len(children) >= 2, "the trials run in worker processes"
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=60) == 143
-        time.sleep(0.5)
-        for pid in children:
+
+        def running(pid: int) -> bool:
             with contextlib.suppress(ProcessLookupError, ChildProcessError):
                 os.waitpid(pid, os.WNOHANG)
-            assert not os.path.exists(f"/proc/{pid}") or "zombie" in open(f"/proc/{pid}/status").read()
+            try:
+                return "zombie" not in open(f"/proc/{pid}/status").read()
+            except FileNotFoundError:
+                return False
+
+        deadline = time.monotonic() + 30  # the fork server finishes its interpreter's exit
+        while any(running(pid) for pid in children) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not [pid for pid in children if running(pid)]
         ended = True
     finally:  # nothing left running when it fails
         for pid in [] if ended else [proc.pid, *children]:
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
         proc.wait()
+
+
+@pytest.mark.skipif(
+    "forkserver" not in multiprocessing.get_all_start_methods(), reason="this platform has no fork server"
+)
+def test_trial_workers_come_from_the_fork_server_with_this_process_environment(monkeypatch):
+    """The workers are forked by the server that imported the fit once (their parent is not this
+    process, as a spawned worker's is), and each sees the environment as it is when its trials
+    start, not as it was when the server started."""
+    ctx = trial_pool._context()
+    assert ctx.get_start_method() == "forkserver"
+
+    def pool() -> ProcessPoolExecutor:
+        return ProcessPoolExecutor(
+            1, mp_context=ctx, initializer=trial_pool._start_worker, initargs=(ctx.Queue(), dict(os.environ))
+        )
+
+    monkeypatch.setenv("ZOOCTL_TRIAL_ENV_CHECK", "before")
+    with pool() as p:
+        assert p.submit(os.getenv, "ZOOCTL_TRIAL_ENV_CHECK").result() == "before"
+        assert p.submit(os.getppid).result() != os.getpid()
+    monkeypatch.setenv("ZOOCTL_TRIAL_ENV_CHECK", "after")
+    monkeypatch.delenv("HOME", raising=False)
+    with pool() as p:
+        assert p.submit(os.getenv, "ZOOCTL_TRIAL_ENV_CHECK").result() == "after"
+        assert p.submit(os.getenv, "HOME").result() is None

@@ -4,7 +4,7 @@ two starts, `zooctl.fit.named_start.start_trial`) in its own process.
 A trial is a fit of a few thousand vertices at a fit resolution of about a hundred pixels: too
 small a job to keep more than one core busy through torch's own threads (on two cores a fit runs
 at about 1.3 cores). The trials of different templates are independent, so on a CPU with two or
-more torch threads they run at once, in spawned processes that split the threads between them;
+more torch threads they run at once, in worker processes that split the threads between them;
 each trial's paused state comes back to continue the winner's fit exactly where it stopped.
 
 ``cfg.trials.workers`` sets how many processes (0: one per trial, while they are at most twice
@@ -16,15 +16,21 @@ BENCHMARKS.md, "The two starts side by side").
 The trials are the same fits either way: side by side they agree with one after another within
 float summation order (`torch` threads differ), not bit for bit.
 
-Workers are spawned, so a script that calls the fit guards its top level with
-``if __name__ == "__main__":``, as for PyTorch's DataLoader workers (without it, the pool breaks
-and the trials run one after another here).
+Workers are forked from a fork server that has imported torch and the fit once (`_context`): a
+spawned worker imports them again, about 2 s of CPU, and a fit with retrieval starts its trials'
+workers twice (BENCHMARKS.md, "Trial workers forked from a server that has imported the fit").
+The server's torch has run no operation, so no thread pool is copied into a worker, and each
+worker takes on the parent's environment as it is when the trials start, as a spawned one would.
+Where the platform has no fork server (Windows) they are spawned. Either way a script that calls
+the fit guards its top level with ``if __name__ == "__main__":``, as for PyTorch's DataLoader
+workers (without it, the pool breaks and the trials run one after another here).
 """
 
 from __future__ import annotations
 
 import io
 import multiprocessing
+import os
 import queue as queue_mod
 import threading
 import time
@@ -178,12 +184,15 @@ def _run(
 def _side_by_side(
     video: FitVideo, trials: list[Trial], cfg: FitConfig, reporter: Reporter | None, shares: list[int]
 ) -> list[TrialResult]:
-    ctx = multiprocessing.get_context("spawn")  # fork would copy torch's thread pools
+    ctx = _context()
     events = ctx.Queue()
     forward = _Forwarder(events, reporter, [t.name for t in trials])
     forward.start()
     pool = ProcessPoolExecutor(
-        max_workers=len(shares), mp_context=ctx, initializer=_start_worker, initargs=(events,)
+        max_workers=len(shares),
+        mp_context=ctx,
+        initializer=_start_worker,
+        initargs=(events, dict(os.environ)),
     )
     try:
         inputs = _pack((video, cfg))  # once: the same for every trial
@@ -202,6 +211,29 @@ def _side_by_side(
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
         forward.stop()
+
+
+# What the fork server imports once for every worker it forks: the trial's code and, through it,
+# torch and the fit (`zooctl.fit.run`).
+PRELOAD = ["zooctl.fit.trial_pool", "zooctl.fit.view_trial"]
+
+
+def _context() -> Any:
+    """The trials' process context: the fork server, preloaded with `PRELOAD`, where the platform
+    has one and it starts; else spawn. Not fork: the fit's own process has run torch, whose thread
+    pools a forked copy would inherit broken. The preload takes effect when this process's fork
+    server first starts (a server some other code started first forks without it, only slower)."""
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        from multiprocessing import forkserver
+
+        ctx = multiprocessing.get_context("forkserver")
+        ctx.set_forkserver_preload(PRELOAD)
+        try:
+            forkserver.ensure_running()  # its socket: a temporary folder's path too long, say
+            return ctx
+        except OSError:
+            pass
+    return multiprocessing.get_context("spawn")
 
 
 def _pack(obj: Any) -> bytes:
@@ -223,9 +255,12 @@ def _unpack(data: bytes) -> Any:
 _EVENTS: Any = None
 
 
-def _start_worker(events: Any) -> None:
+def _start_worker(events: Any, environ: dict[str, str]) -> None:
     global _EVENTS
     _EVENTS = events
+    # a forked worker has the fork server's environment, from when the server started
+    os.environ.clear()
+    os.environ.update(environ)
 
 
 def _trial_in_worker(index: int, inputs: bytes, trial: bytes, threads: int) -> bytes:
