@@ -7,6 +7,7 @@ says when a fit tries both, `fit_video` (``start="mirror"``) starts from the mir
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -40,12 +41,4 @@ def depth_mirror(init: CameraInit, rest: np.ndarray, normal: np.ndarray, offset:
     trans = t * np.array([1.0, 1.0, -1.0])
     trans[:, 2] += 2.0 * centre_z
     trans += 2.0 * float(offset) * (Mz @ R @ n)
-    return CameraInit(
-        init.focal,
-        np.stack([matrix_to_quat(r) for r in rot]),
-        trans,
-        init.candidates,
-        init.iou,
-        init.keyframe_iou,
-        init.present,
-    )
+    return replace(init, root_rotation=np.stack([matrix_to_quat(r) for r in rot]), root_translation=trans)
