@@ -242,9 +242,7 @@ def test_trial_workers_come_from_the_fork_server_with_this_process_environment(m
     assert ctx.get_start_method() == "forkserver"
 
     def pool() -> ProcessPoolExecutor:
-        return ProcessPoolExecutor(
-            1, mp_context=ctx, initializer=trial_pool._start_worker, initargs=(ctx.Queue(), dict(os.environ))
-        )
+        return trial_pool._worker_pool(ctx, 1, ctx.Queue())
 
     monkeypatch.setenv("ZOOCTL_TRIAL_ENV_CHECK", "before")
     with pool() as p:

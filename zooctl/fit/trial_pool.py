@@ -188,12 +188,7 @@ def _side_by_side(
     events = ctx.Queue()
     forward = _Forwarder(events, reporter, [t.name for t in trials])
     forward.start()
-    pool = ProcessPoolExecutor(
-        max_workers=len(shares),
-        mp_context=ctx,
-        initializer=_start_worker,
-        initargs=(events, dict(os.environ)),
-    )
+    pool = _worker_pool(ctx, len(shares), events)
     try:
         inputs = _pack((video, cfg))  # once: the same for every trial
         futures = [
@@ -211,6 +206,14 @@ def _side_by_side(
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
         forward.stop()
+
+
+def _worker_pool(ctx: Any, workers: int, events: Any) -> ProcessPoolExecutor:
+    """Trial workers from ``ctx`` (`_context`), each with this process's environment as it is now
+    and ``events`` (a ``ctx.Queue``) for its progress."""
+    return ProcessPoolExecutor(
+        max_workers=workers, mp_context=ctx, initializer=_start_worker, initargs=(events, dict(os.environ))
+    )
 
 
 # What the fork server imports once for every worker it forks: the trial's code and, through it,
